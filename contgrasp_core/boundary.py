@@ -1,0 +1,513 @@
+"""Object boundaries: smooth, simple, closed planar curves parameterised by arclength.
+
+Paper Sec. II-B, eq. gamma: ``d gamma / d s_o = t = (cos phi, sin phi)``, ``d phi / d s_o = kappa_o``.
+Curves are traversed counter-clockwise (the object lies to the LEFT of the tangent), ``s_o``
+runs over ``[0, L_o)`` and every evaluation accepts any real ``s_o`` (taken modulo ``L_o``;
+the tangent angle is continued so that ``phi(s_o + L_o) = phi(s_o) + 2 pi``).
+
+Every curve is built from a smooth ``2 pi``-periodic parametrisation ``c(t)`` whose
+derivatives up to third order are known (analytically, or from a periodic quintic spline
+for user points). Arclength ``s(t)`` is computed with 16-point Gauss-Legendre quadrature on
+panels of ``t`` and inverted by Newton's method, so ``gamma(s_o)`` is arclength-parametrised
+to rounding error; point, tangent angle, curvature and its derivative follow exactly from
+the derivatives of ``c``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from math import comb
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.interpolate import CubicSpline, splev, splprep
+from scipy.spatial import cKDTree
+
+from .errors import (
+    DegenerateBoundaryError,
+    InvalidParameterError,
+    NotClosedError,
+    SelfIntersectionError,
+)
+
+__all__ = [
+    "Boundary",
+    "Projection",
+    "circle",
+    "ellipse",
+    "fourier_polar",
+    "deformed_circle",
+    "from_points",
+    "load_points",
+]
+
+TWO_PI = 2.0 * np.pi
+CurveFn = Callable[[NDArray[np.float64], int], NDArray[np.float64]]
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
+_N_TABLE = 4096  # samples of the curve used for inversion guesses and projection candidates
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Closest points on the boundary of a set of query points.
+
+    ``foot`` (n, 2) the closest boundary points gamma(s_o); ``s_o`` (n,) their arclength in
+    ``[0, L_o)``; ``distance`` (n,) >= 0; ``signed_distance`` (n,) positive outside the object,
+    negative inside; ``side`` (n,) +1 outside, -1 inside (0 exactly on the boundary).
+    """
+
+    foot: NDArray[np.float64]
+    s_o: NDArray[np.float64]
+    distance: NDArray[np.float64]
+    signed_distance: NDArray[np.float64]
+    side: NDArray[np.int_]
+
+
+def _rot(vec_cos_sin_shift: int, t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """k-th derivative of (cos t, sin t) as an (n, 2) array."""
+    shifted = t + vec_cos_sin_shift * np.pi / 2.0
+    return np.stack([np.cos(shifted), np.sin(shifted)], axis=-1)
+
+
+class Boundary:
+    """A simple closed smooth planar curve, counter-clockwise, parameterised by arclength.
+
+    Build one with :func:`circle`, :func:`ellipse`, :func:`deformed_circle`,
+    :func:`fourier_polar` or :func:`from_points`; ``kind`` and ``params`` record how.
+    """
+
+    def __init__(
+        self,
+        curve: CurveFn,
+        breakpoints: ArrayLike,
+        *,
+        kind: str,
+        params: dict[str, object],
+    ) -> None:
+        self._c = curve
+        self.kind = kind
+        self.params = dict(params)
+        bp = np.asarray(breakpoints, dtype=float)
+        self._bp = bp
+        # Cumulative arclength at the panel breakpoints (eq. gamma: |dgamma/ds_o| = 1).
+        panel_len = self._gauss_arclength(bp[:-1], bp[1:])
+        self._S = np.concatenate([[0.0], np.cumsum(panel_len)])
+        self.length = float(self._S[-1])
+        if not np.isfinite(self.length) or self.length <= 0.0:
+            raise DegenerateBoundaryError(f"boundary '{kind}' has non-positive length {self.length}")
+        t_tab = np.linspace(0.0, TWO_PI, _N_TABLE + 1)
+        s_tab = self._s_of_t(t_tab)
+        s_tab[-1] = self.length
+        self._t_of_s_guess = CubicSpline(s_tab, t_tab)
+        d1 = curve(t_tab, 1)
+        phi_tab = np.unwrap(np.arctan2(d1[:, 1], d1[:, 0]))
+        turning = phi_tab[-1] - phi_tab[0]
+        if abs(turning - TWO_PI) > 1e-6:
+            raise SelfIntersectionError(
+                f"boundary '{kind}' has total tangent turning {turning / TWO_PI:.6f} x 2 pi; "
+                "a simple counter-clockwise closed curve turns exactly once (+2 pi)"
+            )
+        self._phi_ref = CubicSpline(s_tab, phi_tab)
+        self._tab_t = t_tab[:-1]
+        self._tab_pts = curve(self._tab_t, 0)
+        self._tree = cKDTree(self._tab_pts)
+
+    # ------------------------------------------------------------------ arclength maps
+    def _speed(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.hypot(*self._c(t, 1).T)
+
+    def _gauss_arclength(self, a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+        half = 0.5 * (b - a)
+        nodes = 0.5 * (a + b)[:, None] + half[:, None] * _GL_X[None, :]
+        speed = self._speed(nodes.ravel()).reshape(nodes.shape)
+        return half * (speed @ _GL_W)
+
+    def _s_of_t(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        j = np.clip(np.searchsorted(self._bp, t, side="right") - 1, 0, len(self._bp) - 2)
+        return self._S[j] + self._gauss_arclength(self._bp[j], t)
+
+    def _t_of_s(self, s_o: ArrayLike) -> NDArray[np.float64]:
+        s = np.mod(np.asarray(s_o, dtype=float).ravel(), self.length)
+        t = np.clip(self._t_of_s_guess(s), 0.0, TWO_PI)
+        for _ in range(4):  # Newton on s(t) = s; the spline guess is already ~1e-9 accurate
+            err = self._s_of_t(t) - s
+            t = np.clip(t - err / self._speed(t), 0.0, TWO_PI)
+            if np.all(np.abs(err) <= 1e-11 * self.length):
+                break
+        return t
+
+    # ------------------------------------------------------------------ geometry at s_o
+    def point(self, s_o: ArrayLike) -> NDArray[np.float64]:
+        """gamma(s_o), shape ``s_o.shape + (2,)``."""
+        s = np.asarray(s_o, dtype=float)
+        return self._c(self._t_of_s(s).ravel(), 0).reshape(s.shape + (2,))
+
+    def tangent_angle(self, s_o: ArrayLike) -> NDArray[np.float64]:
+        """Continuous tangent angle phi(s_o) (eq. gamma), ``phi(s + L_o) = phi(s) + 2 pi``."""
+        s = np.asarray(s_o, dtype=float)
+        d1 = self._c(self._t_of_s(s).ravel(), 1)
+        raw = np.arctan2(d1[:, 1], d1[:, 0]).reshape(s.shape)
+        sm = np.mod(s, self.length)
+        ref = self._phi_ref(sm)
+        phi = ref + (np.mod(raw - ref + np.pi, TWO_PI) - np.pi)
+        return phi + TWO_PI * np.floor(s / self.length)
+
+    def tangent(self, s_o: ArrayLike) -> NDArray[np.float64]:
+        """Unit tangent t(s_o) = (cos phi, sin phi)."""
+        phi = self.tangent_angle(s_o)
+        return np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+
+    def normal(self, s_o: ArrayLike) -> NDArray[np.float64]:
+        """Unit normal n(s_o) = R(pi/2) t(s_o); it points INTO the object (CCW curve)."""
+        phi = self.tangent_angle(s_o)
+        return np.stack([-np.sin(phi), np.cos(phi)], axis=-1)
+
+    def curvature(self, s_o: ArrayLike) -> NDArray[np.float64]:
+        """kappa_o(s_o) = d phi / d s_o (eq. gamma); positive on convex parts."""
+        s = np.asarray(s_o, dtype=float)
+        t = self._t_of_s(s).ravel()
+        d1, d2 = self._c(t, 1), self._c(t, 2)
+        cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+        return (cross / np.hypot(*d1.T) ** 3).reshape(s.shape)
+
+    def curvature_derivative(self, s_o: ArrayLike) -> NDArray[np.float64]:
+        """d kappa_o / d s_o, needed by exact gradients that move the shadow point s_o."""
+        s = np.asarray(s_o, dtype=float)
+        t = self._t_of_s(s).ravel()
+        d1, d2, d3 = self._c(t, 1), self._c(t, 2), self._c(t, 3)
+        sp2 = np.sum(d1 * d1, axis=1)
+        cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+        cross3 = d1[:, 0] * d3[:, 1] - d1[:, 1] * d3[:, 0]
+        dkdt = (cross3 * sp2 - 3.0 * cross * np.sum(d1 * d2, axis=1)) / sp2**2.5
+        return (dkdt / np.sqrt(sp2)).reshape(s.shape)
+
+    def sample(self, n: int = 512) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``n`` points equally spaced in arclength: (s_o, gamma(s_o))."""
+        s = np.linspace(0.0, self.length, int(n), endpoint=False)
+        return s, self.point(s)
+
+    # ------------------------------------------------------------------ closest point
+    def project(self, points: ArrayLike, *, candidates: int = 4) -> Projection:
+        """Closest boundary point of each query point (vectorised).
+
+        The ``candidates`` nearest of 4096 curve samples seed a safeguarded Newton iteration
+        on ``(c(t) - q) . c'(t) = 0``, bracketed by the neighbouring samples; the best refined
+        candidate wins, so non-convex boundaries get the global closest point.
+        """
+        q = np.asarray(points, dtype=float)
+        if q.ndim != 2 or q.shape[1] != 2 or not np.all(np.isfinite(q)):
+            raise InvalidParameterError(f"points must be a finite (n, 2) array, got shape {q.shape}")
+        k = int(min(max(candidates, 1), len(self._tab_t)))
+        _, idx = self._tree.query(q, k=k)
+        idx = np.asarray(idx).reshape(len(q), k)
+        h = TWO_PI / _N_TABLE
+        qq = np.repeat(q, k, axis=0)
+        t0 = self._tab_t[idx.ravel()]
+        t = self._refine(qq, t0 - h, t0 + h, t0)
+        c = self._c(t, 0)
+        dist = np.hypot(*(c - qq).T).reshape(len(q), k)
+        best = np.argmin(dist, axis=1)
+        rows = np.arange(len(q))
+        t_best = t.reshape(len(q), k)[rows, best]
+        foot = c.reshape(len(q), k, 2)[rows, best]
+        d = dist[rows, best]
+        d1 = self._c(t_best, 1)
+        rel = q - foot
+        cross = d1[:, 0] * rel[:, 1] - d1[:, 1] * rel[:, 0]  # > 0: query on the left = inside
+        side = -np.sign(cross).astype(int)
+        s_o = np.mod(self._s_of_t(t_best), self.length)
+        return Projection(foot=foot, s_o=s_o, distance=d, signed_distance=side * d, side=side)
+
+    def _refine(
+        self,
+        q: NDArray[np.float64],
+        lo: NDArray[np.float64],
+        hi: NDArray[np.float64],
+        t: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """Safeguarded Newton (rtsafe) for the stationary point of |c(t) - q|^2 / 2 in [lo, hi]."""
+
+        def grad(tt: NDArray[np.float64]) -> NDArray[np.float64]:
+            return np.sum((self._c(tt, 0) - q) * self._c(tt, 1), axis=1)
+
+        g_lo, g_hi = grad(lo), grad(hi)
+        # Minimum at a bracket end when the gradient does not change sign inside.
+        t = np.where(g_lo >= 0.0, lo, np.where(g_hi <= 0.0, hi, t))
+        active = (g_lo < 0.0) & (g_hi > 0.0)
+        lo, hi = lo.copy(), hi.copy()
+        for _ in range(60):
+            if not np.any(active):
+                break
+            ta = t[active]
+            qa = q[active]
+            c0, c1, c2 = self._c(ta, 0), self._c(ta, 1), self._c(ta, 2)
+            g = np.sum((c0 - qa) * c1, axis=1)
+            dg = np.sum(c1 * c1, axis=1) + np.sum((c0 - qa) * c2, axis=1)
+            lo_a, hi_a = lo[active], hi[active]
+            lo_a = np.where(g < 0.0, ta, lo_a)
+            hi_a = np.where(g > 0.0, ta, hi_a)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                newton = ta - g / dg
+            ok = (dg > 0.0) & (newton > lo_a) & (newton < hi_a)
+            tn = np.where(ok, newton, 0.5 * (lo_a + hi_a))
+            done = np.abs(tn - ta) <= 1e-15 * (1.0 + np.abs(ta))
+            t[active] = tn
+            lo[active], hi[active] = lo_a, hi_a
+            idx = np.flatnonzero(active)
+            active[idx[done | (hi_a - lo_a <= 1e-15)]] = False
+        return np.mod(t, TWO_PI)
+
+    def __repr__(self) -> str:
+        return f"Boundary(kind={self.kind!r}, length={self.length:.6g}, params={self.params})"
+
+
+# ---------------------------------------------------------------------- constructors
+def _finite_positive(name: str, value: float) -> float:
+    v = float(value)
+    if not np.isfinite(v) or v <= 0.0:
+        raise InvalidParameterError(f"{name} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def _center(center: ArrayLike) -> NDArray[np.float64]:
+    c = np.asarray(center, dtype=float)
+    if c.shape != (2,) or not np.all(np.isfinite(c)):
+        raise InvalidParameterError(f"center must be two finite numbers (x, y), got {center!r}")
+    return c
+
+
+def _uniform_breakpoints(panels: int = 64) -> NDArray[np.float64]:
+    return np.linspace(0.0, TWO_PI, panels + 1)
+
+
+def ellipse(a: float, b: float, center: ArrayLike = (0.0, 0.0), angle: float = 0.0) -> Boundary:
+    """Ellipse with semi-axes ``a`` (along ``angle``) and ``b``, counter-clockwise.
+
+    ``c(t) = center + R(angle) (a cos t, b sin t)``; ``s_o = 0`` at the end of the ``a`` axis.
+    """
+    a_, b_ = _finite_positive("a", a), _finite_positive("b", b)
+    c0 = _center(center)
+    ang = float(angle)
+    if not np.isfinite(ang):
+        raise InvalidParameterError(f"angle must be finite, got {angle!r}")
+    rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
+    scale = np.array([a_, b_])
+
+    def curve(t: NDArray[np.float64], k: int) -> NDArray[np.float64]:
+        local = _rot(k, t) * scale
+        out = local @ rot.T
+        return out + c0 if k == 0 else out
+
+    return Boundary(
+        curve,
+        _uniform_breakpoints(),
+        kind="ellipse",
+        params={"a": a_, "b": b_, "center": c0.tolist(), "angle": ang},
+    )
+
+
+def circle(R: float, center: ArrayLike = (0.0, 0.0)) -> Boundary:
+    """Circle of radius ``R``: curvature 1/R, length 2 pi R; ``s_o = 0`` at center + (R, 0)."""
+    r = _finite_positive("R", R)
+    b = ellipse(r, r, center)
+    b.kind, b.params = "circle", {"R": r, "center": _center(center).tolist()}
+    return b
+
+
+def fourier_polar(
+    R: float,
+    cos_coeffs: ArrayLike = (),
+    sin_coeffs: ArrayLike = (),
+    center: ArrayLike = (0.0, 0.0),
+) -> Boundary:
+    """Star-shaped curve ``c(t) = center + R (1 + sum_k a_k cos kt + b_k sin kt) (cos t, sin t)``.
+
+    ``cos_coeffs[k-1] = a_k``, ``sin_coeffs[k-1] = b_k`` for k = 1, 2, ... The radius factor
+    must stay positive (so the curve is simple); otherwise a DegenerateBoundaryError is raised.
+    """
+    r0 = _finite_positive("R", R)
+    a = np.atleast_1d(np.asarray(cos_coeffs, dtype=float))
+    b = np.atleast_1d(np.asarray(sin_coeffs, dtype=float))
+    n = max(a.size, b.size)
+    a = np.pad(a, (0, n - a.size))
+    b = np.pad(b, (0, n - b.size))
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        raise InvalidParameterError("Fourier coefficients must be finite")
+    c0 = _center(center)
+    kk = np.arange(1, n + 1, dtype=float)
+
+    def radius(t: NDArray[np.float64], j: int) -> NDArray[np.float64]:
+        """j-th derivative of the polar radius."""
+        if n == 0:
+            return np.full_like(t, r0 if j == 0 else 0.0)
+        ph = np.outer(t, kk) + j * np.pi / 2.0
+        val = (np.cos(ph) * a + np.sin(ph) * b) @ (kk**j)
+        return r0 * (val + (1.0 if j == 0 else 0.0))
+
+    tt = np.linspace(0.0, TWO_PI, 8192, endpoint=False)
+    if np.min(radius(tt, 0)) <= 1e-9 * r0:
+        raise DegenerateBoundaryError(
+            "polar radius 1 + sum(a_k cos kt + b_k sin kt) must stay > 0 for a simple curve"
+        )
+
+    def curve(t: NDArray[np.float64], k: int) -> NDArray[np.float64]:
+        out = sum(comb(k, j) * radius(t, j)[:, None] * _rot(k - j, t) for j in range(k + 1))
+        return out + c0 if k == 0 else out
+
+    panels = max(64, 8 * n)
+    return Boundary(
+        curve,
+        _uniform_breakpoints(panels),
+        kind="fourier_polar",
+        params={"R": r0, "cos_coeffs": a.tolist(), "sin_coeffs": b.tolist(), "center": c0.tolist()},
+    )
+
+
+def deformed_circle(
+    R: float = 5.0,
+    amplitude: float = 0.15,
+    lobes: int = 3,
+    phase: float = 0.0,
+    center: ArrayLike = (0.0, 0.0),
+) -> Boundary:
+    """The paper's third object: a circle of radius ``R`` smoothly deformed into lobes.
+
+    ``c(t) = center + R (1 + amplitude cos(lobes (t - phase))) (cos t, sin t)``.
+    The curve has concave parts when ``amplitude > 1 / (1 + lobes^2)`` (0.1 for 3 lobes);
+    the default (R = 5, amplitude 0.15, 3 lobes) has minimum curvature about -0.138
+    (concave radius about 7.2) between the lobes.
+    """
+    m = int(lobes)
+    if m < 2 or m != lobes:
+        raise InvalidParameterError(f"lobes must be an integer >= 2, got {lobes!r}")
+    amp = float(amplitude)
+    if not (0.0 <= amp < 1.0):
+        raise InvalidParameterError(f"amplitude must be in [0, 1), got {amplitude!r}")
+    cos_c = np.zeros(m)
+    sin_c = np.zeros(m)
+    cos_c[m - 1] = amp * np.cos(m * phase)
+    sin_c[m - 1] = amp * np.sin(m * phase)
+    b = fourier_polar(R, cos_c, sin_c, center)
+    b.kind = "deformed_circle"
+    b.params = {"R": float(R), "amplitude": amp, "lobes": m, "phase": float(phase), "center": list(b.params["center"])}
+    return b
+
+
+# ---------------------------------------------------------------------- user points
+def _segments_intersect(p: NDArray[np.float64]) -> bool:
+    """True if any two non-adjacent edges of the closed polygon ``p`` (n, 2) intersect."""
+    n = len(p)
+    a, b = p, np.roll(p, -1, axis=0)
+
+    def orient(o: NDArray, u: NDArray, v: NDArray) -> NDArray:
+        return (u[..., 0] - o[..., 0]) * (v[..., 1] - o[..., 1]) - (u[..., 1] - o[..., 1]) * (v[..., 0] - o[..., 0])
+
+    block = max(1, 4_000_000 // max(n, 1))
+    j = np.arange(n)
+    for start in range(0, n, block):
+        i = np.arange(start, min(n, start + block))[:, None]
+        ai, bi = a[i], b[i]
+        aj, bj = a[None, :], b[None, :]
+        o1, o2 = orient(ai, bi, aj), orient(ai, bi, bj)
+        o3, o4 = orient(aj, bj, ai), orient(aj, bj, bi)
+        cross = (o1 * o2 < 0) & (o3 * o4 < 0)
+        gap = np.abs(i - j[None, :])
+        adjacent = (gap <= 1) | (gap == n - 1)
+        if np.any(cross & ~adjacent):
+            return True
+    return False
+
+
+def from_points(
+    points: ArrayLike,
+    *,
+    closed: bool = False,
+    smoothing: float = 0.0,
+) -> Boundary:
+    """Closed smooth curve through user points (e.g. a CSV outline or an SVG-like polygon).
+
+    A closed periodic quintic spline (C^4, so curvature and its derivative are continuous)
+    is fitted through the points, parameterised by cumulative chord length; ``smoothing`` is
+    scipy's ``splprep`` smoothing factor relative to the number of points and the squared
+    size of the outline (0 interpolates). The polygon must be closed: its last point must
+    repeat the first, unless ``closed=True`` says the outline closes back to the first
+    point implicitly. Clockwise input is reversed to counter-clockwise.
+
+    Raises NotClosedError (open polyline), SelfIntersectionError (the polygon or the fitted
+    curve crosses itself) or DegenerateBoundaryError (fewer than 5 distinct points, zero area,
+    non-finite values).
+    """
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise DegenerateBoundaryError(f"points must be an (n, 2) array, got shape {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise DegenerateBoundaryError("points contain NaN or infinite values")
+    size = float(np.max(np.ptp(p, axis=0)))
+    if size <= 0.0:
+        raise DegenerateBoundaryError("all points coincide")
+    gap = float(np.hypot(*(p[-1] - p[0])))
+    if gap <= 1e-9 * size:
+        p = p[:-1]
+    elif not closed:
+        raise NotClosedError(
+            f"the outline is an open polyline: its last point is {gap:.6g} away from its first; "
+            "repeat the first point at the end, or pass closed=True (CLI: --closed) to close it"
+        )
+    keep = np.hypot(*np.diff(p, axis=0, append=p[:1]).T) > 1e-12 * size
+    p = p[keep]
+    if len(p) < 5:
+        raise DegenerateBoundaryError(f"need at least 5 distinct points, got {len(p)}")
+    x, y = p[:, 0], p[:, 1]
+    area = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    if abs(area) <= 1e-9 * size**2:
+        raise DegenerateBoundaryError("the outline encloses zero area")
+    if _segments_intersect(p):
+        raise SelfIntersectionError("the polygon through the given points crosses itself")
+    if area < 0.0:
+        p = p[::-1]
+    smoothing = float(smoothing)
+    if not np.isfinite(smoothing) or smoothing < 0.0:
+        raise InvalidParameterError(f"smoothing must be >= 0, got {smoothing!r}")
+    closed_pts = np.vstack([p, p[:1]])
+    chord = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed_pts, axis=0).T))])
+    u = chord / chord[-1]
+    tck, _ = splprep(closed_pts.T, u=u, per=1, k=5, s=smoothing * len(p) * size**2, quiet=2)
+
+    def curve(t: NDArray[np.float64], k: int) -> NDArray[np.float64]:
+        uu = np.mod(t, TWO_PI) / TWO_PI
+        vals = np.asarray(splev(uu, tck, der=k))
+        return vals.T / TWO_PI**k
+
+    knots = np.unique(np.clip(tck[0], 0.0, 1.0)) * TWO_PI
+    sub = np.linspace(0.0, 1.0, 3)[:-1]
+    bp = np.concatenate([(knots[:-1, None] + np.diff(knots)[:, None] * sub).ravel(), [TWO_PI]])
+    dense = curve(np.linspace(0.0, TWO_PI, 2048, endpoint=False), 0)
+    if _segments_intersect(dense):
+        raise SelfIntersectionError(
+            "the smooth curve fitted through the points crosses itself; add points or smooth more"
+        )
+    return Boundary(curve, bp, kind="points", params={"n_points": len(p), "smoothing": smoothing})
+
+
+def load_points(path: str) -> NDArray[np.float64]:
+    """Read an outline from a CSV/whitespace text file with two columns x, y (header allowed)."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+    except OSError as exc:
+        raise InvalidParameterError(f"cannot read outline file {path!r}: {exc.strerror}") from exc
+    rows = []
+    for line_no, line in enumerate(text.splitlines(), start=1):
+        fields = [f for f in line.replace(",", " ").split() if f]
+        if not fields or line.lstrip().startswith("#"):
+            continue
+        try:
+            rows.append([float(fields[0]), float(fields[1])])
+        except (ValueError, IndexError):
+            if rows:
+                raise DegenerateBoundaryError(f"{path}:{line_no}: expected two numbers x, y, got {line!r}")
+    if not rows:
+        raise DegenerateBoundaryError(f"{path}: no x, y rows found")
+    return np.asarray(rows)

@@ -1,0 +1,338 @@
+"""Contact kinematics between the arm and the object boundary (paper Sec. II-C).
+
+Three views of the same relative geometry:
+
+* :func:`sense` - geometric sensing: from an arm shape, the shadow point s_o(s) (closest
+  boundary point), contact distance rho, contact angle alpha (eq. rho_alpha_definition),
+  contact depth delta (eq. delta) and the contact set (Definition 1).
+* :func:`integrate_contact` - the contact kinematics ODE (eqs. object_speed, rho_alpha_2)
+  in s with state (rho, alpha, s_o), driven by a curvature profile kappa(s).
+* :func:`shape_from_contact` - the reverse map from (rho, alpha, s_o)(s) to the arm shape.
+
+Sign conventions: the object is on the LEFT of the arm; ``n(s_o)`` is the boundary's inward
+normal; ``rho`` is the signed distance from the centreline to the boundary (positive outside
+the object; equal to ``|gamma - r|`` there) and ``alpha`` is the angle from the arm tangent
+``a`` to ``n(s_o)``, which equals the angle from ``a`` to ``rho_vec = gamma - r`` whenever
+``rho > 0``. Valid contact states satisfy ``rho > 0``, ``0 < alpha < pi`` and
+``1 + rho kappa_o > 0``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.integrate import solve_ivp
+
+from .arm import ArmShape, BasePose, curvature_spline
+from .boundary import Boundary
+from .errors import ContactValidityError, InvalidParameterError
+
+__all__ = [
+    "ContactState",
+    "ContactKinematics",
+    "sense",
+    "integrate_contact",
+    "shape_from_contact",
+    "initial_state",
+    "base_pose",
+    "check_state",
+    "offset_curvature",
+    "DEFAULT_CONTACT_TOL",
+]
+
+DEFAULT_CONTACT_TOL = 0.0
+"""Default contact tolerance: in contact where ``delta >= -tol`` (Definition 1 exactly)."""
+
+
+@dataclass(frozen=True)
+class ContactState:
+    """Geometric contact state along the arm (arrays over the arm grid ``s``).
+
+    ``s_o`` is unwrapped along the arm (continuous, may exceed L_o); ``foot`` = gamma(s_o);
+    ``nu_o`` = sin(alpha) / (1 + rho kappa_o) (eq. object_speed); ``in_contact`` is
+    ``delta >= -tol``; ``valid`` marks points inside the admissible region.
+    """
+
+    s: NDArray[np.float64]
+    rho: NDArray[np.float64]
+    alpha: NDArray[np.float64]
+    delta: NDArray[np.float64]
+    s_o: NDArray[np.float64]
+    foot: NDArray[np.float64]
+    kappa_o: NDArray[np.float64]
+    nu_o: NDArray[np.float64]
+    in_contact: NDArray[np.bool_]
+    valid: NDArray[np.bool_]
+    tol: float
+
+
+@dataclass(frozen=True)
+class ContactKinematics:
+    """Solution of the contact kinematics ODE (eq. rho_alpha_2) on the grid ``s``."""
+
+    s: NDArray[np.float64]
+    rho: NDArray[np.float64]
+    alpha: NDArray[np.float64]
+    s_o: NDArray[np.float64]
+
+
+def _wrap_pi(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.mod(x + np.pi, 2.0 * np.pi) - np.pi
+
+
+def _radius_array(radius: float | ArrayLike, n: int) -> NDArray[np.float64]:
+    r = np.broadcast_to(np.asarray(radius, dtype=float), (n,)).copy()
+    if not np.all(np.isfinite(r)) or np.any(r < 0.0):
+        raise InvalidParameterError("arm radius must be finite and >= 0 along the arm")
+    return r
+
+
+def sense(
+    shape: ArmShape,
+    boundary: Boundary,
+    radius: float | ArrayLike,
+    *,
+    tol: float = DEFAULT_CONTACT_TOL,
+) -> ContactState:
+    """Geometric sensing of (rho, alpha, delta, s_o) and the contact set from an arm shape.
+
+    Implements eq. rho_alpha_definition with the closest boundary point as shadow point,
+    eq. delta (``delta = r_arm - rho``) and Definition 1 with tolerance ``tol``
+    (``in_contact = delta >= -tol``).
+    """
+    if not np.isfinite(tol) or tol < 0.0:
+        raise InvalidParameterError(f"contact tolerance must be >= 0, got {tol!r}")
+    r = np.asarray(shape.r, dtype=float)
+    theta = np.asarray(shape.theta, dtype=float)
+    if r.ndim != 2 or r.shape[1] != 2 or theta.shape != (len(r),) or len(r) == 0:
+        raise InvalidParameterError(
+            f"arm shape needs r of shape (n, 2) and theta of shape (n,), got {r.shape}, {theta.shape}"
+        )
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(theta))):
+        raise InvalidParameterError("arm shape contains NaN or infinite values")
+    rad = _radius_array(radius, len(r))
+    proj = boundary.project(r)
+    s_o = np.unwrap(proj.s_o, period=boundary.length)
+    rho = proj.signed_distance
+    phi = boundary.tangent_angle(proj.s_o)
+    alpha = _wrap_pi(phi + 0.5 * np.pi - theta)
+    kappa_o = boundary.curvature(proj.s_o)
+    one_plus = 1.0 + rho * kappa_o
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nu_o = np.sin(alpha) / one_plus
+    delta = rad - rho
+    valid = (rho > 0.0) & (alpha > 0.0) & (alpha < np.pi) & (one_plus > 0.0)
+    return ContactState(
+        s=np.asarray(shape.s, dtype=float),
+        rho=rho,
+        alpha=alpha,
+        delta=delta,
+        s_o=s_o,
+        foot=proj.foot,
+        kappa_o=kappa_o,
+        nu_o=nu_o,
+        in_contact=delta >= -tol,
+        valid=valid,
+        tol=float(tol),
+    )
+
+
+def check_state(boundary: Boundary, rho: float, alpha: float, s_o: float, *, s: float = 0.0) -> None:
+    """Raise ContactValidityError unless (rho, alpha, s_o) is an admissible contact state."""
+    vals = np.array([rho, alpha, s_o], dtype=float)
+    if not np.all(np.isfinite(vals)):
+        raise ContactValidityError(
+            f"contact state (rho, alpha, s_o) = {tuple(vals)} is not finite at s = {s:.6g}",
+            s=s,
+            condition="finite",
+        )
+    if rho <= 0.0:
+        raise ContactValidityError(
+            f"rho = {rho:.6g} at s = {s:.6g}: the contact distance must be > 0 "
+            "(the arm centreline must stay outside the object)",
+            s=s,
+            condition="rho > 0",
+        )
+    if not 0.0 < alpha < np.pi:
+        raise ContactValidityError(
+            f"alpha = {alpha:.6g} at s = {s:.6g}: the contact angle must lie in (0, pi) "
+            "(object on the left of the arm)",
+            s=s,
+            condition="0 < alpha < pi",
+        )
+    k_o = float(boundary.curvature(s_o))
+    if 1.0 + rho * k_o <= 0.0:
+        raise ContactValidityError(
+            f"1 + rho kappa_o = {1.0 + rho * k_o:.6g} at s = {s:.6g} (rho = {rho:.6g}, "
+            f"kappa_o = {k_o:.6g}): the shadow point would stop or run backwards "
+            "(eq. object_speed needs 1 + rho kappa_o > 0)",
+            s=s,
+            condition="1 + rho kappa_o > 0",
+        )
+
+
+KappaProfile = Callable[[NDArray[np.float64]], NDArray[np.float64]] | ArrayLike
+
+
+def integrate_contact(
+    s: ArrayLike,
+    kappa: KappaProfile,
+    boundary: Boundary,
+    rho0: float,
+    alpha0: float,
+    s_o0: float,
+    *,
+    rtol: float = 1e-11,
+    atol: float = 1e-12,
+) -> ContactKinematics:
+    """Integrate the contact kinematics (eqs. object_speed, rho_alpha_2) along the arm.
+
+    ``d rho/ds = -cos alpha``, ``d alpha/ds = -kappa + kappa_o sin(alpha) / (1 + rho kappa_o)``,
+    ``d s_o/ds = nu_o = sin(alpha) / (1 + rho kappa_o)``, from (rho0, alpha0, s_o0) at ``s[0]``.
+    ``kappa`` is either samples on ``s`` (interpolated by the same cubic spline as
+    :func:`contgrasp_core.arm.shape_from_curvature`) or a callable of s. Integration uses
+    DOP853 (8th order) at tolerance ``rtol``/``atol``; leaving the admissible region raises
+    ContactValidityError naming the arclength where it happened.
+    """
+    ss = np.asarray(s, dtype=float)
+    if ss.ndim != 1 or len(ss) < 2 or np.any(np.diff(ss) <= 0.0) or not np.all(np.isfinite(ss)):
+        raise InvalidParameterError("s must be a finite, strictly increasing grid of >= 2 points")
+    kfun = kappa if callable(kappa) else curvature_spline(ss, kappa)
+    check_state(boundary, rho0, alpha0, s_o0, s=float(ss[0]))
+
+    def rhs(sv: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        rho, alpha, so = y
+        k_o = float(boundary.curvature(so))
+        nu = np.sin(alpha) / (1.0 + rho * k_o)
+        return np.array([-np.cos(alpha), -float(kfun(sv)) + k_o * nu, nu])
+
+    def ev_rho(sv: float, y: NDArray[np.float64]) -> float:
+        return y[0]
+
+    def ev_alpha_lo(sv: float, y: NDArray[np.float64]) -> float:
+        return y[1]
+
+    def ev_alpha_hi(sv: float, y: NDArray[np.float64]) -> float:
+        return np.pi - y[1]
+
+    def ev_speed(sv: float, y: NDArray[np.float64]) -> float:
+        return 1.0 + y[0] * float(boundary.curvature(y[2]))
+
+    events = [ev_rho, ev_alpha_lo, ev_alpha_hi, ev_speed]
+    for ev in events:
+        ev.terminal = True  # type: ignore[attr-defined]
+    sol = solve_ivp(
+        rhs,
+        (ss[0], ss[-1]),
+        np.array([rho0, alpha0, s_o0], dtype=float),
+        method="DOP853",
+        t_eval=ss,
+        rtol=rtol,
+        atol=atol,
+        events=events,
+    )
+    names = ["rho > 0", "0 < alpha < pi", "0 < alpha < pi", "1 + rho kappa_o > 0"]
+    for name, t_ev in zip(names, sol.t_events):
+        if len(t_ev):
+            s_bad = float(t_ev[0])
+            raise ContactValidityError(
+                f"contact kinematics left the admissible region at s = {s_bad:.6g} "
+                f"(of {ss[-1]:.6g}): {name} violated; choose a curvature profile that keeps "
+                "the arm outside the object with the object on its left",
+                s=s_bad,
+                condition=name,
+            )
+    if sol.status != 0:
+        raise ContactValidityError(
+            f"contact kinematics integration failed: {sol.message}", s=float(sol.t[-1]), condition="solver"
+        )
+    rho, alpha, s_o = sol.y
+    return ContactKinematics(s=ss, rho=rho, alpha=alpha, s_o=s_o)
+
+
+def shape_from_contact(
+    s: ArrayLike, rho: ArrayLike, alpha: ArrayLike, s_o: ArrayLike, boundary: Boundary
+) -> ArmShape:
+    """Arm shape from the contact state (inverse of eq. rho_alpha_definition).
+
+    ``r = gamma(s_o) - rho n(s_o)`` and ``theta = phi(s_o) + pi/2 - alpha``.
+    """
+    rr, aa, so = (np.asarray(v, dtype=float) for v in (rho, alpha, s_o))
+    ss = np.asarray(s, dtype=float)
+    if not (rr.shape == aa.shape == so.shape == ss.shape):
+        raise InvalidParameterError(
+            f"s, rho, alpha, s_o must have equal shapes, got {ss.shape}, {rr.shape}, {aa.shape}, {so.shape}"
+        )
+    phi = boundary.tangent_angle(so)
+    normal = np.stack([-np.sin(phi), np.cos(phi)], axis=-1)
+    r = boundary.point(so) - rr[..., None] * normal
+    return ArmShape(s=ss, r=r, theta=phi + 0.5 * np.pi - aa)
+
+
+def initial_state(boundary: Boundary, base: BasePose) -> tuple[float, float, float]:
+    """(rho0, alpha0, s_o0) of an arm base pose, by closest-point projection.
+
+    Raises ContactValidityError if the base is inside the object or the heading does not keep
+    the object on the left (alpha0 outside (0, pi)).
+    """
+    proj = boundary.project(np.array([[base.x, base.y]]))
+    rho0 = float(proj.signed_distance[0])
+    s_o0 = float(proj.s_o[0])
+    if rho0 <= 0.0:
+        raise ContactValidityError(
+            f"base pose ({base.x:.6g}, {base.y:.6g}) is inside the object or on its boundary "
+            f"(signed distance {rho0:.6g}); place the base outside the object",
+            s=0.0,
+            condition="rho > 0",
+        )
+    alpha0 = float(_wrap_pi(boundary.tangent_angle(s_o0) + 0.5 * np.pi - base.theta))
+    check_state(boundary, rho0, alpha0, s_o0)
+    return rho0, alpha0, s_o0
+
+
+def base_pose(boundary: Boundary, rho0: float, alpha0: float, s_o0: float) -> BasePose:
+    """Base pose whose contact state is (rho0, alpha0, s_o0): ``r0 = gamma - rho0 n``."""
+    check_state(boundary, rho0, alpha0, s_o0)
+    shape = shape_from_contact([0.0], [rho0], [alpha0], [s_o0], boundary)
+    return BasePose(float(shape.r[0, 0]), float(shape.r[0, 1]), float(shape.theta[0]))
+
+
+def offset_curvature(
+    boundary: Boundary, s: ArrayLike, distance: float, s_o0: float
+) -> NDArray[np.float64]:
+    """Curvature, in arm arclength, of the curve parallel to the boundary at ``distance``.
+
+    An arm starting at ``(rho, alpha, s_o) = (distance, pi/2, s_o0)`` with this curvature
+    keeps ``rho = distance`` and ``alpha = pi/2`` exactly (eq. rho_alpha_2 with
+    ``d alpha/ds = 0``). With ``sigma`` the shadow arclength, the parallel curve has
+    ``ds = (1 + d kappa_o(sigma)) d sigma`` so ``s = sigma - s_o0 + d (phi(sigma) - phi(s_o0))``
+    and ``kappa = kappa_o / (1 + d kappa_o)``; for a circle of radius R this is 1/(R + d).
+    """
+    ss = np.asarray(s, dtype=float)
+    d = float(distance)
+    if not np.isfinite(d) or d <= 0.0:
+        raise InvalidParameterError(f"offset distance must be > 0, got {distance!r}")
+    phi0 = float(boundary.tangent_angle(s_o0))
+
+    def s_of_sigma(sig: NDArray[np.float64]) -> NDArray[np.float64]:
+        return sig - s_o0 + d * (boundary.tangent_angle(sig) - phi0)
+
+    span = float(np.max(ss)) + 1.0
+    table = s_o0 + np.linspace(0.0, span, 4097)
+    s_tab = s_of_sigma(table)
+    k_tab = boundary.curvature(table)
+    if np.any(1.0 + d * k_tab <= 0.0):
+        raise ContactValidityError(
+            f"no parallel curve at distance {d:.6g}: 1 + d kappa_o <= 0 on the boundary",
+            s=0.0,
+            condition="1 + rho kappa_o > 0",
+        )
+    sigma = np.interp(ss, s_tab, table)
+    for _ in range(6):
+        k_o = boundary.curvature(sigma)
+        sigma = sigma - (s_of_sigma(sigma) - ss) / (1.0 + d * k_o)
+    k_o = boundary.curvature(sigma)
+    return k_o / (1.0 + d * k_o)
