@@ -167,21 +167,32 @@ class Boundary:
     def curvature(self, s_o: ArrayLike) -> NDArray[np.float64]:
         """kappa_o(s_o) = d phi / d s_o (eq. gamma); positive on convex parts."""
         s = np.asarray(s_o, dtype=float)
-        t = self._t_of_s(s).ravel()
+        t = self._t_of_s(s)
         d1, d2 = self._c(t, 1), self._c(t, 2)
         cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
         return (cross / np.hypot(*d1.T) ** 3).reshape(s.shape)
 
-    def curvature_derivative(self, s_o: ArrayLike) -> NDArray[np.float64]:
-        """d kappa_o / d s_o, needed by exact gradients that move the shadow point s_o."""
+    def curvature_with_derivative(
+        self, s_o: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(kappa_o, d kappa_o / d s_o) with one arclength inversion.
+
+        The derivative is needed by exact gradients in which the control moves the shadow
+        point s_o (and hence kappa_o(s_o)).
+        """
         s = np.asarray(s_o, dtype=float)
-        t = self._t_of_s(s).ravel()
+        t = self._t_of_s(s)
         d1, d2, d3 = self._c(t, 1), self._c(t, 2), self._c(t, 3)
         sp2 = np.sum(d1 * d1, axis=1)
         cross = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
         cross3 = d1[:, 0] * d3[:, 1] - d1[:, 1] * d3[:, 0]
+        kappa = cross / sp2**1.5
         dkdt = (cross3 * sp2 - 3.0 * cross * np.sum(d1 * d2, axis=1)) / sp2**2.5
-        return (dkdt / np.sqrt(sp2)).reshape(s.shape)
+        return kappa.reshape(s.shape), (dkdt / np.sqrt(sp2)).reshape(s.shape)
+
+    def curvature_derivative(self, s_o: ArrayLike) -> NDArray[np.float64]:
+        """d kappa_o / d s_o."""
+        return self.curvature_with_derivative(s_o)[1]
 
     def sample(self, n: int = 512) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``n`` points equally spaced in arclength: (s_o, gamma(s_o))."""
