@@ -1,0 +1,87 @@
+"""The ``contgrasp`` command.
+
+Every computing subcommand accepts ``--json`` and then prints exactly one JSON object on
+stdout (keys documented in docs/cli.md). Errors become one line on stderr: exit code 2 for
+bad usage or input (:class:`~contgrasp_core.errors.ContgraspError`, argparse errors),
+1 for runtime failures; ``--debug`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from . import __version__, cli_kinematics
+from .errors import ContgraspError
+
+__all__ = ["build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with every subcommand registered."""
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--json", action="store_true", help="print one JSON object with the results on stdout")
+    common.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
+    parser = argparse.ArgumentParser(
+        prog="contgrasp",
+        description="Kinematics of continuum planar grasping: kinematics, optimal grasps, quality, control.",
+    )
+    parser.add_argument("--version", action="version", version=f"contgrasp {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    cli_kinematics.add_parser(sub, [common])
+    return parser
+
+
+def _to_jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _to_jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def _summary(result: dict[str, Any]) -> str:
+    lines = []
+    for key, value in result.items():
+        if isinstance(value, list) and len(value) > 6:
+            continue
+        lines.append(f"{key}: {value}")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``contgrasp`` console script; returns the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        result = args.func(args)
+    except ContgraspError as exc:
+        if args.debug:
+            raise
+        print(f"contgrasp {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # noqa: BLE001 - the CLI turns every failure into one line
+        if args.debug:
+            raise
+        print(f"contgrasp {args.command}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(_to_jsonable(result), allow_nan=False))
+    else:
+        print(_summary(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

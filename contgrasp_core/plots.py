@@ -1,0 +1,88 @@
+"""Matplotlib drawing helpers shared by the figures (headless, Agg backend)."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from numpy.typing import ArrayLike, NDArray  # noqa: E402
+
+from .arm import ArmShape  # noqa: E402
+from .boundary import Boundary  # noqa: E402
+from .contact import ContactKinematics, ContactState  # noqa: E402
+
+__all__ = ["draw_boundary", "draw_arm", "kinematics_figure", "save"]
+
+
+def draw_boundary(ax: Axes, boundary: Boundary, **kw: object) -> None:
+    """Object outline, filled light grey."""
+    _, pts = boundary.sample(720)
+    pts = np.vstack([pts, pts[:1]])
+    ax.fill(pts[:, 0], pts[:, 1], color=kw.pop("color", "0.85"), zorder=1)
+    ax.plot(pts[:, 0], pts[:, 1], color="k", lw=1.0, zorder=2)
+
+
+def arm_outline(shape: ArmShape, radius: ArrayLike) -> NDArray[np.float64]:
+    """Closed polygon of the arm's body: centreline offset by +-radius along b = R(pi/2) a."""
+    rad = np.broadcast_to(np.asarray(radius, dtype=float), shape.s.shape)
+    b = np.stack([-np.sin(shape.theta), np.cos(shape.theta)], axis=-1)
+    left = shape.r + rad[:, None] * b
+    right = shape.r - rad[:, None] * b
+    return np.vstack([left, right[::-1], left[:1]])
+
+
+def draw_arm(ax: Axes, shape: ArmShape, radius: ArrayLike, *, color: str = "tab:purple", alpha: float = 0.6, label: str | None = None) -> None:
+    """Arm drawn with its (possibly tapered) radius, centreline dashed, base marked."""
+    poly = arm_outline(shape, radius)
+    ax.fill(poly[:, 0], poly[:, 1], color=color, alpha=alpha, lw=0, zorder=3, label=label)
+    ax.plot(shape.r[:, 0], shape.r[:, 1], color="k", lw=0.6, ls="--", zorder=4)
+    ax.plot(shape.r[0, 0], shape.r[0, 1], "ks", ms=4, zorder=5)
+
+
+def kinematics_figure(
+    boundary: Boundary,
+    shape: ArmShape,
+    radius: ArrayLike,
+    ode: ContactKinematics,
+    geo: ContactState,
+    *,
+    title: str = "",
+) -> Figure:
+    """Arm around the object with its shadow points; rho and alpha against s/L (ODE vs geometry)."""
+    fig = plt.figure(figsize=(10, 4.6))
+    ax = fig.add_subplot(1, 2, 1)
+    draw_boundary(ax, boundary)
+    draw_arm(ax, shape, radius)
+    step = max(1, len(shape.s) // 40)
+    for i in range(0, len(shape.s), step):
+        ax.plot([shape.r[i, 0], geo.foot[i, 0]], [shape.r[i, 1], geo.foot[i, 1]], color="tab:orange", lw=0.5, zorder=4)
+    ax.plot(geo.foot[::step, 0], geo.foot[::step, 1], "o", color="tab:orange", ms=2.5, zorder=5, label="shadow points")
+    ax.set_aspect("equal")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(title or "arm and shadow curve")
+    sl = shape.s / shape.s[-1]
+    ax1 = fig.add_subplot(2, 2, 2)
+    ax1.plot(sl, ode.rho, "C0", label="rho (ODE)")
+    ax1.plot(sl, geo.rho, "k:", label="rho (geometry)")
+    ax1.set_ylabel("rho")
+    ax1.legend(fontsize=8)
+    ax2 = fig.add_subplot(2, 2, 4, sharex=ax1)
+    ax2.plot(sl, ode.alpha, "C1", label="alpha (ODE)")
+    ax2.plot(sl, geo.alpha, "k:", label="alpha (geometry)")
+    ax2.axhline(np.pi / 2, color="0.5", ls="--", lw=0.8)
+    ax2.set_ylabel("alpha [rad]")
+    ax2.set_xlabel("s / L")
+    ax2.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def save(fig: Figure, path: str) -> None:
+    """Write the figure (format from the file suffix) and close it."""
+    fig.savefig(path, dpi=130)
+    plt.close(fig)

@@ -1,0 +1,73 @@
+"""The ``contgrasp`` command: JSON output, plots, and one-line errors with exit code 2."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from contgrasp_core.cli import main
+
+KIN_KEYS = {"max_discrepancy", "s", "rho", "alpha", "s_o", "x", "y", "theta", "kappa", "discrepancy"}
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    exe = os.path.join(os.path.dirname(sys.executable), "contgrasp")
+    return subprocess.run([exe, *args], capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.parametrize("obj", ["circle", "ellipse", "deformed"])
+def test_kinematics_json_and_plot(obj: str, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    png = tmp_path / f"{obj}.png"
+    proc = run_cli("kinematics", "--object", obj, "--json", "--plot", str(png))
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)  # exactly one JSON object on stdout
+    assert KIN_KEYS <= out.keys()
+    assert out["max_discrepancy"] < 1e-6
+    assert len(out["s"]) == len(out["rho"]) == len(out["x"]) == out["nodes"]
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_kinematics_user_outline_and_constant_profile(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    th = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    csv = tmp_path / "blob.csv"
+    csv.write_text("x,y\n" + "\n".join(f"{3 * np.cos(t)},{2 * np.sin(t)}" for t in th))
+    # the outline does not repeat its first point: it is open unless --closed is given
+    assert main(["kinematics", "--outline", str(csv), "--json"]) == 2
+    assert "open polyline" in capsys.readouterr().err
+    code = main(["kinematics", "--outline", str(csv), "--closed", "--rho0", "0.5", "--alpha0", "1.5708",
+                 "--length", "3", "--curvature", "parallel", "--json"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["max_discrepancy"] < 1e-6
+    np.testing.assert_allclose(out["rho"], 0.5, atol=1e-4)
+
+
+@pytest.mark.parametrize(
+    "args,needle",
+    [
+        (["kinematics", "--alpha0", "3.5"], "(0, pi)"),
+        (["kinematics", "--rho0", "0"], "rho = 0"),
+        (["kinematics", "--nodes", "1"], "nodes"),
+        (["kinematics", "--curvature", "wobbly"], "unknown curvature profile"),
+        (["kinematics", "--curvature", "const:0", "--alpha0", "0.5", "--length", "20"], "left the admissible region"),
+        (["kinematics", "--object", "points"], "outline file"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(args: list[str], needle: str) -> None:
+    proc = run_cli(*args)
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert needle in proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_argparse_usage_error_is_exit_2() -> None:
+    proc = run_cli("kinematics", "--object", "square")
+    assert proc.returncode == 2
+    assert "invalid choice" in proc.stderr

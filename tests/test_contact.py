@@ -1,0 +1,122 @@
+"""Contact kinematics: ODE (eq. rho_alpha_2) vs geometric sensing, closed forms, validity."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from contgrasp_core.arm import BasePose, shape_from_curvature
+from contgrasp_core.boundary import circle, deformed_circle, ellipse
+from contgrasp_core.contact import (
+    base_pose,
+    initial_state,
+    integrate_contact,
+    offset_curvature,
+    sense,
+    shape_from_contact,
+)
+from contgrasp_core.errors import ContactValidityError
+
+
+@pytest.mark.parametrize(
+    "boundary,rho0,alpha0,s_o0",
+    [(circle(5.0), 1.0, 1.55, 0.3), (ellipse(8.0, 4.0), 1.2, 1.6, 2.0), (deformed_circle(), 0.8, 1.5, 4.0)],
+    ids=["circle", "ellipse", "deformed"],
+)
+def test_ode_agrees_with_geometry(boundary, rho0, alpha0, s_o0) -> None:  # type: ignore[no-untyped-def]
+    """Two independent routes to (rho, alpha, s_o): ODE vs shape + closest points."""
+    L = boundary.length / 2
+    s = np.linspace(0, L, 401)
+    kappa = offset_curvature(boundary, s, rho0, s_o0) + 0.01 * np.sin(2 * np.pi * s / L)
+    ode = integrate_contact(s, kappa, boundary, rho0, alpha0, s_o0)
+    shape = shape_from_curvature(s, kappa, base_pose(boundary, rho0, alpha0, s_o0))
+    geo = sense(shape, boundary, 0.3)
+    assert np.all(geo.valid)
+    assert np.max(np.abs(ode.rho - geo.rho)) / L < 1e-6
+    assert np.max(np.abs(ode.alpha - geo.alpha)) < 1e-6
+    assert np.max(np.abs(ode.s_o - geo.s_o)) / L < 1e-6
+    np.testing.assert_allclose(geo.nu_o, np.sin(geo.alpha) / (1 + geo.rho * geo.kappa_o))
+    # reverse map: (rho, alpha, s_o) -> arm shape reproduces the integrated shape
+    back = shape_from_contact(s, ode.rho, ode.alpha, ode.s_o, boundary)
+    assert np.max(np.hypot(*(back.r - shape.r).T)) / L < 1e-6
+    assert np.max(np.abs(back.theta - shape.theta)) < 1e-6
+
+
+@pytest.mark.parametrize("rho", [0.2, 1.0, 3.0])
+def test_constant_distance_around_a_circle(rho: float) -> None:
+    """kappa = 1/(R + rho) with alpha0 = pi/2 keeps rho constant and alpha = pi/2 exactly."""
+    R = 5.0
+    b = circle(R, center=(1.0, 2.0))
+    s = np.linspace(0, 0.9 * 2 * np.pi * (R + rho), 301)
+    kappa = offset_curvature(b, s, rho, 1.0)
+    np.testing.assert_allclose(kappa, 1.0 / (R + rho), rtol=1e-13)
+    ode = integrate_contact(s, kappa, b, rho, np.pi / 2, 1.0)
+    np.testing.assert_allclose(ode.rho, rho, atol=1e-12)
+    np.testing.assert_allclose(ode.alpha, np.pi / 2, atol=1e-12)
+    np.testing.assert_allclose(ode.s_o, 1.0 + s * R / (R + rho), atol=1e-10)
+    shape = shape_from_curvature(s, kappa, base_pose(b, rho, np.pi / 2, 1.0))
+    geo = sense(shape, b, np.full_like(s, rho))
+    np.testing.assert_allclose(geo.rho, rho, atol=1e-10)
+    np.testing.assert_allclose(geo.alpha, np.pi / 2, atol=1e-10)
+    np.testing.assert_allclose(geo.delta, 0.0, atol=1e-10)
+    assert np.all(geo.in_contact | (geo.delta > -1e-9))
+
+
+def test_contact_set_and_tolerance() -> None:
+    b = circle(2.0)
+    s = np.linspace(0, 3, 60)
+    shape = shape_from_curvature(s, np.full_like(s, 1 / 2.5), BasePose(2.5, 0.0, np.pi / 2))
+    radius = np.linspace(0.6, 0.4, len(s))  # delta = radius - 0.5 crosses zero mid-arm
+    strict = sense(shape, b, radius)
+    np.testing.assert_array_equal(strict.in_contact, radius - 0.5 >= 0)
+    loose = sense(shape, b, radius, tol=0.05)
+    np.testing.assert_array_equal(loose.in_contact, radius - 0.5 >= -0.05)
+
+
+def test_centreline_inside_object_gives_negative_rho() -> None:
+    b = circle(1.0)
+    shape = shape_from_curvature(np.linspace(0, 1, 5), np.zeros(5), BasePose(0.5, -0.5, np.pi / 2))
+    geo = sense(shape, b, 0.1)
+    inside = np.hypot(*shape.r.T) < 1.0
+    np.testing.assert_array_equal(geo.rho < 0, inside)
+    assert not np.any(geo.valid[inside])
+
+
+def test_straight_arm_hits_circle_where_the_line_does() -> None:
+    """Leaving the admissible region is reported at the right arclength (line-circle hit)."""
+    R = 2.0
+    b = circle(R)
+    rho0, alpha0 = 1.0, np.pi / 6
+    base = base_pose(b, rho0, alpha0, 0.0)
+    p0 = np.array([base.x, base.y])
+    a = np.array([np.cos(base.theta), np.sin(base.theta)])
+    # |p0 + s a| = R  ->  s^2 + 2 (p0.a) s + |p0|^2 - R^2 = 0
+    pa = p0 @ a
+    s_hit = -pa - np.sqrt(pa**2 - (p0 @ p0 - R**2))
+    s = np.linspace(0, 4.0, 81)
+    with pytest.raises(ContactValidityError) as info:
+        integrate_contact(s, np.zeros_like(s), b, rho0, alpha0, 0.0)
+    assert info.value.condition == "rho > 0"
+    assert info.value.s == pytest.approx(s_hit, abs=1e-6)
+    assert f"s = {s_hit:.4g}"[:8] in str(info.value)
+
+
+def test_initial_state_round_trip_and_bad_states() -> None:
+    b = ellipse(8.0, 4.0)
+    rho0, alpha0, s_o0 = 1.7, 1.2, 5.0
+    base = base_pose(b, rho0, alpha0, s_o0)
+    got = initial_state(b, base)
+    np.testing.assert_allclose(got, (rho0, alpha0, s_o0), atol=1e-10)
+    with pytest.raises(ContactValidityError, match="inside the object"):
+        initial_state(b, BasePose(1.0, 0.5, 0.0))
+    with pytest.raises(ContactValidityError, match=r"\(0, pi\)"):
+        initial_state(b, BasePose(10.0, 0.0, -np.pi / 2))  # heading puts the object on the right
+    s = np.linspace(0, 1, 11)
+    for rho, alpha in [(0.0, 1.5), (-1.0, 1.5), (1.0, 0.0), (1.0, np.pi), (1.0, 4.0), (np.nan, 1.0)]:
+        with pytest.raises(ContactValidityError):
+            integrate_contact(s, np.zeros_like(s), b, rho, alpha, 0.0)
+    # 1 + rho kappa_o <= 0: too far out in the deformed circle's concave part
+    d = deformed_circle()
+    s_concave = d.sample(2000)[0][np.argmin(d.curvature(d.sample(2000)[0]))]
+    with pytest.raises(ContactValidityError, match="1 \\+ rho kappa_o"):
+        integrate_contact(s, np.zeros_like(s), d, 9.0, 1.5, s_concave)
