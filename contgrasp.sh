@@ -53,9 +53,19 @@ setup() {
     if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
         echo "== installing contgrasp and its dependencies into .venv"
         "$py" -m pip install --quiet --upgrade pip
-        "$py" -m pip install --quiet -e ".[test]"
+        "$py" -m pip install --quiet -e ".[test,msgs]"
         echo "$want" >"$stamp"
     fi
+    # The interface package is compiled with the machine's cmake and C/C++ compilers.
+    if ! command -v cmake >/dev/null 2>&1 || ! command -v g++ >/dev/null 2>&1; then
+        if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+            apt-get update -qq && apt-get install -y -qq cmake g++ make >/dev/null
+        else
+            echo "contgrasp.sh: cmake and g++ are needed to build msgs_schema/; install them" >&2
+            exit 1
+        fi
+    fi
+    "$py" msgs_schema/build_into_venv.py
     mkdir -p "$ROS_LOG_DIR"
 }
 

@@ -1,0 +1,101 @@
+"""Build and install the contgrasp_msgs interface package into the running virtual environment.
+
+Run with the venv's interpreter (``.venv/bin/python msgs_schema/build_into_venv.py``); the
+project's set-up does it. Steps (DESIGN.md section 6):
+
+1. point the ROS wheels' exported CMake files, which hard-code the wheel builder's Python and
+   numpy include directories, at this interpreter's (idempotent text replacement);
+2. plain ``cmake`` configure / build / install with ``CMAKE_INSTALL_PREFIX`` and
+   ``CMAKE_PREFIX_PATH`` set to the venv and ``BUILD_TESTING=OFF``;
+3. import the generated Python messages in a fresh interpreter to prove the install.
+
+The package stays buildable unchanged with ``colcon build`` in an ordinary ROS 2 workspace.
+A stamp with the hash of the interface sources makes a second run a no-op.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import sysconfig
+from pathlib import Path
+
+import numpy
+
+HERE = Path(__file__).resolve().parent
+PREFIX = Path(sys.prefix)
+WHEEL_PY_INCLUDE = "/opt/python/cp311-cp311/include/python3.11"
+WHEEL_NUMPY_INCLUDE = "/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include"
+
+
+def source_hash() -> str:
+    h = hashlib.sha256()
+    for path in sorted([HERE / "CMakeLists.txt", HERE / "package.xml", *HERE.glob("msg/*.msg")]):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def fix_wheel_cmake_paths() -> int:
+    py_inc = sysconfig.get_paths()["include"]
+    np_inc = numpy.get_include()
+    fixed = 0
+    for path in (PREFIX / "share").rglob("*.cmake"):
+        text = path.read_text(errors="surrogateescape")
+        if WHEEL_PY_INCLUDE in text or WHEEL_NUMPY_INCLUDE in text:
+            # numpy first: the Python include path is a prefix of neither, but keep order explicit
+            text = text.replace(WHEEL_NUMPY_INCLUDE, np_inc).replace(WHEEL_PY_INCLUDE, py_inc)
+            path.write_text(text, errors="surrogateescape")
+            fixed += 1
+    return fixed
+
+
+def run(cmd: list[str], **kw: object) -> None:
+    print("+", " ".join(cmd), flush=True)
+    subprocess.run(cmd, check=True, **kw)  # type: ignore[call-overload]
+
+
+def main() -> int:
+    stamp = PREFIX / ".contgrasp-msgs"
+    want = source_hash()
+    if stamp.exists() and stamp.read_text() == want and import_ok():
+        print("contgrasp_msgs: up to date")
+        return 0
+    n = fix_wheel_cmake_paths()
+    print(f"contgrasp_msgs: corrected {n} wheel CMake files")
+    build = HERE.parent / "build" / "contgrasp_msgs"
+    build.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, PATH=f"{PREFIX / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}")
+    run(
+        [
+            "cmake",
+            "-S", str(HERE),
+            "-B", str(build),
+            f"-DCMAKE_INSTALL_PREFIX={PREFIX}",
+            f"-DCMAKE_PREFIX_PATH={PREFIX}",
+            f"-DPython3_EXECUTABLE={sys.executable}",
+            "-DBUILD_TESTING=OFF",
+            "-DCMAKE_BUILD_TYPE=Release",
+        ],
+        env=env,
+        stdout=subprocess.DEVNULL,
+    )
+    run(["cmake", "--build", str(build), "-j", str(os.cpu_count() or 2)], env=env, stdout=subprocess.DEVNULL)
+    run(["cmake", "--install", str(build)], env=env, stdout=subprocess.DEVNULL)
+    if not import_ok():
+        print("contgrasp_msgs: built but the Python messages do not import", file=sys.stderr)
+        return 1
+    stamp.write_text(want)
+    print("contgrasp_msgs: installed into", PREFIX)
+    return 0
+
+
+def import_ok() -> bool:
+    code = "from contgrasp_msgs.msg import RodState, ContactState, CoupleControl, GraspQuality, ObjectBoundary"
+    return subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
