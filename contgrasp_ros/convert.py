@@ -1,0 +1,227 @@
+"""Conversions between contgrasp_msgs messages and the core library's arrays.
+
+Every ``*_arrays`` function validates what it receives (array lengths, finiteness, a strictly
+increasing arclength grid) and raises :class:`MessageError` with the reason, so nodes can drop
+a malformed message, count it and keep running.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse, from_points
+from contgrasp_core.contact import ContactState
+from contgrasp_core.errors import ContgraspError
+from contgrasp_core.quality import GraspQuality
+from contgrasp_msgs.msg import ContactState as ContactStateMsg
+from contgrasp_msgs.msg import CoupleControl, ObjectBoundary
+from contgrasp_msgs.msg import GraspQuality as GraspQualityMsg
+from contgrasp_msgs.msg import RodState as RodStateMsg
+from std_msgs.msg import Header
+
+__all__ = [
+    "MessageError",
+    "RodArrays",
+    "rod_state_arrays",
+    "contact_to_msg",
+    "ContactArrays",
+    "contact_arrays",
+    "couple_to_msg",
+    "couple_arrays",
+    "quality_to_msg",
+    "boundary_to_msg",
+    "boundary_from_msg",
+    "stamp_seconds",
+]
+
+Array = NDArray[np.float64]
+
+
+class MessageError(ContgraspError):
+    """A received message is malformed (wrong lengths, NaN/Inf, empty, bad grid, bad object)."""
+
+
+def stamp_seconds(header: Header) -> float:
+    """Header stamp as float seconds."""
+    return header.stamp.sec + 1e-9 * header.stamp.nanosec
+
+
+def _arrays(msg: object, names: tuple[str, ...], *, min_len: int = 2) -> dict[str, Array]:
+    out = {name: np.asarray(getattr(msg, name), dtype=float) for name in names}
+    n = len(out[names[0]])
+    if n < min_len:
+        raise MessageError(f"{type(msg).__name__}: needs at least {min_len} samples, got {n}")
+    for name, arr in out.items():
+        if len(arr) != n:
+            raise MessageError(f"{type(msg).__name__}: field '{name}' has {len(arr)} samples, '{names[0]}' has {n}")
+        if not np.all(np.isfinite(arr)):
+            raise MessageError(f"{type(msg).__name__}: field '{name}' contains NaN or Inf")
+    if "s" in out and np.any(np.diff(out["s"]) <= 0.0):
+        raise MessageError(f"{type(msg).__name__}: arclength 's' must increase strictly")
+    return out
+
+
+@dataclass(frozen=True)
+class RodArrays:
+    """Arrays of a RodState message (SI)."""
+
+    step: int
+    t: float
+    s: Array
+    x: Array
+    y: Array
+    theta: Array
+    kappa: Array
+    radius: Array
+
+
+def rod_state_arrays(msg: RodStateMsg) -> RodArrays:
+    """Validated arrays of a RodState message."""
+    a = _arrays(msg, ("s", "x", "y", "theta", "radius"))
+    kappa = np.asarray(msg.kappa, dtype=float)
+    if len(kappa) not in (0, len(a["s"])) or not np.all(np.isfinite(kappa)):
+        raise MessageError("RodState: field 'kappa' must be empty or finite with one value per node")
+    if np.any(a["radius"] < 0.0):
+        raise MessageError("RodState: radius must be >= 0")
+    return RodArrays(int(msg.step), stamp_seconds(msg.header), a["s"], a["x"], a["y"], a["theta"], kappa, a["radius"])
+
+
+def contact_to_msg(state: ContactState, header: Header, step: int) -> ContactStateMsg:
+    """ContactState message of a sensed contact state."""
+    return ContactStateMsg(
+        header=header,
+        step=int(step),
+        s=state.s.tolist(),
+        rho=state.rho.tolist(),
+        alpha=state.alpha.tolist(),
+        delta=state.delta.tolist(),
+        s_o=state.s_o.tolist(),
+        shadow_x=state.foot[:, 0].tolist(),
+        shadow_y=state.foot[:, 1].tolist(),
+        in_contact=[bool(v) for v in state.in_contact],
+        contact_tolerance=float(state.tol),
+    )
+
+
+@dataclass(frozen=True)
+class ContactArrays:
+    """Arrays of a ContactState message (SI)."""
+
+    step: int
+    t: float
+    s: Array
+    rho: Array
+    alpha: Array
+    delta: Array
+    s_o: Array
+    shadow: Array
+    in_contact: NDArray[np.bool_]
+    tol: float
+
+
+def contact_arrays(msg: ContactStateMsg) -> ContactArrays:
+    """Validated arrays of a ContactState message."""
+    a = _arrays(msg, ("s", "rho", "alpha", "delta", "s_o", "shadow_x", "shadow_y"))
+    flags = np.asarray(msg.in_contact, dtype=bool)
+    if len(flags) != len(a["s"]):
+        raise MessageError(f"ContactState: 'in_contact' has {len(flags)} flags for {len(a['s'])} nodes")
+    tol = float(msg.contact_tolerance)
+    if not np.isfinite(tol) or tol < 0.0:
+        raise MessageError(f"ContactState: contact_tolerance must be finite and >= 0, got {tol}")
+    return ContactArrays(
+        int(msg.step),
+        stamp_seconds(msg.header),
+        a["s"],
+        a["rho"],
+        a["alpha"],
+        a["delta"],
+        a["s_o"],
+        np.stack([a["shadow_x"], a["shadow_y"]], -1),
+        flags,
+        tol,
+    )
+
+
+def couple_to_msg(s: Array, u: Array, header: Header, step: int) -> CoupleControl:
+    """CoupleControl message: internal couple u (N m) at arclengths s."""
+    return CoupleControl(header=header, step=int(step), s=np.asarray(s).tolist(), u=np.asarray(u).tolist())
+
+
+def couple_arrays(msg: CoupleControl) -> tuple[int, Array, Array]:
+    """Validated (step, s, u) of a CoupleControl message."""
+    a = _arrays(msg, ("s", "u"))
+    return int(msg.step), a["s"], a["u"]
+
+
+def quality_to_msg(q: GraspQuality, header: Header, step: int, tol: float) -> GraspQualityMsg:
+    """GraspQuality message of Q1..Q3 and W."""
+    return GraspQualityMsg(
+        header=header,
+        step=int(step),
+        w=np.asarray(q.W, dtype=float).ravel().tolist(),
+        q1=q.Q1,
+        q2=q.Q2,
+        q3=q.Q3,
+        contact_length=q.contact_length,
+        contact_tolerance=float(tol),
+        valid=bool(q.has_contact),
+    )
+
+
+_PARAM_ORDER = {
+    "circle": ("R", "center_x", "center_y"),
+    "ellipse": ("a", "b", "center_x", "center_y", "angle"),
+    "deformed_circle": ("R", "amplitude", "lobes", "phase", "center_x", "center_y"),
+}
+
+
+def boundary_to_msg(boundary: Boundary, header: Header, samples: int = 256) -> ObjectBoundary:
+    """ObjectBoundary message: kind, named parameters and ``samples`` points equally spaced in s_o."""
+    params = dict(boundary.params)
+    center = params.pop("center", None)
+    if center is not None:
+        params["center_x"], params["center_y"] = float(center[0]), float(center[1])
+    names, values = [], []
+    for key, val in params.items():
+        if isinstance(val, int | float) and not isinstance(val, bool):
+            names.append(key)
+            values.append(float(val))
+    _, pts = boundary.sample(samples)
+    return ObjectBoundary(
+        header=header,
+        kind=boundary.kind,
+        parameter_names=names,
+        parameter_values=values,
+        length=boundary.length,
+        x=pts[:, 0].tolist(),
+        y=pts[:, 1].tolist(),
+    )
+
+
+def boundary_from_msg(msg: ObjectBoundary) -> Boundary:
+    """Rebuild the boundary: analytic kinds from their parameters, anything else (user outlines,
+    Fourier curves) from the samples as a closed spline."""
+    params = dict(zip(msg.parameter_names, msg.parameter_values))
+    try:
+        if msg.kind in _PARAM_ORDER:
+            missing = [k for k in _PARAM_ORDER[msg.kind] if k not in params]
+            if missing:
+                raise MessageError(f"ObjectBoundary '{msg.kind}' lacks parameters {missing}")
+            c = (params["center_x"], params["center_y"])
+            if msg.kind == "circle":
+                return circle(params["R"], c)
+            if msg.kind == "ellipse":
+                return ellipse(params["a"], params["b"], c, params["angle"])
+            return deformed_circle(params["R"], params["amplitude"], int(params["lobes"]), params["phase"], c)
+        pts = np.stack([np.asarray(msg.x, dtype=float), np.asarray(msg.y, dtype=float)], -1)
+        if len(msg.x) != len(msg.y):
+            raise MessageError("ObjectBoundary: x and y differ in length")
+        return from_points(pts, closed=True)
+    except MessageError:
+        raise
+    except ContgraspError as exc:
+        raise MessageError(f"ObjectBoundary rejected: {exc}") from exc
+

@@ -1,0 +1,1 @@
+"""One module per node; each has a Node subclass and a ``main()`` entry point."""

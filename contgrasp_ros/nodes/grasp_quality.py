@@ -1,0 +1,72 @@
+"""grasp_quality: contact state -> continuum grasp quality (W, Q1..Q3) at a configurable rate.
+
+Thin wrapper of :func:`contgrasp_core.quality.grasp_quality` (paper Sec. IV, Prop. 2).
+"""
+
+from __future__ import annotations
+
+from rclpy.node import Node
+
+from contgrasp_core.boundary import Boundary
+from contgrasp_core.errors import ContgraspError
+from contgrasp_core.quality import grasp_quality
+from contgrasp_msgs.msg import ContactState, GraspQuality, ObjectBoundary
+from contgrasp_ros import qos
+from contgrasp_ros.convert import boundary_from_msg, contact_arrays, quality_to_msg
+from contgrasp_ros.runtime import DropCounter, declare, run_node
+
+
+class GraspQualityNode(Node):
+    """Evaluates Q1..Q3 of the sensed contact set, at most ``rate_hz`` times per sim second."""
+
+    def __init__(self, **node_kwargs: object) -> None:
+        super().__init__("grasp_quality", **node_kwargs)  # type: ignore[arg-type]
+        declare(self, "rate_hz", 20.0, "evaluations per simulated second (0 = every contact state)", lo=0.0, hi=1e6)
+        declare(self, "contact_tolerance", -1.0, "contact tolerance [m]; < 0 uses the sensor's", lo=-1.0, hi=1.0)
+        declare(self, "reference_x", 0.0, "wrench reference point x [m] (object frame origin)", lo=-1e6, hi=1e6)
+        declare(self, "reference_y", 0.0, "wrench reference point y [m]", lo=-1e6, hi=1e6)
+        self.boundary: Boundary | None = None
+        self.drops = DropCounter(self)
+        self.last_t: float | None = None
+        self.pub = self.create_publisher(GraspQuality, qos.TOPIC_QUALITY, qos.STREAM)
+        self.create_subscription(ObjectBoundary, qos.TOPIC_OBJECT, self.on_object, qos.LATCHED)
+        self.create_subscription(ContactState, qos.TOPIC_CONTACT, self.on_contact, qos.STREAM)
+
+    def on_object(self, msg: ObjectBoundary) -> None:
+        try:
+            self.boundary = boundary_from_msg(msg)
+        except ContgraspError as exc:
+            self.drops.drop(qos.TOPIC_OBJECT, str(exc))
+
+    def on_contact(self, msg: ContactState) -> None:
+        if self.boundary is None:
+            self.drops.drop(qos.TOPIC_CONTACT, "no object boundary received yet")
+            return
+        try:
+            c = contact_arrays(msg)
+        except ContgraspError as exc:
+            self.drops.drop(qos.TOPIC_CONTACT, str(exc))
+            return
+        rate = self.get_parameter("rate_hz").value
+        if rate > 0 and self.last_t is not None and 0.0 <= c.t - self.last_t < 1.0 / rate - 1e-12:
+            return
+        self.last_t = c.t
+        tol = self.get_parameter("contact_tolerance").value
+        tol = c.tol if tol < 0 else tol
+        ref = (self.get_parameter("reference_x").value, self.get_parameter("reference_y").value)
+        try:
+            phi = self.boundary.tangent_angle(c.s_o)
+            q = grasp_quality(c.s, c.shadow, phi, c.delta, tol=tol, ref=ref)
+        except ContgraspError as exc:
+            self.drops.drop(qos.TOPIC_CONTACT, str(exc))
+            return
+        self.pub.publish(quality_to_msg(q, msg.header, msg.step, tol))
+
+
+def main(args: list[str] | None = None) -> int:
+    """``ros2 run contgrasp_ros grasp_quality``."""
+    return run_node(GraspQualityNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,94 @@
+"""Shared node plumbing: parameter declaration with ranges, throttled drop counting, main()."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+
+from contgrasp_core.errors import ContgraspError
+
+__all__ = ["declare", "DropCounter", "run_node"]
+
+
+def declare(
+    node: Node,
+    name: str,
+    default: Any,
+    description: str,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    read_only: bool = False,
+) -> Any:
+    """Declare a parameter with a descriptor (and a range for numbers); return its value.
+
+    rclpy enforces the range both for the start-up value (params file / overrides: the node
+    refuses to start) and for ``ros2 param set`` at run time (the set is refused, the old value
+    stays).
+    """
+    desc = ParameterDescriptor(description=description, read_only=read_only)
+    if lo is not None and hi is not None:
+        if isinstance(default, bool):
+            pass
+        elif isinstance(default, int):
+            desc.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
+        elif isinstance(default, float):
+            desc.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    return node.declare_parameter(name, default, desc).value
+
+
+class DropCounter:
+    """Counts dropped messages by reason and warns at most once per ``period_s`` seconds (wall)."""
+
+    def __init__(self, node: Node, period_s: float = 2.0) -> None:
+        self._node = node
+        self._period = period_s
+        self.counts: dict[str, int] = {}
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def drop(self, topic: str, reason: str) -> None:
+        key = f"{topic}: {reason.split(':')[0]}"
+        self.counts[key] = self.counts.get(key, 0) + 1
+        self._node.get_logger().warn(
+            f"dropped message on {topic} ({self.total} dropped so far): {reason}",
+            throttle_duration_sec=self._period,
+        )
+
+
+def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
+    """Init rclpy, build the node, spin until shutdown (SIGINT/SIGTERM), clean up.
+
+    A node that rejects its start-up parameters exits with code 2 and a one-line reason.
+    """
+    rclpy.init(args=list(args) if args is not None else sys.argv)
+    node = None
+    try:
+        try:
+            node = factory()
+        except (
+            rclpy.exceptions.InvalidParameterValueException,
+            rclpy.exceptions.ParameterException,
+            ContgraspError,
+        ) as exc:
+            print(f"{getattr(factory, '__name__', 'node')}: invalid parameter: {exc}", file=sys.stderr)
+            return 2
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0

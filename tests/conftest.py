@@ -1,0 +1,34 @@
+"""Test-wide settings: loopback-only DDS discovery and a distinct ROS domain per test."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import tempfile
+
+import pytest
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "contgrasp_ros_log"))
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+_domains = itertools.count()
+
+
+def fresh_domain_id() -> int:
+    """A ROS_DOMAIN_ID for one test: distinct within this run, spread across concurrent runs."""
+    base = int(os.environ.get("ROS_DOMAIN_ID", os.getpid() % 90 + 10))
+    return (base + next(_domains)) % 100 + 1
+
+
+@pytest.fixture
+def ros_context():  # type: ignore[no-untyped-def]
+    """An initialised rclpy context on a fresh domain; shut down after the test."""
+    import rclpy
+    from rclpy.context import Context
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=fresh_domain_id())
+    yield ctx
+    if ctx.ok():
+        rclpy.shutdown(context=ctx)
