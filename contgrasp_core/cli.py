@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__, cli_kinematics
+from . import __version__, cli_kinematics, cli_quality
 from .errors import ContgraspError
 
 __all__ = ["build_parser", "main"]
@@ -34,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"contgrasp {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     cli_kinematics.add_parser(sub, [common])
+    cli_quality.add_parser(sub, [common])
     return parser
 
 

@@ -1,0 +1,70 @@
+"""``contgrasp quality-map``: grasp quality over arm base poses (paper Sec. IV-C, Fig. 3)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from .errors import InvalidParameterError
+from .objects import PAPER_OBJECTS
+from .sweep import METRICS, MapSpec, load_map, quality_map, save_map
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
+    """Register the ``quality-map`` subcommand."""
+    p = sub.add_parser(
+        "quality-map",
+        parents=parents,
+        help="grasp quality Q1..Q3 over base poses in the disc region D, with Nelder-Mead maxima (Fig. 3)",
+        description=__doc__,
+    )
+    p.add_argument("--object", choices=PAPER_OBJECTS, default="circle")
+    p.add_argument("--psi-steps", type=int, default=24, help="polar angles of the base (default 24)")
+    p.add_argument("--d-steps", type=int, default=6, help="distances in [d_min, d_max] (default 6)")
+    p.add_argument("--d-min", type=float, default=3.0)
+    p.add_argument("--d-max", type=float, default=13.0)
+    p.add_argument("--nodes", type=int, default=200, help="inner optimal-grasp grid nodes (default 200)")
+    p.add_argument("--contact-tol", type=float, default=0.05, help="contact where delta >= -tol (default 0.05)")
+    p.add_argument("--metric", choices=(*METRICS, "all"), default="all", help="metric(s) to maximise and plot")
+    p.add_argument("--executor", choices=("serial", "processes", "dask"), default="processes")
+    p.add_argument("--workers", type=int, default=None, help="process-pool size (default: all cores)")
+    p.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (with --executor dask)")
+    p.add_argument("--no-optimise", action="store_true", help="skip the Nelder-Mead maximisation")
+    p.add_argument("--out", metavar="FILE", help="save the map (FILE.npz + FILE.json) for later re-plotting")
+    p.add_argument("--load", metavar="FILE", help="re-plot / report a saved map instead of computing")
+    p.add_argument("--plot", metavar="FILE", help="draw the Fig. 3 panels to FILE")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Execute ``contgrasp quality-map``; JSON keys in docs/cli.md."""
+    if args.load:
+        qm = load_map(args.load)
+    else:
+        if args.executor == "dask" and not args.scheduler:
+            raise InvalidParameterError("--executor dask needs --scheduler tcp://host:port")
+        if args.workers is not None and args.workers < 1:
+            raise InvalidParameterError("--workers must be >= 1")
+        spec = MapSpec(
+            object=args.object, psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
+            d_max=args.d_max, nodes=args.nodes, contact_tol=args.contact_tol,
+        )
+        qm = quality_map(
+            spec, executor=args.executor, workers=args.workers, scheduler=args.scheduler,
+            progress=not args.json, optimise=not args.no_optimise,
+        )
+        if args.out:
+            save_map(qm, args.out)
+    out = qm.to_dict()
+    if args.metric != "all":
+        out["optimum"] = {args.metric: out["optimum"].get(args.metric)}
+    if args.plot:
+        from .plot_quality import quality_map_figure
+
+        fig = quality_map_figure(qm)
+        fig.savefig(args.plot, dpi=120)
+        out["plot"] = args.plot
+    out["saved"] = args.out
+    return out

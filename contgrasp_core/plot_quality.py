@@ -1,0 +1,60 @@
+"""Fig. 3 of the paper: normalised quality maps over the base region D with the optimal grasp."""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.tri import Triangulation
+
+from .plots import draw_boundary
+from .sweep import METRICS, QualityMap
+
+__all__ = ["quality_map_figure"]
+
+
+def _ring_triangulation(qm: QualityMap) -> tuple[Triangulation, np.ndarray]:
+    P, D = qm.valid.shape
+    x, y = qm.base[..., 0].ravel(), qm.base[..., 1].ravel()
+    idx = np.arange(P * D).reshape(P, D)
+    tris = []
+    for i in range(P):
+        a, b = idx[i], idx[(i + 1) % P]
+        for j in range(D - 1):
+            tris.append([a[j], b[j], b[j + 1]])
+            tris.append([a[j], b[j + 1], a[j + 1]])
+    tri = np.array(tris)
+    bad = ~np.isfinite(x) | ~np.isfinite(y)
+    xs, ys = np.where(bad, 0.0, x), np.where(bad, 0.0, y)
+    t = Triangulation(xs, ys, tri)
+    return t, bad
+
+
+def quality_map_figure(qm: QualityMap, *, title: str | None = None) -> Figure:
+    """One panel per metric: heatmap over D normalised by its maximum (darker = higher), the
+    object, the optimal base point (purple) and its arm configuration (purple dashed)."""
+    fig = Figure(figsize=(13, 4.6))
+    t, bad = _ring_triangulation(qm)
+    for k, metric in enumerate(METRICS):
+        ax = fig.add_subplot(1, 3, k + 1)
+        vals = qm.Q[k].ravel()
+        finite = np.isfinite(vals) & ~bad
+        vmax = np.nanmax(vals[finite]) if finite.any() else 1.0
+        norm = np.where(finite, vals / vmax, 0.0)
+        t.set_mask(np.any(~finite[t.triangles], axis=1))
+        pc = ax.tripcolor(t, norm, shading="gouraud", cmap="Greys", vmin=0.0, vmax=1.0)
+        draw_boundary(ax, qm.spec.boundary(), color="0.75")
+        opt = qm.optimum.get(metric)
+        if opt:
+            ax.plot(opt["base"]["x"], opt["base"]["y"], "o", color="purple", ms=7, zorder=6)
+            if opt.get("x") is not None:
+                ax.plot(opt["x"], opt["y"], "--", color="purple", lw=2, zorder=6)
+        inv = ~qm.valid
+        if inv.any():
+            ax.plot(qm.base[..., 0][inv], qm.base[..., 1][inv], "x", color="tab:red", ms=4, label="invalid pose")
+            ax.legend(loc="lower right", fontsize=7)
+        ax.set_aspect("equal")
+        ax.set_title(f"{metric} / max {metric}" + (f"  (max {vmax:.3g})" if finite.any() else ""))
+        fig.colorbar(pc, ax=ax, shrink=0.7)
+    fig.suptitle(title or f"grasp quality maps: {qm.spec.object}")
+    fig.tight_layout()
+    return fig

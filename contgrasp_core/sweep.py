@@ -1,0 +1,432 @@
+"""Grasp-quality maps over arm base poses and their maximisation (paper Sec. IV-C, eq. max_quality).
+
+Base positions lie in the region D around the object: the point at boundary distance ``d`` on
+the ray from the object frame origin at polar angle ``psi``, ``d in [d_min, d_max]``; the base
+heading is ``theta0 = psi + pi/2`` (tangent to the disc, counter-clockwise). For each pose the
+initial contact state comes from closest-point projection, the inner optimal grasp
+(eq. optimal_kappa) is solved by :func:`contgrasp_core.optimal.solve`, and Q1..Q3 of its
+contact set are evaluated (:mod:`contgrasp_core.quality`).
+
+Work is split into one task per ``psi``: along it the distances are solved in increasing order,
+each warm-started from its neighbour's solution. The task is pure (same inputs, same
+arithmetic), so serial, process-pool and Dask executors give identical maps.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import brentq, minimize
+
+from .arm import Arm, BasePose
+from .boundary import Boundary
+from .errors import ContgraspError, InvalidParameterError
+from .objects import paper_object
+from .quality import grasp_quality
+
+__all__ = [
+    "MapSpec",
+    "PoseResult",
+    "QualityMap",
+    "disc_pose",
+    "solve_pose",
+    "quality_map",
+    "maximise",
+    "save_map",
+    "load_map",
+    "METRICS",
+]
+
+METRICS = ("Q1", "Q2", "Q3")
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    """What to sweep: a paper object, the (psi, d) grid of D and the inner problem's settings.
+
+    Paper defaults (Sec. IV-C): d in [3, 13], arm of constant unit radius and length L_o/2,
+    rho_d = 1, alpha_d = pi/2, chi = 10. ``contact_tol`` is the contact tolerance of
+    Definition 1 used for Q1..Q3 (delta >= -tol); since rho_d equals the arm radius the depth
+    hovers around zero, so a small positive tolerance (default 0.05 = 5 % of the radius)
+    counts the tracked part of the arm as in contact. ``nodes`` is the inner grid size.
+    """
+
+    object: str = "circle"
+    psi_steps: int = 24
+    d_steps: int = 6
+    d_min: float = 3.0
+    d_max: float = 13.0
+    nodes: int = 200
+    chi: float = 10.0
+    rho_d: float = 1.0
+    alpha_d: float = 0.5 * np.pi
+    arm_radius: float = 1.0
+    length_fraction: float = 0.5
+    contact_tol: float = 0.05
+    solver_tol: float = 1e-8
+
+    def __post_init__(self) -> None:
+        if self.psi_steps < 1 or self.d_steps < 1:
+            raise InvalidParameterError("psi_steps and d_steps must be >= 1")
+        if not (0.0 < self.d_min <= self.d_max and np.isfinite(self.d_max)):
+            raise InvalidParameterError(f"need 0 < d_min <= d_max, got [{self.d_min}, {self.d_max}]")
+        for name in ("chi", "rho_d", "arm_radius", "length_fraction", "solver_tol"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise InvalidParameterError(f"{name} must be > 0, got {v!r}")
+        if not 0.0 < self.alpha_d < np.pi:
+            raise InvalidParameterError(f"alpha_d must be in (0, pi), got {self.alpha_d!r}")
+        if not (np.isfinite(self.contact_tol) and self.contact_tol >= 0):
+            raise InvalidParameterError(f"contact_tol must be >= 0, got {self.contact_tol!r}")
+        paper_object(self.object)  # validates the name
+
+    def boundary(self) -> Boundary:
+        return paper_object(self.object)
+
+    @property
+    def psi(self) -> Array:
+        return np.linspace(0.0, 2.0 * np.pi, self.psi_steps, endpoint=False)
+
+    @property
+    def d(self) -> Array:
+        return np.linspace(self.d_min, self.d_max, self.d_steps)
+
+
+@dataclass(frozen=True)
+class PoseResult:
+    """Outcome at one base pose: Q1..Q3 (NaN when invalid) and why/how."""
+
+    psi: float
+    d: float
+    base: tuple[float, float, float]
+    valid: bool
+    reason: str
+    Q: tuple[float, float, float] = (np.nan, np.nan, np.nan)
+    converged: bool = False
+    constraints_ok: bool = False
+    iterations: int = 0
+    contact_length: float = 0.0
+    x: Array | None = field(default=None, repr=False)
+    y: Array | None = field(default=None, repr=False)
+
+
+def _ray_distance(boundary: Boundary, direction: Array, lam: float) -> float:
+    return float(boundary.project(np.array([lam * direction])).signed_distance[0])
+
+
+def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
+    """Base pose in D: on the ray at polar angle ``psi`` from the origin, at boundary distance ``d``.
+
+    Heading ``theta0 = psi + pi/2``. Requires the origin inside the object (true for the paper's
+    objects, which are star-shaped about it).
+    """
+    if not (np.isfinite(psi) and np.isfinite(d) and d > 0):
+        raise InvalidParameterError(f"need finite psi and d > 0, got psi={psi!r}, d={d!r}")
+    u = np.array([np.cos(psi), np.sin(psi)])
+    if _ray_distance(boundary, u, 0.0) >= 0:
+        raise InvalidParameterError("the object frame origin must lie inside the object to place bases in D")
+    _, pts = boundary.sample(256)
+    r_max = float(np.max(np.hypot(*pts.T))) + boundary.length / 256
+    lam_b = brentq(lambda lam: _ray_distance(boundary, u, lam), 0.0, r_max, xtol=1e-13)
+    lo, hi = lam_b + d, r_max + d
+    f_lo = _ray_distance(boundary, u, lo) - d
+    lam = lo if f_lo >= 0 else brentq(lambda lam: _ray_distance(boundary, u, lam) - d, lo, hi, xtol=1e-12)
+    return BasePose(float(lam * u[0]), float(lam * u[1]), float(psi + 0.5 * np.pi))
+
+
+def _problem(spec: MapSpec, boundary: Boundary, base: BasePose):  # type: ignore[no-untyped-def]
+    from .optimal import problem_from_base
+
+    arm = Arm(spec.length_fraction * boundary.length, spec.arm_radius)
+    return problem_from_base(
+        boundary, base, arm=arm, nodes=spec.nodes, rho_d=spec.rho_d, alpha_d=spec.alpha_d, chi=spec.chi
+    )
+
+
+def _evaluate(spec: MapSpec, boundary: Boundary, psi: float, d: float, base: BasePose, warm: Any) -> tuple[PoseResult, Any]:
+    from .optimal import solve
+
+    try:
+        problem = _problem(spec, boundary, base)
+    except ContgraspError as exc:
+        return PoseResult(psi, d, (base.x, base.y, base.theta), False, f"invalid initial state: {exc}"), None
+    # Warm start first; the solver's own cold starts as fall-backs (deterministic order).
+    res, errors = None, []
+    for initial in ([warm] if warm is not None else []) + ["approach", "zero"]:
+        try:
+            cand = solve(problem, initial=initial, tol=spec.solver_tol)
+        except ContgraspError as exc:
+            errors.append(str(exc))
+            continue
+        if res is None or (cand.converged and cand.constraints.ok):
+            res = cand
+        if res.converged and res.constraints.ok:
+            break
+    if res is None:
+        return PoseResult(psi, d, (base.x, base.y, base.theta), False, f"inner solve failed: {errors[-1]}"), None
+    s = problem.s
+    delta = problem.arm.radius(s) - res.rho
+    q = grasp_quality(s, boundary.point(res.s_o), boundary.tangent_angle(res.s_o), delta, tol=spec.contact_tol)
+    ok = bool(res.converged and res.constraints.ok)
+    reason = "ok" if ok else ("not converged" if not res.converged else "constraints violated")
+    return (
+        PoseResult(
+            psi,
+            d,
+            (base.x, base.y, base.theta),
+            ok,
+            reason,
+            (q.Q1, q.Q2, q.Q3) if ok else (np.nan, np.nan, np.nan),
+            bool(res.converged),
+            bool(res.constraints.ok),
+            int(res.iterations),
+            q.contact_length,
+            res.shape.r[:, 0],
+            res.shape.r[:, 1],
+        ),
+        res if ok else None,
+    )
+
+
+def solve_pose(spec: MapSpec, psi: float, d: float, warm: Any = None) -> PoseResult:
+    """Inner optimal grasp and Q1..Q3 at the base pose (psi, d) of D."""
+    boundary = spec.boundary()
+    return _evaluate(spec, boundary, psi, d, disc_pose(boundary, psi, d), warm)[0]
+
+
+def _column(spec: MapSpec, psi: float) -> list[PoseResult]:
+    """All distances at one polar angle, in increasing d, each warm-started from the previous."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        boundary = spec.boundary()
+        out, warm = [], None
+        for d in spec.d:
+            try:
+                base = disc_pose(boundary, psi, d)
+            except ContgraspError as exc:
+                out.append(PoseResult(psi, d, (np.nan, np.nan, np.nan), False, f"no base pose: {exc}"))
+                continue
+            res, sol = _evaluate(spec, boundary, psi, float(d), base, warm)
+            warm = sol if sol is not None else warm
+            out.append(res)
+        return out
+
+
+@dataclass(frozen=True)
+class QualityMap:
+    """Q1..Q3 on the (psi, d) grid (NaN where invalid) with per-pose status and the optimum."""
+
+    spec: MapSpec
+    psi: Array
+    d: Array
+    Q: Array  # (3, P, D)
+    valid: NDArray[np.bool_]
+    reasons: list[list[str]]
+    base: Array  # (P, D, 3)
+    iterations: NDArray[np.int_]
+    arms: Array  # (P, D, 2, nodes) arm centrelines (NaN where invalid)
+    wall_time: float
+    executor: str
+    optimum: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    @property
+    def n_solves(self) -> int:
+        return int(self.spec.psi_steps * self.spec.d_steps)
+
+    def to_dict(self) -> dict[str, Any]:
+        def grid(a: Array) -> list[list[float | None]]:
+            return [[None if not np.isfinite(v) else float(v) for v in row] for row in a]
+
+        return {
+            "object": self.spec.object,
+            "psi": self.psi.tolist(),
+            "d": self.d.tolist(),
+            "Q1": grid(self.Q[0]),
+            "Q2": grid(self.Q[1]),
+            "Q3": grid(self.Q[2]),
+            "valid": self.valid.tolist(),
+            "invalid_reasons": sorted({r for row in self.reasons for r in row if r != "ok"}),
+            "n_valid": int(self.valid.sum()),
+            "optimum": self.optimum,
+            "wall_time_s": self.wall_time,
+            "n_solves": self.n_solves,
+            "executor": self.executor,
+            "spec": asdict(self.spec),
+        }
+
+
+
+
+def _run_columns(spec: MapSpec, executor: str, workers: int | None, scheduler: str | None, progress: bool) -> list[list[PoseResult]]:
+    from functools import partial
+
+    task = partial(_column, spec)
+    psis = [float(p) for p in spec.psi]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(psis), desc=f"quality map {spec.object}", unit="psi")
+    out: list[list[PoseResult]] = []
+    try:
+        if executor == "serial":
+            for p in psis:
+                out.append(task(p))
+                if bar:
+                    bar.update()
+        elif executor == "processes":
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+
+            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as pool:
+                for res in pool.map(task, psis):
+                    out.append(res)
+                    if bar:
+                        bar.update()
+        elif executor == "dask":
+            from distributed import Client
+
+            if not scheduler:
+                raise InvalidParameterError("the dask executor needs a scheduler address (--scheduler tcp://host:port)")
+            with Client(scheduler) as client:
+                futures = client.map(task, psis, pure=False)
+                for fut in futures:  # keep psi order
+                    out.append(fut.result())
+                    if bar:
+                        bar.update()
+        else:
+            raise InvalidParameterError(f"unknown executor {executor!r}: serial, processes or dask")
+    finally:
+        if bar:
+            bar.close()
+    return out
+
+
+def quality_map(
+    spec: MapSpec,
+    *,
+    executor: str = "processes",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: bool = False,
+    optimise: bool = True,
+) -> QualityMap:
+    """Compute the quality map of ``spec`` (and, with ``optimise``, each metric's maximiser)."""
+    t0 = time.perf_counter()
+    cols = _run_columns(spec, executor, workers, scheduler, progress)
+    P, D = spec.psi_steps, spec.d_steps
+    Q = np.full((3, P, D), np.nan)
+    valid = np.zeros((P, D), dtype=bool)
+    base = np.full((P, D, 3), np.nan)
+    iters = np.zeros((P, D), dtype=int)
+    arms = np.full((P, D, 2, spec.nodes), np.nan)
+    reasons = [["" for _ in range(D)] for _ in range(P)]
+    for i, col in enumerate(cols):
+        for j, r in enumerate(col):
+            Q[:, i, j] = r.Q
+            valid[i, j] = r.valid
+            base[i, j] = r.base
+            iters[i, j] = r.iterations
+            reasons[i][j] = r.reason
+            if r.valid and r.x is not None and r.y is not None:
+                arms[i, j, 0], arms[i, j, 1] = r.x, r.y
+    qm = QualityMap(spec, spec.psi, spec.d, Q, valid, reasons, base, iters, arms, 0.0, executor)
+    optimum = {m: maximise(qm, m) for m in METRICS} if optimise and valid.any() else {}
+    return QualityMap(spec, spec.psi, spec.d, Q, valid, reasons, base, iters, arms, time.perf_counter() - t0, executor, optimum)
+
+
+def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
+    """Nelder-Mead maximisation of one metric over D (eq. max_quality), from the best grid point.
+
+    The search variables are (psi, d) with d bounded to [d_min, d_max] (scipy's bounded
+    Nelder-Mead); psi is periodic. Invalid poses count as -inf quality.
+    """
+    if metric not in METRICS:
+        raise InvalidParameterError(f"metric must be one of {METRICS}, got {metric!r}")
+    k = METRICS.index(metric)
+    spec = qm.spec
+    grid = np.where(qm.valid, qm.Q[k], -np.inf)
+    i, j = np.unravel_index(int(np.argmax(grid)), grid.shape)
+    boundary = spec.boundary()
+    cache: dict[tuple[float, float], PoseResult] = {}
+
+    def value(z: Array) -> float:
+        psi, d = float(np.mod(z[0], 2 * np.pi)), float(np.clip(z[1], spec.d_min, spec.d_max))
+        key = (round(psi, 12), round(d, 12))
+        if key not in cache:
+            try:
+                base = disc_pose(boundary, psi, d)
+                cache[key] = _evaluate(spec, boundary, psi, d, base, None)[0]
+            except ContgraspError as exc:
+                cache[key] = PoseResult(psi, d, (np.nan,) * 3, False, str(exc))
+        r = cache[key]
+        return -r.Q[k] if r.valid else np.inf
+
+    z0 = np.array([qm.psi[i], qm.d[j]])
+    dpsi = 2 * np.pi / spec.psi_steps
+    dd = (spec.d_max - spec.d_min) / max(spec.d_steps - 1, 1) if spec.d_max > spec.d_min else 0.0
+    simplex = np.array([z0, z0 + [0.5 * dpsi, 0.0], z0 + [0.0, 0.5 * dd if dd else 0.0]])
+    simplex[:, 1] = np.clip(simplex[:, 1], spec.d_min, spec.d_max)
+    if dd and simplex[2, 1] == simplex[0, 1]:
+        simplex[2, 1] = z0[1] - 0.5 * dd
+    res = minimize(
+        value,
+        z0,
+        method="Nelder-Mead",
+        bounds=[(None, None), (spec.d_min, spec.d_max)],
+        options={"initial_simplex": simplex, "xatol": 1e-3, "fatol": 1e-9 * max(1.0, abs(grid[i, j])), "maxfev": 120},
+    )
+    psi, d = float(np.mod(res.x[0], 2 * np.pi)), float(np.clip(res.x[1], spec.d_min, spec.d_max))
+    best = cache.get((round(psi, 12), round(d, 12)))
+    grid_best = float(grid[i, j])
+    if best is None or not best.valid or best.Q[k] < grid_best:
+        psi, d = float(qm.psi[i]), float(qm.d[j])
+        best = cache.get((round(psi, 12), round(d, 12))) or solve_pose(spec, psi, d)
+    return {
+        "psi": psi,
+        "d": d,
+        "value": float(best.Q[k]),
+        "grid_value": grid_best,
+        "base": {"x": best.base[0], "y": best.base[1], "theta": best.base[2]},
+        "evaluations": int(res.nfev),
+        "x": None if best.x is None else best.x.tolist(),
+        "y": None if best.y is None else best.y.tolist(),
+    }
+
+
+def save_map(qm: QualityMap, path: str | Path) -> Path:
+    """Save to ``path`` (.npz arrays) plus ``path`` with suffix .json (metadata, optimum)."""
+    p = Path(path).with_suffix(".npz")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(
+        p, psi=qm.psi, d=qm.d, Q=qm.Q, valid=qm.valid, base=qm.base, iterations=qm.iterations, arms=qm.arms,
+        reasons=np.array(qm.reasons, dtype=str),
+    )
+    meta = {k: v for k, v in qm.to_dict().items() if k not in ("Q1", "Q2", "Q3", "valid")}
+    p.with_suffix(".json").write_text(json.dumps(meta, indent=1))
+    return p
+
+
+def load_map(path: str | Path) -> QualityMap:
+    """Reload a map saved by :func:`save_map` (no recomputation)."""
+    p = Path(path).with_suffix(".npz")
+    try:
+        meta = json.loads(p.with_suffix(".json").read_text())
+        with np.load(p) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, KeyError) as exc:
+        raise InvalidParameterError(f"cannot load quality map {p}: {exc}") from exc
+    spec = MapSpec(**meta["spec"])
+    return QualityMap(
+        spec, arrays["psi"], arrays["d"], arrays["Q"], arrays["valid"], arrays["reasons"].tolist(), arrays["base"],
+        arrays["iterations"], arrays["arms"], float(meta["wall_time_s"]), str(meta["executor"]), meta.get("optimum", {}),
+    )

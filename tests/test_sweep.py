@@ -1,0 +1,103 @@
+"""Quality maps over the base region D: geometry of D, symmetries, executors, invalid poses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.objects import paper_object
+from contgrasp_core.sweep import MapSpec, disc_pose, load_map, maximise, quality_map, save_map
+
+FAST = dict(nodes=80, solver_tol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["circle", "ellipse", "deformed"])
+def test_disc_pose_is_at_distance_d_on_the_ray(name: str) -> None:
+    b = paper_object(name)
+    for psi, d in [(0.0, 3.0), (1.1, 7.5), (4.0, 13.0)]:
+        pose = disc_pose(b, psi, d)
+        assert np.arctan2(pose.y, pose.x) % (2 * np.pi) == pytest.approx(psi % (2 * np.pi), abs=1e-12)
+        assert b.project(np.array([[pose.x, pose.y]])).signed_distance[0] == pytest.approx(d, abs=1e-9)
+        assert pose.theta == pytest.approx(psi + np.pi / 2)
+    assert np.hypot(*[disc_pose(paper_object("circle"), 0.7, 4.0).x, disc_pose(paper_object("circle"), 0.7, 4.0).y]) == pytest.approx(9.0)
+
+
+def test_circle_map_is_radially_symmetric() -> None:
+    qm = quality_map(MapSpec("circle", psi_steps=5, d_steps=2, **FAST), executor="serial", optimise=False)
+    assert qm.valid.all()
+    for k in range(3):
+        np.testing.assert_allclose(qm.Q[k], np.broadcast_to(qm.Q[k][0], qm.Q[k].shape), rtol=1e-6)
+    # higher quality closer to the object
+    assert np.all(qm.Q[0][:, 0] > qm.Q[0][:, 1])
+
+
+def test_ellipse_map_has_the_point_symmetry_but_not_the_reflections() -> None:
+    """Rotating by pi maps the problem onto itself (the arm still wraps counter-clockwise);
+    reflecting about an axis reverses the wrapping direction, so it is not a symmetry."""
+    qm = quality_map(MapSpec("ellipse", psi_steps=8, d_steps=1, d_min=3.0, d_max=3.0, **FAST), executor="serial", optimise=False)
+    assert qm.valid.all()
+    Q = qm.Q[:, :, 0]
+    np.testing.assert_allclose(Q[:, 4:], Q[:, :4], rtol=1e-6)  # psi + pi
+    mirror = Q[:, (-np.arange(8)) % 8]  # psi -> -psi (reflection about the major axis)
+    assert np.max(np.abs(mirror - Q) / np.abs(Q)) > 1e-2
+
+
+def test_deformed_circle_map_has_threefold_symmetry_and_invalid_poses_are_marked() -> None:
+    spec = MapSpec("deformed", psi_steps=6, d_steps=2, d_min=3.0, d_max=13.0, **FAST)
+    qm = quality_map(spec, executor="serial", optimise=False)
+    assert qm.valid[:, 0].all()
+    Q = qm.Q[:, :, 0]
+    np.testing.assert_allclose(Q[:, 2:4], Q[:, 0:2], rtol=1e-6)  # psi + 2 pi / 3
+    np.testing.assert_allclose(Q[:, 4:6], Q[:, 0:2], rtol=1e-6)
+    # 13 away from a concave part (concave radius ~7.2) the shadow point cannot move forward:
+    # such poses are invalid, with the reason, and carry no number
+    # (on a bay's symmetry axis the two flanks are equally close, so which shadow point the
+    # projection picks - and whether the pose is feasible - is a tie broken by rounding)
+    concave = np.isclose(np.mod(qm.psi - np.pi / 3, 2 * np.pi / 3), 0.0)
+    invalid = ~qm.valid[:, 1]
+    assert invalid.any() and not np.any(invalid & ~concave)
+    assert np.all(np.isnan(qm.Q[:, invalid, 1]))
+    for i in np.flatnonzero(invalid):
+        assert qm.reasons[i][1].startswith("inner solve failed") and "singular" in qm.reasons[i][1]
+    assert all(r == "ok" for i in np.flatnonzero(~concave) for r in qm.reasons[i])
+
+
+def test_executors_give_identical_maps() -> None:
+    distributed = pytest.importorskip("distributed")
+    spec = MapSpec("ellipse", psi_steps=4, d_steps=2, **FAST)
+    serial = quality_map(spec, executor="serial", optimise=False)
+    procs = quality_map(spec, executor="processes", workers=2, optimise=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        dask = quality_map(spec, executor="dask", scheduler=cluster.scheduler_address, optimise=False)
+    for other in (procs, dask):
+        np.testing.assert_array_equal(other.valid, serial.valid)
+        np.testing.assert_array_equal(other.Q, serial.Q)
+
+
+def test_nelder_mead_improves_on_the_grid_within_bounds(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    spec = MapSpec("ellipse", psi_steps=6, d_steps=2, **FAST)
+    qm = quality_map(spec, executor="serial", optimise=True)
+    for metric, opt in qm.optimum.items():
+        assert spec.d_min <= opt["d"] <= spec.d_max
+        assert opt["value"] >= opt["grid_value"] * (1 - 1e-12)
+        assert len(opt["x"]) == spec.nodes
+    back = load_map(save_map(qm, tmp_path / "map"))
+    np.testing.assert_array_equal(back.Q, qm.Q)
+    np.testing.assert_array_equal(back.valid, qm.valid)
+    assert back.optimum == qm.optimum and back.spec == spec
+    with pytest.raises(InvalidParameterError):
+        maximise(qm, "Q4")
+
+
+def test_bad_specs_rejected(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(InvalidParameterError):
+        MapSpec("square")
+    with pytest.raises(InvalidParameterError):
+        MapSpec("circle", d_min=5.0, d_max=3.0)
+    with pytest.raises(InvalidParameterError):
+        MapSpec("circle", contact_tol=-0.1)
+    with pytest.raises(InvalidParameterError):
+        quality_map(MapSpec("circle", psi_steps=1, d_steps=1, **FAST), executor="dask")
+    with pytest.raises(InvalidParameterError):
+        load_map(tmp_path / "missing")
