@@ -117,9 +117,8 @@ def sense(
     proj = boundary.project(r)
     s_o = np.unwrap(proj.s_o, period=boundary.length)
     rho = proj.signed_distance
-    phi = boundary.tangent_angle(proj.s_o)
-    alpha = _wrap_pi(phi + 0.5 * np.pi - theta)
-    kappa_o = boundary.curvature(proj.s_o)
+    alpha = _wrap_pi(proj.phi + 0.5 * np.pi - theta)
+    kappa_o = proj.kappa_o
     one_plus = 1.0 + rho * kappa_o
     with np.errstate(divide="ignore", invalid="ignore"):
         nu_o = np.sin(alpha) / one_plus

@@ -196,3 +196,11 @@ def test_invalid_parameters() -> None:
         deformed_circle(5.0, amplitude=1.5)
     with pytest.raises(InvalidParameterError):
         circle(1.0).project(np.array([[np.nan, 0.0]]))
+
+
+def test_projection_reports_tangent_angle_and_curvature_at_the_foot() -> None:
+    b = deformed_circle()
+    q = np.random.default_rng(3).uniform(-12, 12, size=(200, 2))
+    pr = b.project(q)
+    np.testing.assert_allclose(pr.phi, b.tangent_angle(pr.s_o), atol=1e-10)
+    np.testing.assert_allclose(pr.kappa_o, b.curvature(pr.s_o), atol=1e-9)
