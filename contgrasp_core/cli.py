@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__, cli_kinematics, cli_quality
+from . import __version__, cli_grasp, cli_kinematics, cli_quality
 from .errors import ContgraspError
 
 __all__ = ["build_parser", "main"]
@@ -35,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     cli_kinematics.add_parser(sub, [common])
     cli_quality.add_parser(sub, [common])
+    cli_grasp.add_parsers(sub, [common])
     return parser
 
 

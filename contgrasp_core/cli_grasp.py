@@ -1,0 +1,129 @@
+"""``contgrasp grasp`` and ``contgrasp figures``: optimal grasps (paper Sec. III, Fig. 2).
+
+``grasp`` solves eq. optimal_kappa for one object with the paper's settings by default
+(arm L = 2 L_o / 3 tapered L/20 -> L/200, rho_d = r(s), alpha_d = pi/2, chi = 10, the
+paper's (rho0, alpha0) per object) with the fast solver or the paper's sweep.
+``figures`` regenerates the three Fig. 2 panels into a directory (default docs/figures).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from .errors import InvalidParameterError
+from .objects import PAPER_OBJECTS
+from .optimal import PAPER_SETTINGS, GraspResult, paper_problem, solve, sweep
+
+__all__ = ["add_parsers", "run_grasp", "run_figures"]
+
+
+def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()) -> None:
+    """Register the ``grasp`` and ``figures`` subcommands (each sets ``func(args) -> dict``)."""
+    g = subparsers.add_parser(
+        "grasp",
+        parents=list(parents),
+        help="optimal grasping configuration of eq. optimal_kappa (paper Fig. 2)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    g.add_argument("--object", choices=PAPER_OBJECTS, default="circle", help="paper object (default circle)")
+    g.add_argument("--rho0", type=float, default=None, help="initial contact distance (paper value per object)")
+    g.add_argument("--alpha0", type=float, default=None, help="initial contact angle in (0, pi) (paper value)")
+    g.add_argument("--s-o0", dest="s_o0", type=float, default=0.0, help="initial shadow point arclength (default 0)")
+    g.add_argument("--chi", type=float, default=10.0, help="tracking weight chi > 0 (default 10)")
+    g.add_argument("--nodes", type=int, default=500, help="grid nodes along the arm (default 500)")
+    g.add_argument("--solver", choices=("fast", "sweep"), default="fast", help="fast Newton (default) or the paper's sweep")
+    g.add_argument("--eta", type=float, default=1e-6, help="sweep step size (paper: 1e-6)")
+    g.add_argument("--gradient", choices=("paper", "exact"), default="paper", help="sweep costates (default: paper's eq. costates)")
+    g.add_argument("--max-iterations", dest="max_iterations", type=int, default=None,
+                   help="iteration limit (default 200 fast, 100000 sweep)")
+    g.add_argument("--tol", type=float, default=None, help="stopping threshold on max|kappa + p2| (default 1e-9 fast, 1e-6 sweep)")
+    g.add_argument("--plot", default=None, metavar="FILE", help="save a Fig. 2-style panel (PNG/PDF/SVG)")
+    g.set_defaults(func=run_grasp)
+
+    f = subparsers.add_parser(
+        "figures",
+        parents=list(parents),
+        help="regenerate the paper's Fig. 2 (optimal grasps) and Fig. 3 (quality maps) for the three objects",
+    )
+    f.add_argument("--out", default="docs/figures", help="output directory (default docs/figures)")
+    f.add_argument("--nodes", type=int, default=500, help="grid nodes along the arm (default 500)")
+    f.add_argument("--no-maps", action="store_true", help="skip the Fig. 3 quality maps")
+    f.add_argument("--psi-steps", type=int, default=48, help="quality-map polar angles (default 48)")
+    f.add_argument("--d-steps", type=int, default=11, help="quality-map distances (default 11)")
+    f.set_defaults(func=run_figures)
+
+
+def _solve(args: argparse.Namespace) -> GraspResult:
+    name = args.object
+    rho0, alpha0 = PAPER_SETTINGS[name]
+    problem = paper_problem(
+        name,
+        nodes=args.nodes,
+        rho0=rho0 if args.rho0 is None else args.rho0,
+        alpha0=alpha0 if args.alpha0 is None else args.alpha0,
+        s_o0=args.s_o0,
+        chi=args.chi,
+    )
+    if args.max_iterations is not None and args.max_iterations < 1:
+        raise InvalidParameterError(f"--max-iterations must be >= 1, got {args.max_iterations}")
+    if args.solver == "fast":
+        kw: dict[str, Any] = {}
+        if args.max_iterations is not None:
+            kw["max_iterations"] = args.max_iterations
+        if args.tol is not None:
+            kw["tol"] = args.tol
+        return solve(problem, **kw)
+    kw = {"eta": args.eta, "gradient": args.gradient}
+    if args.max_iterations is not None:
+        kw["max_iterations"] = args.max_iterations
+    if args.tol is not None:
+        kw["tol"] = args.tol
+    return sweep(problem, **kw)
+
+
+def run_grasp(args: argparse.Namespace) -> dict[str, Any]:
+    """Solve one optimal grasp; returns the JSON-able result (arrays included)."""
+    result = _solve(args)
+    out = result.to_dict(arrays=True)
+    if args.plot:
+        from .plot_grasp import save_grasp_figure
+
+        out["plot"] = str(save_grasp_figure(result, args.plot, title=f"{args.object} ({result.solver})"))
+    return out
+
+
+def run_figures(args: argparse.Namespace) -> dict[str, Any]:
+    """Solve the three Fig. 2 problems with the fast solver and save ``fig2_<object>.png``;
+    compute the three Fig. 3 quality maps (process executor) and save ``fig3_<object>.png``."""
+    from .plot_grasp import save_grasp_figure
+
+    out_dir = Path(args.out)
+    files, summary = [], {}
+    for name in PAPER_OBJECTS:
+        result = solve(paper_problem(name, nodes=args.nodes))
+        path = save_grasp_figure(result, out_dir / f"fig2_{name}.png", title=name)
+        files.append(str(path))
+        summary[name] = {
+            "cost": result.cost,
+            "converged": result.converged,
+            "iterations": result.iterations,
+            "wall_time_s": result.wall_time,
+            "constraints_ok": result.constraints.ok,
+        }
+    if not args.no_maps:
+        from .plot_quality import quality_map_figure
+        from .sweep import MapSpec, quality_map
+
+        for name in PAPER_OBJECTS:
+            qm = quality_map(MapSpec(name, psi_steps=args.psi_steps, d_steps=args.d_steps), progress=not args.json)
+            path = out_dir / f"fig3_{name}.png"
+            quality_map_figure(qm).savefig(path, dpi=110)
+            files.append(str(path))
+            summary[name]["quality_map"] = {"optimum": {m: {k: v for k, v in o.items() if k not in ("x", "y")}
+                                                         for m, o in qm.optimum.items()},
+                                             "n_valid": int(qm.valid.sum()), "wall_time_s": qm.wall_time}
+    return {"files": files, "objects": summary, "nodes": args.nodes}

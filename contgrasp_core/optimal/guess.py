@@ -1,0 +1,91 @@
+"""Initial controls for the optimal-grasp solvers (cold start and warm start).
+
+* ``"approach"`` (default): a curvature profile from a simple stabilising law marched along
+  the arm once: steer the contact angle towards ``alpha_ref = pi/2 - c (rho - rho_d)``
+  (clipped to [0.3, pi - 0.3]) so that rho approaches rho_d, with
+  ``kappa = kappa_o nu_o + k_alpha (alpha - alpha_ref)`` (the first term keeps alpha constant
+  in eq. rho_alpha_2). Gains: ``k_alpha = 20 / L``, ``c = 6 / L``. It only seeds the solvers.
+* ``"zero"``: the straight arm kappa = 0 (may be singular for non-convex objects: a straight arm
+  can pass a concave part at a distance beyond its focal distance, 1 + rho kappa_o <= 0).
+* an array of N curvatures, or a previous :class:`GraspResult` (its curvature is
+  interpolated in s/L onto the new grid) - the warm start used by quality maps.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InvalidParameterError
+from .problem import GraspProblem, GraspResult
+
+__all__ = ["initial_control", "approach_control"]
+
+Array = NDArray[np.float64]
+
+
+def approach_control(problem: GraspProblem) -> tuple[Array, Array]:
+    """Curvature from the stabilising approach law (module docstring), marched explicitly.
+
+    Returns (kappa (N,), states (N, 3) of the explicit march, a guess for the implicit states).
+    """
+    d = problem.disc
+    coeffs, step, length = d.table.scalar()
+    c0, c1, c2, c3 = coeffs
+    ncell = len(c0)
+    L = float(d.s[-1])
+    k_alpha, c_rho = 20.0 / L, 6.0 / L
+    rho, alpha, sig = (float(v) for v in d.x0)
+    out = np.empty(d.nodes)
+    xs = np.empty((d.nodes, 3))
+    rho_d, alpha_d = d.rho_d.tolist(), d.alpha_d.tolist()
+    h = d.h
+
+    def rhs(r: float, a: float, sg: float, i: int) -> tuple[float, float, float, float]:
+        sm = sg % length
+        j = min(int(sm / step), ncell - 1)
+        t = sm - j * step
+        k = ((c0[j] * t + c1[j]) * t + c2[j]) * t + c3[j]
+        D = max(1.0 + r * k, 0.05)
+        g = math.sin(a) / D
+        a_ref = min(max(alpha_d[i] - c_rho * (r - rho_d[i]), 0.3), math.pi - 0.3)
+        kap = k * g + k_alpha * (a - a_ref)
+        return kap, -math.cos(a), -kap + k * g, g
+
+    for i in range(d.nodes):
+        kap, f0, f1, f2 = rhs(rho, alpha, sig, i)
+        out[i] = kap
+        xs[i] = (rho, alpha, sig)
+        if i + 1 < d.nodes:
+            _, g0, g1, g2 = rhs(rho + h * f0, alpha + h * f1, sig + h * f2, i + 1)
+            rho += 0.5 * h * (f0 + g0)
+            alpha += 0.5 * h * (f1 + g1)
+            sig += 0.5 * h * (f2 + g2)
+    return out, xs
+
+
+def initial_control(problem: GraspProblem, initial: Any) -> tuple[Array, Array | None]:
+    """Resolve an ``initial`` argument (see module docstring) to N curvature samples.
+
+    Returns (kappa, state guess or None).
+    """
+    n = problem.nodes
+    if initial is None or (isinstance(initial, str) and initial == "approach"):
+        return approach_control(problem)
+    if isinstance(initial, str):
+        if initial == "zero":
+            return np.zeros(n), None
+        raise InvalidParameterError(f"unknown initial guess {initial!r}; use 'approach', 'zero' or an array")
+    if isinstance(initial, GraspResult):
+        src = initial.s / initial.s[-1]
+        t = problem.s / problem.s[-1]
+        guess = np.stack([np.interp(t, src, v) for v in (initial.rho, initial.alpha, initial.s_o)], axis=-1)
+        guess += problem.disc.x0 - guess[0]
+        return np.interp(t, src, initial.kappa), guess
+    u = np.asarray(initial, dtype=float)
+    if u.shape != (n,) or not np.all(np.isfinite(u)):
+        raise InvalidParameterError(f"initial curvature must be {n} finite values, got shape {u.shape}")
+    return u.copy(), None
