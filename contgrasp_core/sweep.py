@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -114,6 +114,7 @@ class PoseResult:
     constraints_ok: bool = False
     iterations: int = 0
     contact_length: float = 0.0
+    seconds: float = 0.0
     x: Array | None = field(default=None, repr=False)
     y: Array | None = field(default=None, repr=False)
 
@@ -215,9 +216,10 @@ def _column(spec: MapSpec, psi: float) -> list[PoseResult]:
             except ContgraspError as exc:
                 out.append(PoseResult(psi, d, (np.nan, np.nan, np.nan), False, f"no base pose: {exc}"))
                 continue
+            t0 = time.perf_counter()
             res, sol = _evaluate(spec, boundary, psi, float(d), base, warm)
             warm = sol if sol is not None else warm
-            out.append(res)
+            out.append(replace(res, seconds=time.perf_counter() - t0))
         return out
 
 
@@ -234,6 +236,7 @@ class QualityMap:
     base: Array  # (P, D, 3)
     iterations: NDArray[np.int_]
     arms: Array  # (P, D, 2, nodes) arm centrelines (NaN where invalid)
+    seconds: Array  # (P, D) wall seconds per pose (inner solve + quality)
     wall_time: float
     executor: str
     optimum: dict[str, dict[str, Any]] = field(default_factory=dict)
@@ -329,6 +332,7 @@ def quality_map(
     base = np.full((P, D, 3), np.nan)
     iters = np.zeros((P, D), dtype=int)
     arms = np.full((P, D, 2, spec.nodes), np.nan)
+    seconds = np.zeros((P, D))
     reasons = [["" for _ in range(D)] for _ in range(P)]
     for i, col in enumerate(cols):
         for j, r in enumerate(col):
@@ -337,11 +341,12 @@ def quality_map(
             base[i, j] = r.base
             iters[i, j] = r.iterations
             reasons[i][j] = r.reason
+            seconds[i, j] = r.seconds
             if r.valid and r.x is not None and r.y is not None:
                 arms[i, j, 0], arms[i, j, 1] = r.x, r.y
-    qm = QualityMap(spec, spec.psi, spec.d, Q, valid, reasons, base, iters, arms, 0.0, executor)
+    qm = QualityMap(spec, spec.psi, spec.d, Q, valid, reasons, base, iters, arms, seconds, 0.0, executor)
     optimum = {m: maximise(qm, m) for m in METRICS} if optimise and valid.any() else {}
-    return QualityMap(spec, spec.psi, spec.d, Q, valid, reasons, base, iters, arms, time.perf_counter() - t0, executor, optimum)
+    return replace(qm, wall_time=time.perf_counter() - t0, optimum=optimum)
 
 
 def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
@@ -409,7 +414,7 @@ def save_map(qm: QualityMap, path: str | Path) -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(
         p, psi=qm.psi, d=qm.d, Q=qm.Q, valid=qm.valid, base=qm.base, iterations=qm.iterations, arms=qm.arms,
-        reasons=np.array(qm.reasons, dtype=str),
+        seconds=qm.seconds, reasons=np.array(qm.reasons, dtype=str),
     )
     meta = {k: v for k, v in qm.to_dict().items() if k not in ("Q1", "Q2", "Q3", "valid")}
     p.with_suffix(".json").write_text(json.dumps(meta, indent=1))
@@ -428,5 +433,6 @@ def load_map(path: str | Path) -> QualityMap:
     spec = MapSpec(**meta["spec"])
     return QualityMap(
         spec, arrays["psi"], arrays["d"], arrays["Q"], arrays["valid"], arrays["reasons"].tolist(), arrays["base"],
-        arrays["iterations"], arrays["arms"], float(meta["wall_time_s"]), str(meta["executor"]), meta.get("optimum", {}),
+        arrays["iterations"], arrays["arms"], arrays["seconds"], float(meta["wall_time_s"]), str(meta["executor"]),
+        meta.get("optimum", {}),
     )
