@@ -81,7 +81,9 @@ def test_nelder_mead_improves_on_the_grid_within_bounds(tmp_path) -> None:  # ty
     for metric, opt in qm.optimum.items():
         assert spec.d_min <= opt["d"] <= spec.d_max
         assert opt["value"] >= opt["grid_value"] * (1 - 1e-12)
-        assert len(opt["x"]) == spec.nodes
+        assert len(opt["x"]) == len(opt["y"]) == spec.nodes
+        # the optimal arm starts at the optimal base
+        assert (opt["x"][0], opt["y"][0]) == pytest.approx((opt["base"]["x"], opt["base"]["y"]), abs=1e-9)
     back = load_map(save_map(qm, tmp_path / "map"))
     np.testing.assert_array_equal(back.Q, qm.Q)
     np.testing.assert_array_equal(back.valid, qm.valid)
