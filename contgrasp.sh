@@ -19,6 +19,8 @@ stamp="$venv/.contgrasp-setup"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_LOG_DIR="${ROS_LOG_DIR:-$here/results/ros_log}"
 export MPLBACKEND=Agg
+# the ament index search path (what sourcing a ROS 2 setup script provides): this venv
+export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
 
 find_python() {
     for cand in python3.11 python3; do
@@ -66,6 +68,7 @@ setup() {
         fi
     fi
     "$py" msgs_schema/build_into_venv.py
+    "$py" -m contgrasp_ros.install_resources >/dev/null  # editable installs skip data files
     mkdir -p "$ROS_LOG_DIR"
 }
 

@@ -12,10 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse, from_points
+from contgrasp_core.boundary import Boundary, from_points
 from contgrasp_core.contact import ContactState
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.quality import GraspQuality
+from contgrasp_core.rod.session import boundary_from_spec
 from contgrasp_msgs.msg import ContactState as ContactStateMsg
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary
 from contgrasp_msgs.msg import GraspQuality as GraspQualityMsg
@@ -171,6 +172,7 @@ def quality_to_msg(q: GraspQuality, header: Header, step: int, tol: float) -> Gr
     )
 
 
+# parameter names of the analytic kinds, in the order of boundary_from_spec
 _PARAM_ORDER = {
     "circle": ("R", "center_x", "center_y"),
     "ellipse": ("a", "b", "center_x", "center_y", "angle"),
@@ -210,18 +212,12 @@ def boundary_from_msg(msg: ObjectBoundary) -> Boundary:
             missing = [k for k in _PARAM_ORDER[msg.kind] if k not in params]
             if missing:
                 raise MessageError(f"ObjectBoundary '{msg.kind}' lacks parameters {missing}")
-            c = (params["center_x"], params["center_y"])
-            if msg.kind == "circle":
-                return circle(params["R"], c)
-            if msg.kind == "ellipse":
-                return ellipse(params["a"], params["b"], c, params["angle"])
-            return deformed_circle(params["R"], params["amplitude"], int(params["lobes"]), params["phase"], c)
-        pts = np.stack([np.asarray(msg.x, dtype=float), np.asarray(msg.y, dtype=float)], -1)
+            return boundary_from_spec(msg.kind, [params[k] for k in _PARAM_ORDER[msg.kind]])
         if len(msg.x) != len(msg.y):
             raise MessageError("ObjectBoundary: x and y differ in length")
+        pts = np.stack([np.asarray(msg.x, dtype=float), np.asarray(msg.y, dtype=float)], -1)
         return from_points(pts, closed=True)
     except MessageError:
         raise
     except ContgraspError as exc:
         raise MessageError(f"ObjectBoundary rejected: {exc}") from exc
-

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import sys
 import tempfile
 
 import pytest
@@ -11,6 +12,8 @@ import pytest
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "contgrasp_ros_log"))
 os.environ.setdefault("MPLBACKEND", "Agg")
+# what sourcing a ROS 2 setup script provides: the ament index search path (this venv)
+os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 
 _domains = itertools.count()
 

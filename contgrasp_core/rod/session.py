@@ -1,0 +1,174 @@
+"""The closed loop as explicit steps, shared by the core runner and the ROS nodes.
+
+One control cycle k (paper Sec. V-B):
+
+1. :meth:`LoopSession.observe` - the rod state k as arrays at the nodes (what the simulator
+   publishes) and the settle/duration bookkeeping;
+2. :func:`sense_observation` - geometric sensing of (rho, alpha, delta, s_o) from those arrays
+   (:func:`contgrasp_core.contact.sense`, eq. rho_alpha_definition) (what the sensor does);
+3. :func:`feedback_at_joints` - the couple of eq. dynamic_feedback at the joints (what the
+   controller does);
+4. :meth:`LoopSession.advance` - hold the couple for one control period (the integrator's
+   substeps) to reach state k + 1 (what the simulator does when the couple arrives).
+
+Because the ROS nodes call exactly these functions on exactly these arrays (CDR carries
+float64 unchanged), a lock-step ROS run reproduces the core-only run bit for bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from contgrasp_core.arm import ArmShape
+from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse
+from contgrasp_core.contact import ContactState, sense
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.feedback import feedback_couple
+from contgrasp_core.rod import chain
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, FeedbackGains
+from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
+from contgrasp_core.rod.model import RodModel
+
+__all__ = ["Observation", "LoopSession", "sense_observation", "feedback_at_joints", "boundary_from_spec"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Observation:
+    """Rod state k at the N+1 nodes (SI): arclength ``s``, positions ``x`` (N+1, 2), tangent
+    angles ``theta``, curvature ``kappa`` (joints; 0 at the free tip), radius, velocities ``v``
+    (N+1, 2); kinetic energy, the largest surface penetration and node speed."""
+
+    k: int
+    t: float
+    s: Array
+    x: Array
+    theta: Array
+    kappa: Array
+    radius: Array
+    v: Array
+    kinetic_energy: float
+    penetration: float
+    max_speed: float
+
+
+class LoopSession:
+    """Steps a :class:`RodSystem` in control periods and decides when the run is over.
+
+    The run finishes when the rod has settled (every node slower than ``settle_speed`` for
+    ``settle_hold`` seconds, not before ``min_time``) or after ``duration``; both are judged on
+    the observed state, before the couple for it is applied.
+    """
+
+    def __init__(self, system: RodSystem, config: ClosedLoopConfig, state: RodState | None = None) -> None:
+        if system.obstacle is None:
+            raise InvalidParameterError("the closed loop needs an obstacle (RodSystem.obstacle is None)")
+        self.system = system
+        self.config = config
+        self.state = system.straight_state() if state is None else state
+        self.k = 0
+        self.n_control = int(np.ceil(config.duration / config.control_period - 1e-9))
+        self.dt = config.control_period / config.substeps
+        self.quiet_since: float | None = None
+        self.settled = False
+        self.finished = False
+        self.iterations = 0
+        self.max_penetration = 0.0
+        self._observed: Observation | None = None
+
+    @property
+    def settle_time(self) -> float | None:
+        return self.quiet_since if self.settled else None
+
+    def observe(self) -> Observation:
+        """Arrays of the current state; updates the settle/finish status (idempotent per step)."""
+        if self._observed is not None and self._observed.k == self.k:
+            return self._observed
+        m, st = self.system.model, self.state
+        x = chain.nodes(m, st.theta)
+        _, b = chain.frames(st.theta)
+        v = np.zeros_like(x)
+        np.cumsum(m.h * b * st.omega[:, None], axis=0, out=v[1:])
+        speed = float(np.hypot(v[:, 0], v[:, 1]).max())
+        radius = m.radius(m.s_nodes)
+        gap_nodes = self.system.obstacle.project(x).signed_distance - radius
+        gap_c = self.system.obstacle.project(chain.centres(m, st.theta)).signed_distance - m.r_centres
+        pen = max(float(-gap_nodes.min()), float(-gap_c.min()), 0.0)
+        self.max_penetration = max(self.max_penetration, pen)
+        obs = Observation(
+            k=self.k,
+            t=float(st.t),
+            s=m.s_nodes,
+            x=x,
+            theta=chain.node_angles(m, st.theta),
+            kappa=np.append(m.joint_curvature(st.theta), 0.0),
+            radius=radius,
+            v=v,
+            kinetic_energy=self.system.kinetic_energy(st),
+            penetration=pen,
+            max_speed=speed,
+        )
+        cfg = self.config
+        if speed < cfg.settle_speed:
+            self.quiet_since = st.t if self.quiet_since is None else self.quiet_since
+            if st.t >= cfg.min_time and st.t - self.quiet_since >= cfg.settle_hold:
+                self.settled = True
+        else:
+            self.quiet_since = None
+        self.finished = self.settled or self.k >= self.n_control
+        self._observed = obs
+        return obs
+
+    def advance(self, couple: Array) -> None:
+        """Hold ``couple`` (N,) at the joints for one control period (integrator substeps)."""
+        u = np.asarray(couple, dtype=float)
+        if u.shape != (self.system.model.n_elements,) or not np.all(np.isfinite(u)):
+            raise InvalidParameterError(f"couple must be {self.system.model.n_elements} finite values, got {u.shape}")
+        if self.finished:
+            raise InvalidParameterError("the run is finished; reset to start again")
+        loads = RodLoads(couple=u)
+        st = self.state
+        for _ in range(self.config.substeps):
+            st, info = self.system.step(st, self.dt, loads)
+            self.iterations += info["iterations"]
+        self.state = st
+        self.k += 1
+
+
+def sense_observation(obs: Observation, boundary: Boundary, tol: float = 0.0) -> ContactState:
+    """Geometric sensing at the rod nodes (eq. rho_alpha_definition, eq. delta, Definition 1)."""
+    return sense(ArmShape(s=obs.s, r=obs.x, theta=obs.theta), boundary, obs.radius, tol=tol)
+
+
+def feedback_at_joints(model: RodModel, gains: FeedbackGains, rho: Array, alpha: Array) -> Array:
+    """Couple of eq. dynamic_feedback at the N joints from (rho, alpha) sensed at the N+1 nodes."""
+    rho, alpha = np.asarray(rho, dtype=float), np.asarray(alpha, dtype=float)
+    n = model.n_elements
+    if rho.shape != (n + 1,) or alpha.shape != (n + 1,):
+        raise InvalidParameterError(f"rho and alpha must be given at the {n + 1} nodes, got {rho.shape}, {alpha.shape}")
+    return feedback_couple(rho[:-1], alpha[:-1], model.joint_ei, gains.mu1, gains.mu2, length_unit=gains.length_unit)
+
+
+def boundary_from_spec(kind: str, params: list[float] | Array) -> Boundary:
+    """An object from a kind and a flat parameter list (how nodes and files name objects).
+
+    ``circle`` [R, cx, cy]; ``ellipse`` [a, b, cx, cy, angle]; ``deformed_circle``
+    [R, amplitude, lobes, phase, cx, cy].
+    """
+    p = [float(v) for v in params]
+    n_expected = {"circle": 3, "ellipse": 5, "deformed_circle": 6}
+    if kind not in n_expected:
+        raise InvalidParameterError(f"object kind must be one of {sorted(n_expected)}, got {kind!r}")
+    if len(p) != n_expected[kind]:
+        raise InvalidParameterError(f"{kind} needs {n_expected[kind]} parameters, got {len(p)}")
+    if kind == "circle":
+        return circle(p[0], (p[1], p[2]))
+    if kind == "ellipse":
+        return ellipse(p[0], p[1], (p[2], p[3]), p[4])
+    if p[2] != int(p[2]):
+        raise InvalidParameterError(f"deformed_circle lobes must be an integer, got {p[2]}")
+    return deformed_circle(p[0], p[1], int(p[2]), p[3], (p[4], p[5]))

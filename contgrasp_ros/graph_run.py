@@ -1,0 +1,233 @@
+"""Drive one run of the graph and summarise it from what travelled over the topics.
+
+The :class:`Monitor` node (in the launcher's process) subscribes to the rod state, contact,
+quality and the simulator's diagnostics; it waits until every node is up and the topics are
+matched, resumes the paused simulator through its ``~/pause`` service (std_srvs/SetBool) and
+then waits for the simulator to report ``finished`` (or ``failed``) on ``/diagnostics``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_srvs.srv import SetBool
+
+from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
+from contgrasp_ros import qos
+
+__all__ = ["Monitor", "run_graph"]
+
+NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
+
+
+class Monitor(Node):
+    """Observes the run: last rod state, contact and quality, a history, the simulator status."""
+
+    def __init__(self, history_period: float = 0.1, **kw: Any) -> None:
+        super().__init__("contgrasp_monitor", **kw)
+        self.rod: RodState | None = None
+        self.contact: ContactState | None = None
+        self.quality: GraspQuality | None = None
+        self.status: dict[str, str] = {}
+        self.history: list[dict[str, Any]] = []
+        self._period = history_period
+        self._next_t = 0.0
+        self.create_subscription(RodState, qos.TOPIC_ROD_STATE, self._on_rod, qos.STREAM)
+        self.create_subscription(ContactState, qos.TOPIC_CONTACT, self._on_contact, qos.STREAM)
+        self.create_subscription(GraspQuality, qos.TOPIC_QUALITY, self._on_quality, qos.STREAM)
+        self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, qos.STREAM)
+        self.pause = self.create_client(SetBool, "/rod_simulator/pause")
+
+    def _on_rod(self, msg: RodState) -> None:
+        self.rod = msg
+
+    def _on_contact(self, msg: ContactState) -> None:
+        self.contact = msg
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if t + 1e-12 >= self._next_t and self.rod is not None and self.rod.step == msg.step:
+            self._next_t = t + self._period
+            self.history.append(
+                {
+                    "t": t,
+                    "x": list(self.rod.x),
+                    "y": list(self.rod.y),
+                    "theta": list(self.rod.theta),
+                    "radius": list(self.rod.radius),
+                    "s": list(msg.s),
+                    "rho": list(msg.rho),
+                    "alpha": list(msg.alpha),
+                }
+            )
+
+    def _on_quality(self, msg: GraspQuality) -> None:
+        self.quality = msg
+
+    def _on_diag(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            if st.name == "rod_simulator":
+                self.status = {kv.key: kv.value for kv in st.values}
+
+    def connected(self) -> bool:
+        """Every node is up and each stream has its publisher and subscribers matched."""
+        names = set(self.get_node_names())
+        if not set(NODES) <= names or not self.pause.service_is_ready():
+            return False
+        return (
+            self.count_subscribers(qos.TOPIC_ROD_STATE) >= 2
+            and self.count_publishers(qos.TOPIC_CONTACT) >= 1
+            and self.count_subscribers(qos.TOPIC_CONTACT) >= 3
+            and self.count_publishers(qos.TOPIC_COUPLE) >= 1
+            and self.count_subscribers(qos.TOPIC_COUPLE) >= 1
+            and self.count_publishers(qos.TOPIC_QUALITY) >= 1
+        )
+
+
+def _overrides(values: dict[str, Any]) -> list[Parameter]:
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def _contact_stats(msg: ContactState | None) -> dict[str, float | None]:
+    if msg is None:
+        return {"mean_abs_rho_ratio_minus_1_contact": None, "mean_abs_alpha_minus_half_pi_contact": None}
+    rho = np.asarray(msg.rho)
+    radius = np.asarray(msg.delta) + rho
+    mask = np.asarray(msg.in_contact, dtype=bool)
+    if not mask.any():
+        return {"mean_abs_rho_ratio_minus_1_contact": None, "mean_abs_alpha_minus_half_pi_contact": None}
+    return {
+        "mean_abs_rho_ratio_minus_1_contact": float(np.mean(np.abs(rho[mask] / radius[mask] - 1.0))),
+        "mean_abs_alpha_minus_half_pi_contact": float(np.mean(np.abs(np.asarray(msg.alpha)[mask] - np.pi / 2))),
+    }
+
+
+def _summary(mon: Monitor) -> dict[str, Any]:
+    st = mon.status
+
+    def num(key: str) -> float | None:
+        try:
+            return float(st[key])
+        except (KeyError, ValueError):
+            return None
+
+    out: dict[str, Any] = {
+        "settled": st.get("settled") == "true",
+        "settle_time_s": num("settle_time_s"),
+        "sim_time_s": num("sim_time_s"),
+        "missed_deadlines": int(num("missed_deadlines") or 0),
+        "max_penetration": num("max_penetration"),
+        "steps": int(num("step") or 0),
+        "simulator_state": st.get("state", "unknown"),
+    }
+    rod = mon.rod
+    out["final"] = None if rod is None else {"s": list(rod.s), "x": list(rod.x), "y": list(rod.y), "theta": list(rod.theta)}
+    q = mon.quality
+    out["final_quality"] = None if q is None else {"Q1": q.q1, "Q2": q.q2, "Q3": q.q3, "valid": q.valid, "contact_length": q.contact_length}
+    out.update(_contact_stats(mon.contact))
+    out["history"] = mon.history
+    return out
+
+
+def _drive(mon: Monitor, executor: SingleThreadedExecutor, group: Any, timeout: float) -> str | None:
+    """Connect, resume, wait for the end. Returns an error text or None."""
+    end = time.monotonic() + timeout
+
+    def dead() -> str | None:
+        if group is None:
+            return None
+        gone = group.exited()
+        if gone:
+            c = gone[0]
+            return f"node '{c.name}' exited with code {c.proc.returncode}"
+        return None
+
+    while not mon.connected():
+        executor.spin_once(timeout_sec=0.05)
+        if (err := dead()) or time.monotonic() > end:
+            return err or "timed out waiting for the graph to connect"
+    fut = mon.pause.call_async(SetBool.Request(data=False))
+    while not fut.done():
+        executor.spin_once(timeout_sec=0.05)
+        if (err := dead()) or time.monotonic() > end:
+            return err or "timed out resuming the simulator"
+    while mon.status.get("state") not in ("finished", "failed"):
+        executor.spin_once(timeout_sec=0.05)
+        if err := dead():
+            return err
+        if time.monotonic() > end:
+            return "wall-clock timeout"
+    # let the last contact/quality of the final state arrive
+    settle_end = time.monotonic() + 1.0
+    while time.monotonic() < settle_end:
+        executor.spin_once(timeout_sec=0.02)
+    if mon.status.get("state") == "failed":
+        return f"simulator failed: {mon.status.get('message', '')}"
+    return None
+
+
+def run_graph(params: dict[str, dict[str, Any]], *, in_process: bool, params_file: Path, timeout: float) -> tuple[dict[str, Any], int]:
+    """Run the graph once; returns (summary, exit code)."""
+    from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
+    from contgrasp_ros.nodes.grasp_controller import GraspController
+    from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
+    from contgrasp_ros.nodes.rod_simulator import RodSimulator
+
+    sim_params = {**params["rod_simulator"], "start_paused": True}
+    rclpy.init(args=[])
+    executor = SingleThreadedExecutor()
+    nodes: list[Node] = []
+    group = None
+    code = 0
+    summary: dict[str, Any] = {}
+    try:
+        mon = Monitor()
+        nodes.append(mon)
+        if in_process:
+            for cls, name in ((RodSimulator, "rod_simulator"), (BoundarySensor, "boundary_sensor"),
+                              (GraspController, "grasp_controller"), (GraspQualityNode, "grasp_quality")):
+                values = sim_params if name == "rod_simulator" else params[name]
+                nodes.append(cls(parameter_overrides=_overrides({**values, "use_sim_time": True})))
+        else:
+            import os
+
+            from contgrasp_ros.processes import ProcessGroup
+
+            group = ProcessGroup(dict(os.environ, PYTHONUNBUFFERED="1"))
+            for name in NODES:
+                cmd = [sys.executable, "-m", f"contgrasp_ros.nodes.{name}", "--ros-args", "--params-file", str(params_file),
+                       "-p", "use_sim_time:=true"]
+                if name == "rod_simulator":
+                    cmd += ["-p", "start_paused:=true", "-p", f"duration:={float(sim_params['duration'])}"]
+                group.start(name, cmd)
+        for n in nodes:
+            executor.add_node(n)
+        error = _drive(mon, executor, group, timeout)
+        summary = _summary(mon)
+        if error:
+            summary["error"] = error
+            code = 1
+    finally:
+        if group is not None:
+            codes = group.stop()
+            summary_codes = {k: v for k, v in codes.items()}
+        else:
+            summary_codes = {}
+        executor.shutdown()
+        for n in nodes:
+            n.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    summary["exit_codes"] = summary_codes
+    summary["pids"] = {c.name: c.proc.pid for c in group.children} if group is not None else {}
+    failing = [c for name, c in summary_codes.items() if c not in (0, -2)]
+    if code == 0 and failing:
+        code = failing[0] if failing[0] > 0 else 1
+    return summary, code

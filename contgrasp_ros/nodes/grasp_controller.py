@@ -1,0 +1,70 @@
+"""grasp_controller: contact state -> internal couple control u(s) (paper eq. dynamic_feedback).
+
+Thin wrapper of :func:`contgrasp_core.rod.session.feedback_at_joints`: the same function the
+core-only closed loop calls, so a lock-step ROS run reproduces it exactly. Gains (mu1, mu2 or
+the adaptive mu2 of the appendix, the law's length unit) are parameters; a change takes effect
+at the next contact message. The rod geometry parameters must match the simulator's.
+"""
+
+from __future__ import annotations
+
+from rclpy.node import Node
+
+from contgrasp_core.errors import ContgraspError
+from contgrasp_core.feedback import CENTIMETRE
+from contgrasp_core.rod.closed_loop import FeedbackGains, paper_gains
+from contgrasp_core.rod.session import feedback_at_joints
+from contgrasp_msgs.msg import ContactState, CoupleControl
+from contgrasp_ros import qos
+from contgrasp_ros.convert import MessageError, contact_arrays, couple_to_msg
+from contgrasp_ros.nodes.rod_params import declare_rod_model
+from contgrasp_ros.runtime import DropCounter, declare, run_node
+
+
+class GraspController(Node):
+    """Evaluates the feedback law on every contact state and publishes the couple."""
+
+    def __init__(self, **node_kwargs: object) -> None:
+        super().__init__("grasp_controller", **node_kwargs)  # type: ignore[arg-type]
+        self.model = declare_rod_model(self)
+        declare(self, "mu1", 1.0, "gain mu1 > 0 of eq. dynamic_feedback", lo=1e-9, hi=1e6)
+        declare(self, "mu2", 0.0, "gain mu2 in law length units (used when adaptive_mu2 is false)", lo=-1e6, hi=1e6)
+        declare(self, "adaptive_mu2", True, "use mu2(s) = r(s) - 1/(r_obj + r(s)) (paper appendix)")
+        declare(self, "object_radius", 0.025, "object radius r_obj for the adaptive mu2 [m]", lo=1e-9, hi=1e3)
+        declare(self, "length_unit", CENTIMETRE, "metres per length unit of the law (paper: cm)", lo=1e-9, hi=1e3)
+        self.drops = DropCounter(self)
+        self.gains = self._gains()
+        self.add_post_set_parameters_callback(lambda _params: self._refresh())
+        self.pub = self.create_publisher(CoupleControl, qos.TOPIC_COUPLE, qos.STREAM)
+        self.create_subscription(ContactState, qos.TOPIC_CONTACT, self.on_contact, qos.STREAM)
+
+    def _gains(self) -> FeedbackGains:
+        p = {n: self.get_parameter(n).value for n in ("mu1", "mu2", "adaptive_mu2", "object_radius", "length_unit")}
+        if p["adaptive_mu2"]:
+            return paper_gains(self.model, p["object_radius"], mu1=p["mu1"], length_unit=p["length_unit"])
+        return FeedbackGains(mu1=p["mu1"], mu2=p["mu2"], length_unit=p["length_unit"])
+
+    def _refresh(self) -> None:
+        self.gains = self._gains()
+
+    def on_contact(self, msg: ContactState) -> None:
+        try:
+            c = contact_arrays(msg)
+            if len(c.s) != self.model.n_elements + 1:
+                raise MessageError(
+                    f"contact state has {len(c.s)} nodes; the controller's rod has {self.model.n_elements + 1}"
+                )
+            u = feedback_at_joints(self.model, self.gains, c.rho, c.alpha)
+        except ContgraspError as exc:
+            self.drops.drop(qos.TOPIC_CONTACT, str(exc))
+            return
+        self.pub.publish(couple_to_msg(self.model.joint_s, u, msg.header, msg.step))
+
+
+def main(args: list[str] | None = None) -> int:
+    """``ros2 run contgrasp_ros grasp_controller``."""
+    return run_node(GraspController, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,86 @@
+"""Child-process management for the launcher: start, prefix output, stop in escalating steps."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import IO
+
+__all__ = ["Child", "ProcessGroup"]
+
+_COLOURS = ("\033[36m", "\033[35m", "\033[33m", "\033[32m", "\033[34m", "\033[31m")
+_RESET = "\033[0m"
+
+
+@dataclass
+class Child:
+    """One node process with its name and the thread that prefixes its output."""
+
+    name: str
+    cmd: list[str]
+    proc: subprocess.Popen[bytes]
+    pump: threading.Thread = field(repr=False)
+
+
+class ProcessGroup:
+    """Starts node processes with a shared environment and stops them cleanly.
+
+    Each child's stdout and stderr are merged and echoed line by line to ``sink`` (stderr by
+    default, so the launcher's stdout stays free for ``--json``), prefixed with ``[name]`` and
+    coloured when the sink is a terminal.
+    """
+
+    def __init__(self, env: dict[str, str], sink: IO[str] | None = None) -> None:
+        self.env = env
+        self.sink = sink if sink is not None else sys.stderr
+        self.children: list[Child] = []
+        self._colour = hasattr(self.sink, "isatty") and self.sink.isatty()
+        self._lock = threading.Lock()
+
+    def start(self, name: str, cmd: list[str]) -> Child:
+        proc = subprocess.Popen(cmd, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+        colour = _COLOURS[len(self.children) % len(_COLOURS)] if self._colour else ""
+        prefix = f"{colour}[{name}]{_RESET if colour else ''} "
+        pump = threading.Thread(target=self._pump, args=(proc, prefix), daemon=True)
+        pump.start()
+        child = Child(name, cmd, proc, pump)
+        self.children.append(child)
+        return child
+
+    def _pump(self, proc: subprocess.Popen[bytes], prefix: str) -> None:
+        assert proc.stdout is not None
+        for raw in iter(proc.stdout.readline, b""):
+            line = raw.decode(errors="replace").rstrip("\n")
+            with self._lock:
+                print(prefix + line, file=self.sink, flush=True)
+
+    def exited(self) -> list[Child]:
+        """Children that have exited."""
+        return [c for c in self.children if c.proc.poll() is not None]
+
+    def stop(self, *, sigint_timeout: float = 10.0, sigterm_timeout: float = 5.0) -> dict[str, int]:
+        """SIGINT every running child, then SIGTERM, then SIGKILL after the timeouts.
+
+        Returns each child's exit code (negative: killed by that signal).
+        """
+        for sig, timeout in ((signal.SIGINT, sigint_timeout), (signal.SIGTERM, sigterm_timeout), (signal.SIGKILL, 5.0)):
+            running = [c for c in self.children if c.proc.poll() is None]
+            if not running:
+                break
+            for c in running:
+                try:
+                    os.kill(c.proc.pid, sig)
+                except ProcessLookupError:
+                    pass
+            end = time.monotonic() + timeout
+            while time.monotonic() < end and any(c.proc.poll() is None for c in running):
+                time.sleep(0.05)
+        for c in self.children:
+            c.proc.wait()
+            c.pump.join(timeout=2.0)
+        return {c.name: int(c.proc.returncode) for c in self.children}

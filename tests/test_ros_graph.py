@@ -1,0 +1,124 @@
+"""The graph end to end: `ros2 run` lookup, in-process and multi-process runs, determinism."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip("contgrasp_msgs.msg")
+
+from contgrasp_core.rod import Obstacle, RodModel, RodSystem  # noqa: E402
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains  # noqa: E402
+from contgrasp_core.rod.session import LoopSession, boundary_from_spec, feedback_at_joints, sense_observation  # noqa: E402
+from contgrasp_ros.launcher import default_params_file, load_params  # noqa: E402
+
+from conftest import fresh_domain_id  # noqa: E402
+
+BIN = Path(sys.executable).parent
+
+
+def small_params(tmp_path: Path, duration: float = 0.1) -> Path:
+    """The packaged scenario, shortened and coarsened so a run takes seconds."""
+    data = yaml.safe_load(default_params_file().read_text())
+    data["/**"]["ros__parameters"]["n_elements"] = 20
+    data["rod_simulator"]["ros__parameters"]["duration"] = duration
+    data["rod_simulator"]["ros__parameters"]["marker_period"] = 0.02
+    data["grasp_quality"]["ros__parameters"]["rate_hz"] = 0.0
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def core_run(params_file: Path) -> tuple[np.ndarray, int]:
+    """The same scenario with the core functions only (no ROS)."""
+    p = load_params(params_file)
+    sim, ctl = p["rod_simulator"], p["grasp_controller"]
+    keys = ("length", "n_elements", "radius_base", "radius_tip", "density", "youngs_modulus", "damping",
+            "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction", "base_angle")
+    model = RodModel(base_position=(sim["base_x"], sim["base_y"]), **{k: sim[k] for k in keys})
+    boundary = boundary_from_spec(sim["object_kind"], sim["object_params"])
+    config = ClosedLoopConfig(duration=sim["duration"], control_period=sim["control_period"], dt=sim["dt"] or None,
+                              settle_speed=sim["settle_speed"], settle_hold=sim["settle_hold"], min_time=sim["min_time"])
+    gains = paper_gains(model, ctl["object_radius"], mu1=ctl["mu1"], length_unit=ctl["length_unit"])
+    session = LoopSession(RodSystem(model, Obstacle(boundary)), config)
+    while True:
+        obs = session.observe()
+        if session.finished:
+            return obs.x, obs.k
+        c = sense_observation(obs, boundary, p["boundary_sensor"]["contact_tolerance"])
+        session.advance(feedback_at_joints(model, gains, c.rho, c.alpha))
+
+
+def launch(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    return subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), *args],
+                          capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def test_ros2_run_finds_and_runs_the_executables() -> None:
+    """The lookup `ros2 run contgrasp_ros <node>` performs: ament index prefix, then lib/<pkg>/<node>."""
+    from ament_index_python.packages import get_package_prefix, get_package_share_directory
+
+    prefix = Path(get_package_prefix("contgrasp_ros"))
+    assert (Path(get_package_share_directory("contgrasp_ros")) / "package.xml").exists()
+    for node in ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"):
+        exe = prefix / "lib" / "contgrasp_ros" / node
+        assert exe.exists() and os.access(exe, os.X_OK), exe
+    env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    exe = prefix / "lib" / "contgrasp_ros" / "boundary_sensor"
+    bad = subprocess.run([str(exe), "--ros-args", "-p", "contact_tolerance:=-1.0"], capture_output=True, text=True,
+                         timeout=60, env=env)
+    assert bad.returncode == 2 and "contact_tolerance" in bad.stderr
+    proc = subprocess.Popen([str(exe)], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    time.sleep(3.0)
+    assert proc.poll() is None  # running
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=30) == 0
+
+
+def test_graph_in_process_equals_the_core_loop(tmp_path: Path) -> None:
+    params = small_params(tmp_path)
+    proc = launch("--in-process", "--json", "--params", str(params))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout)
+    x_core, k = core_run(params)
+    assert out["steps"] == k
+    np.testing.assert_allclose(out["final"]["x"], x_core[:, 0], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out["final"]["y"], x_core[:, 1], rtol=0, atol=1e-9)
+    assert out["missed_deadlines"] == 0 and out["final_quality"] is not None
+
+
+def test_graph_as_processes_is_deterministic_and_leaves_nothing_behind(tmp_path: Path) -> None:
+    params = small_params(tmp_path)
+    runs = []
+    for _ in range(2):
+        proc = launch("--json", "--params", str(params))
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        out = json.loads(proc.stdout)
+        assert set(out["exit_codes"]) == {"rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"}
+        assert all(code == 0 for code in out["exit_codes"].values()), out["exit_codes"]
+        assert not any(alive(pid) for pid in out["pids"].values())
+        runs.append(out)
+    x_core, k = core_run(params)
+    for out in runs:
+        assert out["steps"] == k and out["missed_deadlines"] == 0
+        np.testing.assert_allclose(out["final"]["x"], x_core[:, 0], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(out["final"]["y"], x_core[:, 1], rtol=0, atol=1e-9)
+    assert runs[0]["final"] == runs[1]["final"]
