@@ -145,3 +145,100 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
     bad.in_contact = bad.in_contact[:3]
     c_pub.publish(bad)
     assert spin_until(ex, lambda: node.drops.total == 1)
+
+
+def _paper_model(n: int = 12):  # type: ignore[no-untyped-def]
+    from contgrasp_core.rod import RodModel
+
+    return RodModel(n_elements=n, damping=2.0, drag_normal=5110.0, drag_tangential=25.55)
+
+
+def test_grasp_controller_matches_core_and_takes_new_gains(graph) -> None:  # type: ignore[no-untyped-def]
+    from rclpy.parameter import Parameter
+
+    from contgrasp_core.rod.closed_loop import paper_gains
+    from contgrasp_core.rod.session import feedback_at_joints
+    from contgrasp_msgs.msg import CoupleControl
+    from contgrasp_ros.nodes.grasp_controller import GraspController
+
+    ctx, ex, add = graph
+    model = _paper_model()
+    node = add(GraspController(context=ctx, parameter_overrides=[Parameter("n_elements", value=model.n_elements)]))
+    probe = add(rclpy.create_node("probe", context=ctx))
+    c_pub = probe.create_publisher(ContactState, qos.TOPIC_CONTACT, qos.STREAM)
+    got: list[CoupleControl] = []
+    probe.create_subscription(CoupleControl, qos.TOPIC_COUPLE, got.append, qos.STREAM)
+    assert spin_until(ex, lambda: c_pub.get_subscription_count() > 0 and probe.count_publishers(qos.TOPIC_COUPLE) > 0)
+    obj = circle(0.025, (0.08, 0.08))
+    shape = shape_from_curvature(model.s_nodes, np.full(model.n_elements + 1, 5.0), BasePose())
+    state = sense(shape, obj, model.radius(model.s_nodes))
+    c_pub.publish(contact_to_msg(state, Header(), 4))
+    assert spin_until(ex, lambda: len(got) == 1)
+    ref = feedback_at_joints(model, paper_gains(model, 0.025), state.rho, state.alpha)
+    assert got[0].step == 4
+    np.testing.assert_array_equal(got[0].u, ref)
+    np.testing.assert_array_equal(got[0].s, model.joint_s)
+    assert not node.set_parameters([Parameter("mu1", value=-1.0)])[0].successful  # out of range: refused
+    assert node.set_parameters([Parameter("mu1", value=2.0)])[0].successful
+    c_pub.publish(contact_to_msg(state, Header(), 5))
+    assert spin_until(ex, lambda: len(got) == 2)
+    np.testing.assert_array_equal(got[1].u, feedback_at_joints(model, paper_gains(model, 0.025, mu1=2.0), state.rho, state.alpha))
+    wrong = sense(shape_from_curvature(np.linspace(0, 0.2, 5), np.zeros(5), BasePose()), obj, 0.01)
+    c_pub.publish(contact_to_msg(wrong, Header(), 6))  # 5 nodes for a 12-element rod
+    assert spin_until(ex, lambda: node.drops.total == 1)
+
+
+def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type: ignore[no-untyped-def]
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.parameter import Parameter
+    from std_srvs.srv import SetBool, Trigger
+
+    from contgrasp_core.rod import Obstacle, RodSystem
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig
+    from contgrasp_core.rod.session import LoopSession
+    from contgrasp_msgs.msg import CoupleControl
+    from contgrasp_ros.convert import couple_to_msg
+    from contgrasp_ros.nodes.rod_simulator import RodSimulator
+
+    ctx, ex, add = graph
+    model = _paper_model()
+    over = [Parameter(k, value=v) for k, v in dict(
+        n_elements=model.n_elements, damping=2.0, drag_normal=5110.0, drag_tangential=25.55,
+        start_paused=True, couple_timeout=0.3, timeout_fallback="zero", duration=1.0).items()]
+    sim = add(RodSimulator(context=ctx, parameter_overrides=over))
+    probe = add(rclpy.create_node("probe", context=ctx))
+    states: list[RodState] = []
+    status: list[dict[str, str]] = []
+    probe.create_subscription(RodState, qos.TOPIC_ROD_STATE, states.append, qos.STREAM)
+    probe.create_subscription(
+        DiagnosticArray, "/diagnostics", lambda m: status.append({kv.key: kv.value for kv in m.status[0].values}), qos.STREAM
+    )
+    u_pub = probe.create_publisher(CoupleControl, qos.TOPIC_COUPLE, qos.STREAM)
+    pause = probe.create_client(SetBool, "/rod_simulator/pause")
+    reset = probe.create_client(Trigger, "/rod_simulator/reset")
+    assert spin_until(ex, lambda: pause.service_is_ready() and u_pub.get_subscription_count() > 0)
+    spin_until(ex, lambda: False, timeout=0.5)
+    assert states == []  # paused: nothing published yet
+    fut = pause.call_async(SetBool.Request(data=False))
+    assert spin_until(ex, lambda: fut.done() and len(states) == 1)
+    ref = LoopSession(RodSystem(model, Obstacle(circle(0.025, (0.08, 0.08)))), ClosedLoopConfig(duration=1.0, control_period=0.01))
+    np.testing.assert_array_equal(states[0].x, ref.observe().x[:, 0])
+    u = np.linspace(-1e-4, 1e-4, model.n_elements)
+    u_pub.publish(couple_to_msg(model.joint_s, u, states[0].header, 0))
+    assert spin_until(ex, lambda: len(states) == 2)
+    ref.advance(u)
+    np.testing.assert_array_equal(states[1].y, ref.observe().x[:, 1])
+    assert states[1].step == 1 and states[1].header.stamp.nanosec == 10_000_000
+    # malformed couple: dropped and counted; then no couple at all: the zero fallback after the timeout
+    u_pub.publish(couple_to_msg(model.joint_s[:3], u[:3], states[1].header, 1))
+    assert spin_until(ex, lambda: len(states) == 3, timeout=10)
+    assert sim.missed == 1 and sim.drops.total == 1
+    ref.advance(np.zeros(model.n_elements))
+    np.testing.assert_array_equal(states[2].y, ref.observe().x[:, 1])
+    assert spin_until(ex, lambda: status and status[-1]["missed_deadlines"] == str(sim.missed))
+    # an invalid fallback is refused at run time
+    assert not sim.set_parameters([Parameter("timeout_fallback", value="explode")])[0].successful
+    fut = reset.call_async(Trigger.Request())
+    n_before = len(states)
+    assert spin_until(ex, lambda: fut.done() and len(states) > n_before)
+    assert states[n_before].step == 0

@@ -67,6 +67,8 @@ class LoopSession:
     def __init__(self, system: RodSystem, config: ClosedLoopConfig, state: RodState | None = None) -> None:
         if system.obstacle is None:
             raise InvalidParameterError("the closed loop needs an obstacle (RodSystem.obstacle is None)")
+        if config.control_period is None:
+            raise InvalidParameterError("a sampled control loop needs config.control_period (the couple is held over it)")
         self.system = system
         self.config = config
         self.state = system.straight_state() if state is None else state
