@@ -19,9 +19,15 @@ from contgrasp_core.optimal import (
 )
 from contgrasp_core.optimal.discrete import (
     CurvatureTable,
+    PenaltyState,
     dynamics,
     dynamics_hessian,
     dynamics_jacobian,
+    evaluate,
+    kkt_solve,
+    lagrangian_gradient,
+    lagrangian_hessian_blocks,
+    linearise,
     march_states,
     residual,
     solve_states,
@@ -320,6 +326,84 @@ def test_gauss_newton_option_reaches_the_same_optimum():
     assert b.iterations > 3 * a.iterations  # linear vs quadratic convergence
 
 
+def test_lagrangian_gradient_matches_finite_differences_off_the_dynamics():
+    """dL/dx and dL/du of L = J + P + lambda . c at a point that violates the dynamics (SQP iterates)."""
+    p = paper_problem("deformed", nodes=40)
+    d = p.disc
+    rng = np.random.default_rng(5)
+    u = solve(p, coarse=None).kappa + 0.05 * rng.standard_normal(40)
+    x = solve_states(d, u) + 0.01 * rng.standard_normal((40, 3))
+    x[0] = d.x0
+    lam = rng.standard_normal((39, 3))
+    pen = PenaltyState.zero(40, p.penalty)
+
+    def lagrangian(xx, uu):
+        f = dynamics(xx, uu, d.table)
+        c = xx[1:] - xx[:-1] - 0.5 * d.h * (f[1:] + f[:-1])
+        return evaluate(d, uu, xx, pen).total + float(np.sum(lam * c))
+
+    Lu, Lx, c = lagrangian_gradient(d, linearise(x, u, d.table), lam, pen)
+    assert np.allclose(c, residual(d, x, u), atol=1e-15)
+    eps = 1e-6
+    for j in (1, 17, 39):
+        e = np.zeros(40)
+        e[j] = eps
+        assert abs((lagrangian(x, u + e) - lagrangian(x, u - e)) / (2 * eps) - Lu[j]) < 1e-6 * (1 + abs(Lu[j]))
+        for a in range(3):
+            E = np.zeros((40, 3))
+            E[j, a] = eps
+            fd = (lagrangian(x + E, u) - lagrangian(x - E, u)) / (2 * eps)
+            assert abs(fd - Lx[j, a]) < 1e-6 * (1 + abs(Lx[j, a]))
+
+
+def test_banded_kkt_solve_matches_a_dense_solve():
+    """The banded layout of the KKT matrix [[H, C^T], [C, 0]] against a dense assembly."""
+    p = paper_problem("ellipse", nodes=9)
+    d = p.disc
+    rng = np.random.default_rng(8)
+    u = rng.standard_normal(9)
+    x = solve_states(d, u)
+    lam = rng.standard_normal((8, 3))
+    pen = PenaltyState.zero(9, p.penalty)
+    lin = linearise(x, u, d.table)
+    H = lagrangian_hessian_blocks(d, x, lam, pen, gauss_newton=False, lin=lin)
+    r_u, r_x, r_c = rng.standard_normal(9), rng.standard_normal((9, 3)), rng.standard_normal((8, 3))
+    du, dx, dlam = kkt_solve(d, lin, H, r_u, r_x, r_c)
+    # dense: unknowns z = (x_1..x_8, u_0..u_8), constraints c_0..c_7
+    nz, h2, A = 3 * 8 + 9, 0.5 * d.h, lin.A
+    K = np.zeros((nz + 24, nz + 24))
+    for j in range(1, 9):
+        K[3 * (j - 1) : 3 * j, 3 * (j - 1) : 3 * j] = H[j]
+    K[24:nz, 24:nz] = np.diag(d.w)
+    C = np.zeros((24, nz))
+    for i in range(8):
+        C[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = np.eye(3) - h2 * A[i + 1]
+        if i >= 1:
+            C[3 * i : 3 * i + 3, 3 * (i - 1) : 3 * i] = -(np.eye(3) + h2 * A[i])
+        C[3 * i + 1, 24 + i] = C[3 * i + 1, 24 + i + 1] = h2
+    K[nz:, :nz], K[:nz, nz:] = C, C.T
+    sol = np.linalg.solve(K, np.concatenate([r_x[1:].ravel(), r_u, r_c.ravel()]))
+    assert np.allclose(dx[1:].ravel(), sol[:24], rtol=1e-9, atol=1e-11)
+    assert np.allclose(du, sol[24:nz], rtol=1e-9, atol=1e-11)
+    assert np.allclose(dlam.ravel(), sol[nz:], rtol=1e-9, atol=1e-11)
+    assert np.all(dx[0] == 0.0)
+
+
+@pytest.mark.parametrize("name", ["circle", "ellipse", "deformed"])
+def test_cost_tolerance_stop_meets_its_predicted_cost_error(name):
+    """cost_tol stops on the Newton decrement; the actual J - J* must be within it (and >= 0)."""
+    p = paper_problem(name, nodes=300)
+    ref = solve(p, tol=1e-11)
+    r = solve(p, cost_tol=1e-8)
+    assert r.converged and r.constraints.ok, r.message
+    assert int(r.history["sqp_steps"]) >= 1
+    assert -1e-12 * ref.cost <= r.cost - ref.cost <= 1e-8 * ref.cost
+    assert r.residual > 0.0 and ("Newton decrement" in r.message or r.residual <= 1e-9)
+    # the returned states satisfy the dynamics and the costates are the exact adjoint ones
+    assert np.max(np.abs(residual(p.disc, np.stack([r.rho, r.alpha, r.s_o], -1), r.kappa))) < 1e-12
+    assert abs(r.residual - np.max(np.abs(r.kappa + r.costates[:, 1]))) < 1e-9
+
+
 # ----------------------------------------------------------------------------- constraints
 def test_sweep_reports_inadmissible_iterates_without_aborting():
     """Start from a straight arm aimed into the circle: rho < 0 for the first iterates."""
@@ -390,6 +474,8 @@ def test_bad_solver_settings_are_rejected():
         sweep(p, eta=0.0)
     with pytest.raises(InvalidParameterError, match="tol"):
         solve(p, tol=-1.0)
+    with pytest.raises(InvalidParameterError, match="cost_tol"):
+        solve(p, cost_tol=0.0)
     with pytest.raises(InvalidParameterError, match="initial"):
         solve(p, initial=np.zeros(29))
 

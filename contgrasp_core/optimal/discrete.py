@@ -30,7 +30,7 @@ that is the gradient of the paper's eq. costates, which are written for a given 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -44,18 +44,23 @@ __all__ = [
     "CurvatureTable",
     "Discretisation",
     "Trajectory",
+    "Linearisation",
     "PenaltyState",
+    "linearise",
     "dynamics",
     "dynamics_jacobian",
     "dynamics_hessian",
     "residual",
     "solve_states",
+    "solve_states_linearised",
     "march_states",
     "evaluate",
     "adjoint",
     "nodal_costates",
     "lagrangian_hessian_blocks",
     "kkt_newton_step",
+    "kkt_solve",
+    "lagrangian_gradient",
     "ForwardSolveError",
     "SingularSystemError",
 ]
@@ -87,10 +92,10 @@ class CurvatureTable:
         s = np.mod(np.asarray(s_o, dtype=float), self.length)
         j = np.minimum((s / self.step).astype(np.int64), self.coeffs.shape[1] - 1)
         t = s - j * self.step
-        c0, c1, c2, c3 = (self.coeffs[m, j] for m in range(4))
+        c0, c1, c2, c3, d0, d1, e0 = self._rows[j].T  # one gather of the cell's coefficients
         k = ((c0 * t + c1) * t + c2) * t + c3
-        k1 = (3.0 * c0 * t + 2.0 * c1) * t + c2
-        k2 = 6.0 * c0 * t + 2.0 * c1
+        k1 = (d0 * t + d1) * t + c2
+        k2 = e0 * t + d1
         return k, k1, k2
 
     def scalar(self) -> tuple[list[list[float]], float, float]:
@@ -100,6 +105,12 @@ class CurvatureTable:
     @cached_property
     def _scalar_lists(self) -> list[list[float]]:
         return self.coeffs.tolist()
+
+    @cached_property
+    def _rows(self) -> Array:
+        """Per cell: c0..c3 and the derivative coefficients 3 c0, 2 c1, 6 c0, shape (size, 7)."""
+        c0, c1, c2, c3 = self.coeffs
+        return np.ascontiguousarray(np.stack([c0, c1, c2, c3, 3.0 * c0, 2.0 * c1, 6.0 * c0], axis=-1))
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,9 +132,30 @@ class Discretisation:
         return len(self.s)
 
     @cached_property
-    def kkt_pattern(self) -> tuple[Array, Array, Array, Array, Array, int]:
+    def kkt_pattern(self) -> tuple[Array, Array, Array, Array, Array]:
         """Index layout of the banded KKT matrix (computed once per discretisation)."""
-        return _kkt_pattern(self.nodes)
+        return _kkt_pattern(self)
+
+    @cached_property
+    def state_band_pattern(self) -> tuple[Array, Array]:
+        """Flat band-storage positions of dc/dx and of its transpose (computed once)."""
+        return _state_band_pattern(self.nodes, False), _state_band_pattern(self.nodes, True)
+
+    def coarsened(self, nodes: int) -> Discretisation:
+        """The same problem on ``nodes`` grid points (profiles interpolated linearly; cached)."""
+        cache = self._coarse
+        if nodes not in cache:
+            s = np.linspace(0.0, float(self.s[-1]), nodes)
+            h = float(s[1] - s[0])
+            w = np.full(nodes, h)
+            w[0] = w[-1] = 0.5 * h
+            rho_d, alpha_d = np.interp(s, self.s, self.rho_d), np.interp(s, self.s, self.alpha_d)
+            cache[nodes] = replace(self, s=s, h=h, w=w, rho_d=rho_d, alpha_d=alpha_d)
+        return cache[nodes]
+
+    @cached_property
+    def _coarse(self) -> dict[int, Discretisation]:
+        return {}
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,13 +174,58 @@ class PenaltyState:
 
 
 @dataclass(frozen=True, eq=False)
+class Linearisation:
+    """The dynamics at one trajectory (x, u), evaluated once and shared by the defect check of
+    the forward solve, the adjoint, the Lagrangian Hessian and the KKT matrix.
+
+    ``k, k1, k2``: kappa_o and its first two derivatives at s_o (:class:`CurvatureTable`);
+    ``S, C``: sin, cos alpha; ``D = 1 + rho kappa_o``; ``f`` (n, 3) of eqs. rho_alpha_2 and
+    object_speed; ``A = df/dx`` (n, 3, 3), formed on first use.
+    """
+
+    x: Array
+    u: Array
+    k: Array
+    k1: Array
+    k2: Array
+    S: Array
+    C: Array
+    D: Array
+    f: Array
+
+    @cached_property
+    def A(self) -> Array:
+        return self.jacobian()
+
+    def jacobian(self, frozen: bool = False) -> Array:
+        """df/dx, shape (n, 3, 3); ``frozen`` drops the s_o dependence of kappa_o (eq. costates)."""
+        rho, S, C, D, k = self.x[:, 0], self.S, self.C, self.D, self.k
+        k1 = np.zeros_like(k) if frozen else self.k1
+        SD2 = S / (D * D)
+        A = np.zeros((len(rho), 3, 3))
+        A[:, 0, 1] = S
+        A[:, 1, 0] = -SD2 * k * k
+        A[:, 1, 1] = k * C / D
+        A[:, 1, 2] = k1 * SD2
+        A[:, 2, 0] = -SD2 * k
+        A[:, 2, 1] = C / D
+        A[:, 2, 2] = -SD2 * rho * k1
+        return A
+
+
+@dataclass(frozen=True, eq=False)
 class Trajectory:
-    """A control and its consistent states, with the cost split into tracking and penalty."""
+    """A control and its consistent states, with the cost split into tracking and penalty.
+
+    ``lin``: the dynamics linearised at (x, u) when the caller already had them (reused by
+    :func:`adjoint` and :func:`kkt_newton_step`), else None.
+    """
 
     u: Array  # (N,)
     x: Array  # (N, 3)
     cost: float  # J of eq. optimal_kappa (discretised), without the penalty
     penalty: float  # augmented-Lagrangian term
+    lin: Linearisation | None = None
 
     @property
     def total(self) -> float:
@@ -156,60 +233,64 @@ class Trajectory:
 
 
 # ----------------------------------------------------------------------------- dynamics
-def dynamics(x: Array, u: Array, table: CurvatureTable) -> Array:
-    """f(x, u) of eqs. rho_alpha_2 and object_speed, vectorised over rows of ``x`` (n, 3)."""
-    rho, alpha, sig = x[:, 0], x[:, 1], x[:, 2]
-    k, _, _ = table(sig)
-    g = np.sin(alpha) / (1.0 + rho * k)
-    return np.stack([-np.cos(alpha), -u + k * g, g], axis=-1)
-
-
-def dynamics_jacobian(x: Array, u: Array, table: CurvatureTable, frozen: bool = False) -> tuple[Array, Array]:
-    """(f, A = df/dx) with A of shape (n, 3, 3); ``frozen`` drops the s_o dependence of kappa_o."""
-    rho, alpha, sig = x[:, 0], x[:, 1], x[:, 2]
-    k, k1, _ = table(sig)
-    if frozen:
-        k1 = np.zeros_like(k1)
-    S, C = np.sin(alpha), np.cos(alpha)
-    D = 1.0 + rho * k
-    g = S / D
-    f = np.stack([-C, -u + k * g, g], axis=-1)
-    A = np.zeros((len(rho), 3, 3))
-    A[:, 0, 1] = S
-    A[:, 1, 0] = -S * k * k / D**2
-    A[:, 1, 1] = k * C / D
-    A[:, 1, 2] = k1 * S / D**2
-    A[:, 2, 0] = -S * k / D**2
-    A[:, 2, 1] = C / D
-    A[:, 2, 2] = -S * rho * k1 / D**2
-    return f, A
-
-
-def dynamics_hessian(x: Array, table: CurvatureTable) -> Array:
-    """Second derivatives d^2 f_m / dx_a dx_b, shape (n, 3, 3, 3) indexed [node, m, a, b]."""
+def linearise(x: Array, u: Array, table: CurvatureTable) -> Linearisation:
+    """Evaluate f(x, u) of eqs. rho_alpha_2 / object_speed and the pieces of its derivatives."""
     rho, alpha, sig = x[:, 0], x[:, 1], x[:, 2]
     k, k1, k2 = table(sig)
     S, C = np.sin(alpha), np.cos(alpha)
     D = 1.0 + rho * k
-    D2, D3 = D**2, D**3
-    Hs = np.zeros((len(rho), 3, 3, 3))
-    Hs[:, 0, 1, 1] = C
-    # m = 1: kappa_o * g
-    F = Hs[:, 1]
-    F[:, 0, 0] = 2.0 * S * k**3 / D3
-    F[:, 0, 1] = F[:, 1, 0] = -C * k * k / D2
-    F[:, 0, 2] = F[:, 2, 0] = -2.0 * S * k * k1 / D3
-    F[:, 1, 1] = -k * S / D
-    F[:, 1, 2] = F[:, 2, 1] = C * k1 / D2
-    F[:, 2, 2] = S * (k2 * D - 2.0 * rho * k1 * k1) / D3
-    # m = 2: g = sin(alpha) / (1 + rho kappa_o)
-    G = Hs[:, 2]
-    G[:, 0, 0] = 2.0 * S * k * k / D3
-    G[:, 0, 1] = G[:, 1, 0] = -C * k / D2
-    G[:, 0, 2] = G[:, 2, 0] = -S * k1 * (1.0 - rho * k) / D3
-    G[:, 1, 1] = -S / D
-    G[:, 1, 2] = G[:, 2, 1] = -C * rho * k1 / D2
-    G[:, 2, 2] = -S * rho * (k2 * D - 2.0 * rho * k1 * k1) / D3
+    g = S / D
+    f = np.empty((len(rho), 3))
+    f[:, 0] = -C
+    f[:, 1] = k * g - u
+    f[:, 2] = g
+    return Linearisation(x=x, u=u, k=k, k1=k1, k2=k2, S=S, C=C, D=D, f=f)
+
+
+def dynamics(x: Array, u: Array, table: CurvatureTable) -> Array:
+    """f(x, u) of eqs. rho_alpha_2 and object_speed, vectorised over rows of ``x`` (n, 3)."""
+    return linearise(x, u, table).f
+
+
+def dynamics_jacobian(x: Array, u: Array, table: CurvatureTable, frozen: bool = False) -> tuple[Array, Array]:
+    """(f, A = df/dx) with A of shape (n, 3, 3); ``frozen`` drops the s_o dependence of kappa_o."""
+    lin = linearise(x, u, table)
+    return lin.f, lin.jacobian(frozen)
+
+
+def _second_derivatives(lin: Linearisation) -> tuple[Array, ...]:
+    """The distinct second derivatives of f_1 = kappa_o g - u and f_2 = g = sin(alpha) / D.
+
+    Returns ``(g00, g01, g11, f12, f22, f02, g02)`` with ``g_ab = d^2 g / dx_a dx_b`` and
+    ``f_ab = d^2 (kappa_o g) / dx_a dx_b`` (x = (rho, alpha, s_o)); the others follow from
+    ``f_ab = kappa_o g_ab`` for ab in {00, 01, 11} and ``g_ab = -rho f_ab`` for ab in {12, 22}.
+    """
+    rho, S, C, D, k, k1, k2 = lin.x[:, 0], lin.S, lin.C, lin.D, lin.k, lin.k1, lin.k2
+    SD3 = S / (D * D * D)
+    CD2 = C / (D * D)
+    return (
+        2.0 * k * k * SD3,
+        -k * CD2,
+        -S / D,
+        k1 * CD2,
+        (k2 * D - 2.0 * rho * k1 * k1) * SD3,
+        -2.0 * k * k1 * SD3,
+        -k1 * (1.0 - rho * k) * SD3,
+    )
+
+
+def dynamics_hessian(x: Array, table: CurvatureTable) -> Array:
+    """Second derivatives d^2 f_m / dx_a dx_b, shape (n, 3, 3, 3) indexed [node, m, a, b]."""
+    lin = linearise(x, np.zeros(len(x)), table)
+    rho, k = x[:, 0], lin.k
+    g00, g01, g11, f12, f22, f02, g02 = _second_derivatives(lin)
+    F = {(0, 0): k * g00, (0, 1): k * g01, (0, 2): f02, (1, 1): k * g11, (1, 2): f12, (2, 2): f22}
+    G = {(0, 0): g00, (0, 1): g01, (0, 2): g02, (1, 1): g11, (1, 2): -rho * f12, (2, 2): -rho * f22}
+    Hs = np.zeros((len(x), 3, 3, 3))
+    Hs[:, 0, 1, 1] = lin.C
+    for (a, b), v in F.items():
+        Hs[:, 1, a, b] = Hs[:, 1, b, a] = v
+        Hs[:, 2, a, b] = Hs[:, 2, b, a] = G[(a, b)]
     return Hs
 
 
@@ -228,35 +309,61 @@ class SingularSystemError(RuntimeError):
 
 
 def _band_solve(ab: Array, kl: int, ku: int, rhs: Array) -> Array:
-    """Solve with LAPACK gbsv; ``ab`` has ``2 kl + ku + 1`` rows, entry (r, c) at ``[kl + ku + r - c, c]``."""
+    """Solve with LAPACK gbsv; ``ab`` (Fortran order, so no copy) has ``2 kl + ku + 1`` rows,
+    entry (r, c) at ``[kl + ku + r - c, c]``."""
     _, _, x, info = _GBSV(kl, ku, ab, rhs, overwrite_ab=True, overwrite_b=True)
     if info != 0:
         raise SingularSystemError(f"banded solve failed (LAPACK gbsv info = {info})")
     return x
 
 
+def _band_matrix(buf: Array, rows: int) -> Array:
+    """View a flat buffer filled at ``(kl + ku + r - c) + rows c`` as the Fortran-ordered band."""
+    return buf.reshape(-1, rows).T
+
+
+def _step_blocks(d: Discretisation, A: Array) -> Array:
+    """The 3x3 blocks of dc/dx: ``I - h/2 A_{i+1}`` (c_i w.r.t. x_{i+1}, i = 0..N-2), then
+    ``-(I + h/2 A_i)`` (c_i w.r.t. x_i, i = 1..N-2); shape (2N - 3, 3, 3)."""
+    n1 = d.nodes - 1
+    h2 = 0.5 * d.h
+    blocks = np.empty((2 * n1 - 1, 3, 3))
+    np.multiply(A[1:], -h2, out=blocks[:n1])
+    np.multiply(A[1:-1], -h2, out=blocks[n1:])
+    diag = blocks.reshape(-1, 9)[:, ::4]
+    diag[:n1] += 1.0
+    diag[n1:] -= 1.0
+    return blocks
+
+
+def _state_band_pattern(n: int, transpose: bool) -> Array:
+    """Flat positions (see :func:`_band_matrix`) of the :func:`_step_blocks` entries in dc/dx
+    (kl, ku = 5, 2: 13 band rows) or in its transpose (kl, ku = 2, 5: 10 band rows)."""
+    n1 = n - 1
+    i = np.arange(n1)[:, None, None]
+    a = np.arange(3)[None, :, None]
+    b = np.arange(3)[None, None, :]
+    zero = 0 * i + 0 * a + 0 * b
+    r = np.concatenate([(3 * i + a + zero).ravel(), (3 * i[1:] + a + zero[1:]).ravel()])
+    c = np.concatenate([(3 * i + b + zero).ravel(), (3 * i[1:] - 3 + b + zero[1:]).ravel()])
+    if transpose:
+        return (7 + c - r) + 10 * r
+    return (7 + r - c) + 13 * c
+
+
 def _state_jacobian_band(d: Discretisation, A: Array, transpose: bool) -> tuple[Array, int, int]:
     """dc/d(x_1..x_{N-1}) (or its transpose) in gbsv band storage: (ab, kl, ku).
 
     Block lower-bidiagonal: block (i, i) = I - h/2 A_{i+1} (c_i w.r.t. x_{i+1}),
-    block (i, i-1) = -(I + h/2 A_i) (c_i w.r.t. x_i).
+    block (i, i-1) = -(I + h/2 A_i) (c_i w.r.t. x_i). One vectorised scatter into a
+    precomputed layout (:attr:`Discretisation.state_band_pattern`).
     """
-    n1 = d.nodes - 1
-    eye = np.eye(3)
-    diag = eye - 0.5 * d.h * A[1:]
-    sub = -(eye + 0.5 * d.h * A[1:-1])
+    pattern = d.state_band_pattern[1 if transpose else 0]
     kl, ku = (2, 5) if transpose else (5, 2)
-    ab = np.zeros((2 * kl + ku + 1, 3 * n1))
-    off = kl + ku
-    for a in range(3):
-        for b in range(3):
-            if transpose:  # (row 3i+b, col 3i+a) and (row 3(i-1)+b, col 3i+a)
-                ab[off + b - a, a::3] = diag[:, a, b]
-                ab[off + b - a - 3, a::3][1:] = sub[:, a, b]
-            else:  # (row 3i+a, col 3i+b) and (row 3i+a, col 3(i-1)+b)
-                ab[off + a - b, b::3] = diag[:, a, b]
-                ab[off + a - b + 3, b::3][: n1 - 1] = sub[:, a, b]
-    return ab, kl, ku
+    rows = 2 * kl + ku + 1
+    buf = np.zeros(rows * 3 * (d.nodes - 1))
+    buf[pattern] = _step_blocks(d, A).ravel()
+    return _band_matrix(buf, rows), kl, ku
 
 
 class ForwardSolveError(RuntimeError):
@@ -269,35 +376,61 @@ def solve_states(
     """States x (N, 3) with c(x, u) = 0 (the forward integration of eq. rho_alpha_2).
 
     Newton's method on the whole block-bidiagonal trapezoidal system, started from ``guess``
-    (e.g. the previous iterate); if that fails, the steps are solved one after another
+    (e.g. the previous iterate; one increase of the defects in a row is tolerated, as happens in
+    the first step from a cold guess); if that fails, the steps are solved one after another
     (:func:`march_states`). Raises ForwardSolveError if the dynamics become singular
     (1 + rho kappa_o <= 0).
+    """
+    return solve_states_linearised(d, u, guess, tol=tol, max_newton=max_newton)[0]
+
+
+def solve_states_linearised(
+    d: Discretisation,
+    u: Array,
+    guess: Array | None = None,
+    *,
+    tol: float = 1e-13,
+    max_newton: int = 12,
+    march: bool = True,
+) -> tuple[Array, Linearisation]:
+    """:func:`solve_states` and the dynamics linearised at the returned states.
+
+    The linearisation is the one the last Newton check evaluated (the defects are computed from
+    it), so the adjoint and the KKT matrix at the new iterate need no further evaluation.
+    ``march=False``: raise ForwardSolveError instead of falling back to :func:`march_states`
+    when Newton from ``guess`` fails (a line search then simply shortens its step).
     """
     if guess is not None and guess.shape == (d.nodes, 3):
         x = guess.copy()
         x[0] = d.x0
         scale = 1.0 + np.max(np.abs(x), axis=0)
         prev = np.inf
+        rises = 0
         for _ in range(max_newton):
             if not np.all(np.isfinite(x)):
                 break
-            f, A = dynamics_jacobian(x, u, d.table)
-            if not np.all(np.isfinite(A)) or np.any(1.0 + x[:, 0] * d.table(x[:, 2])[0] <= 0.0):
+            lin = linearise(x, u, d.table)
+            if np.any(lin.D <= 0.0):
                 break
+            f = lin.f
             c = x[1:] - x[:-1] - 0.5 * d.h * (f[1:] + f[:-1])
             err = float(np.max(np.abs(c) / scale))
             if err <= tol:
-                return x
-            if not err < prev:
+                return x, lin
+            rises = 0 if err < prev else rises + 1
+            if not np.isfinite(err) or rises > 1:
                 break
             prev = err
-            ab, kl, ku = _state_jacobian_band(d, A, transpose=False)
+            ab, kl, ku = _state_jacobian_band(d, lin.A, transpose=False)
             try:
                 dx = _band_solve(ab, kl, ku, -c.ravel())
             except SingularSystemError:
                 break
             x[1:] += dx.reshape(-1, 3)
-    return march_states(d, u)
+    if not march:
+        raise ForwardSolveError("Newton on the trapezoidal trajectory did not converge from the guess")
+    x = march_states(d, u)
+    return x, linearise(x, u, d.table)
 
 
 def march_states(d: Discretisation, u: Array) -> Array:
@@ -373,44 +506,68 @@ def march_states(d: Discretisation, u: Array) -> Array:
 
 
 # ----------------------------------------------------------------------------- cost, penalty
-def _constraint_values(d: Discretisation, x: Array) -> tuple[Array, Array, Array, Array]:
-    """q (N, 4) >= 0 wanted; gradients dq/dx (N, 4, 3); and (k, k1, k2) at the nodes."""
-    rho, alpha, sig = x[:, 0], x[:, 1], x[:, 2]
-    k, k1, k2 = d.table(sig)
+def _constraints(d: Discretisation, x: Array, lin: Linearisation | None = None) -> Array:
+    """q (N, 4) >= 0 wanted: rho - m, alpha - m, pi - m - alpha, 1 + rho kappa_o - m.
+
+    kappa_o comes from ``lin`` (the linearisation at ``x``) when given, else from the table.
+    """
+    rho, alpha = x[:, 0], x[:, 1]
+    k = lin.k if lin is not None else d.table(x[:, 2])[0]
     m_rho, m_alpha, m_speed = d.margins
-    q = np.stack([rho - m_rho, alpha - m_alpha, np.pi - m_alpha - alpha, 1.0 + rho * k - m_speed], axis=-1)
+    q = np.empty((len(rho), 4))
+    q[:, 0] = rho - m_rho
+    q[:, 1] = alpha - m_alpha
+    q[:, 2] = (np.pi - m_alpha) - alpha
+    q[:, 3] = 1.0 - m_speed + rho * k
+    return q
+
+
+def _constraint_jacobian(
+    d: Discretisation, x: Array, lin: Linearisation | None
+) -> tuple[Array, Array, Array]:
+    """dq/dx (N, 4, 3) and (dkappa_o, d^2kappa_o) at the nodes (only needed when a constraint is active)."""
+    rho = x[:, 0]
+    k, k1, k2 = (lin.k, lin.k1, lin.k2) if lin is not None else d.table(x[:, 2])
     dq = np.zeros((len(rho), 4, 3))
     dq[:, 0, 0] = 1.0
     dq[:, 1, 1] = 1.0
     dq[:, 2, 1] = -1.0
     dq[:, 3, 0] = k
     dq[:, 3, 2] = rho * k1
-    return q, dq, k1, k2
+    return dq, k1, k2
 
 
-def evaluate(d: Discretisation, u: Array, x: Array, pen: PenaltyState) -> Trajectory:
-    """Discrete cost (trapezoid rule of eq. optimal_kappa's integrand) and penalty."""
+def evaluate(
+    d: Discretisation, u: Array, x: Array, pen: PenaltyState, lin: Linearisation | None = None
+) -> Trajectory:
+    """Discrete cost (trapezoid rule of eq. optimal_kappa's integrand) and penalty.
+
+    ``lin``: the dynamics linearised at (x, u) if known; kept in the returned trajectory.
+    """
     rho, alpha = x[:, 0], x[:, 1]
     run = 0.5 * u * u + d.chi * (0.5 * (rho - d.rho_d) ** 2 + 1.0 - np.cos(alpha - d.alpha_d))
     if pen.mu == 0.0:
-        return Trajectory(u=u, x=x, cost=float(d.w @ run), penalty=0.0)
-    q, _, _, _ = _constraint_values(d, x)
+        return Trajectory(u=u, x=x, cost=float(d.w @ run), penalty=0.0, lin=lin)
+    q = _constraints(d, x, lin)
     act = np.maximum(0.0, pen.y - pen.mu * q)
     psi = (act * act - pen.y * pen.y) / (2.0 * pen.mu)
-    return Trajectory(u=u, x=x, cost=float(d.w @ run), penalty=float(d.w @ psi.sum(axis=1)))
+    return Trajectory(u=u, x=x, cost=float(d.w @ run), penalty=float(d.w @ psi.sum(axis=1)), lin=lin)
 
 
-def state_gradient(d: Discretisation, x: Array, pen: PenaltyState, frozen: bool = False) -> Array:
+def state_gradient(
+    d: Discretisation, x: Array, pen: PenaltyState, frozen: bool = False, lin: Linearisation | None = None
+) -> Array:
     """d(cost + penalty)/dx_i without the weights' sum over steps, shape (N, 3)."""
     rho, alpha = x[:, 0], x[:, 1]
     gx = np.zeros_like(x)
     gx[:, 0] = d.chi * (rho - d.rho_d)
     gx[:, 1] = d.chi * np.sin(alpha - d.alpha_d)
-    q, dq, _, _ = _constraint_values(d, x)
-    if frozen:
-        dq[:, 3, 2] = 0.0
-    act = np.maximum(0.0, pen.y - pen.mu * q)
-    gx -= np.einsum("nj,nja->na", act, dq)
+    act = np.maximum(0.0, pen.y - pen.mu * _constraints(d, x, lin))
+    if np.any(act > 0.0):
+        dq, _, _ = _constraint_jacobian(d, x, lin)
+        if frozen:
+            dq[:, 3, 2] = 0.0
+        gx -= np.einsum("nj,nja->na", act, dq)
     return d.w[:, None] * gx
 
 
@@ -419,9 +576,11 @@ def adjoint(d: Discretisation, traj: Trajectory, pen: PenaltyState, frozen: bool
 
     Solves ``(dc/dx)^T lambda = -d(J + P)/dx`` (block upper-bidiagonal, one banded solve).
     With ``frozen`` the kappa_o(s_o) dependence is dropped (paper's eq. costates).
+    Uses ``traj.lin`` when present.
     """
-    _, A = dynamics_jacobian(traj.x, traj.u, d.table, frozen=frozen)
-    gx = state_gradient(d, traj.x, pen, frozen=frozen)
+    lin = traj.lin if traj.lin is not None else linearise(traj.x, traj.u, d.table)
+    A = lin.jacobian(frozen=True) if frozen else lin.A
+    gx = state_gradient(d, traj.x, pen, frozen=frozen, lin=lin)
     ab, kl, ku = _state_jacobian_band(d, A, transpose=True)
     lam = _band_solve(ab, kl, ku, -gx[1:].ravel()).reshape(-1, 3)
     grad = d.w * traj.u
@@ -439,21 +598,28 @@ def nodal_costates(d: Discretisation, lam: Array) -> Array:
 
 
 def lagrangian_hessian_blocks(
-    d: Discretisation, x: Array, lam: Array, pen: PenaltyState, gauss_newton: bool
+    d: Discretisation,
+    x: Array,
+    lam: Array,
+    pen: PenaltyState,
+    gauss_newton: bool,
+    lin: Linearisation | None = None,
 ) -> Array:
     """Per-node 3x3 state blocks of the Hessian of the Lagrangian, shape (N, 3, 3).
 
     Exact: ``w_i (chi diag(1, cos(alpha - alpha_d), 0) + penalty'') - w_i p_i . d^2 f``.
     Gauss-Newton: drops the costate curvature terms and clips ``cos`` at 0 (positive semidefinite).
+    ``lin``: the linearisation at ``x`` if known.
     """
     n = d.nodes
+    lin = lin if lin is not None else linearise(x, np.zeros(n), d.table)
     H = np.zeros((n, 3, 3))
     cosd = np.cos(x[:, 1] - d.alpha_d)
     H[:, 0, 0] = d.chi
     H[:, 1, 1] = d.chi * (np.maximum(cosd, 0.0) if gauss_newton else cosd)
-    q, dq, k1, k2 = _constraint_values(d, x)
-    act = np.maximum(0.0, pen.y - pen.mu * q)
+    act = np.maximum(0.0, pen.y - pen.mu * _constraints(d, x, lin))
     if np.any(act > 0.0):
+        dq, k1, k2 = _constraint_jacobian(d, x, lin)
         on = (act > 0.0).astype(float)
         H += pen.mu * np.einsum("nj,nja,njb->nab", on, dq, dq)
         if not gauss_newton:
@@ -462,15 +628,30 @@ def lagrangian_hessian_blocks(
             H[:, 2, 0] -= act[:, 3] * k1
             H[:, 2, 2] -= act[:, 3] * x[:, 0] * k2
     H *= d.w[:, None, None]
-    if not gauss_newton:
+    if not gauss_newton:  # - w p . d^2 f, grouped by the relations of _second_derivatives
         p = nodal_costates(d, lam) * d.w[:, None]
-        Hs = dynamics_hessian(x, d.table)
-        H -= p[:, 0, None, None] * Hs[:, 0] + p[:, 1, None, None] * Hs[:, 1] + p[:, 2, None, None] * Hs[:, 2]
+        p0, p1, p2 = p[:, 0], p[:, 1], p[:, 2]
+        g00, g01, g11, f12, f22, f02, g02 = _second_derivatives(lin)
+        a = p1 * lin.k + p2
+        b = p1 - x[:, 0] * p2
+        H[:, 0, 0] -= a * g00
+        H[:, 1, 1] -= a * g11 + p0 * lin.C
+        H[:, 2, 2] -= b * f22
+        for (i, j), v in (((0, 1), a * g01), ((1, 2), b * f12), ((0, 2), p1 * f02 + p2 * g02)):
+            H[:, i, j] -= v
+            H[:, j, i] -= v
     return H
 
 
-def _kkt_pattern(n: int) -> tuple[Array, Array, Array, Array, Array, int]:
-    """Index layout of the KKT matrix: (rows, cols, iu, ix, il, size); see kkt_newton_step."""
+def _kkt_pattern(d: Discretisation) -> tuple[Array, Array, Array, Array, Array]:
+    """Layout of the banded KKT matrix (19 band rows, see kkt_newton_step).
+
+    Returns (flat positions of the per-iteration entries - the Hessian blocks H_1..H_{N-1},
+    then the :func:`_step_blocks` below and right of the diagonal -, a flat band buffer holding
+    the constant entries w (u-u) and h/2 (lambda_2-u couplings), iu, ix, il) where ``iu`` (N,),
+    ``ix`` (N, 3) and ``il`` (N-1, 3) are the unknowns' positions (ix[0] = -1: x_0 is fixed).
+    """
+    n = d.nodes
     size = 7 * n - 6
     iu = np.empty(n, dtype=np.int64)
     ix = np.full((n, 3), -1, dtype=np.int64)
@@ -484,44 +665,79 @@ def _kkt_pattern(n: int) -> tuple[Array, Array, Array, Array, Array, int]:
     a, b = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
     i = np.arange(n - 1)
     i1 = i[1:]
-    rows = [ix[1:, a].ravel(), iu]
-    cols = [ix[1:, b].ravel(), iu]
-    for r_, c_ in ((il[i][:, a], ix[i + 1][:, b]), (il[i1][:, a], ix[i1][:, b])):
-        rows += [r_.ravel(), c_.ravel()]
-        cols += [c_.ravel(), r_.ravel()]
-    for uu in (iu[i], iu[i + 1]):
-        rows += [il[i, 1], uu]
-        cols += [uu, il[i, 1]]
-    return np.concatenate(rows), np.concatenate(cols), iu, ix, il, size
+    # constraint rows (lambda_i, a) against state columns (x_{i+1}, b) and (x_i, b), i >= 1
+    lr = np.concatenate([il[i][:, a].ravel(), il[i1][:, a].ravel()])
+    xc = np.concatenate([ix[i + 1][:, b].ravel(), ix[i1][:, b].ravel()])
+    rows = np.concatenate([ix[1:, a].ravel(), lr, xc])
+    cols = np.concatenate([ix[1:, b].ravel(), xc, lr])
+
+    def flat(r: Array, c: Array) -> Array:
+        return (12 + r - c) + 19 * c
+
+    template = np.zeros(19 * size)
+    template[flat(iu, iu)] = d.w
+    for uu in (iu[i], iu[i + 1]):  # c_i depends on u_i and u_{i+1} through -h/2 df/du = (0, h/2, 0)
+        template[flat(il[i, 1], uu)] = 0.5 * d.h
+        template[flat(uu, il[i, 1])] = 0.5 * d.h
+    return flat(rows, cols), template, iu, ix, il
+
+
+def kkt_solve(
+    d: Discretisation, lin: Linearisation, H: Array, r_u: Array, r_x: Array, r_c: Array
+) -> tuple[Array, Array, Array]:
+    """Solve the KKT system ``[[H, C^T], [C, 0]] (dx, du, dlambda) = (r_x, r_u, r_c)``.
+
+    ``H``: the per-node state blocks of the Lagrangian Hessian (the control block is diag(w));
+    ``C = dc/d(x, u)`` from ``lin``; ``r_u`` (N,), ``r_x`` (N, 3) (row 0 unused: x_0 is
+    fixed), ``r_c`` (N-1, 3). Unknown ordering
+    ``[u_0, lam_0, (x_j, u_j, lam_j)_{j=1..N-2}, x_{N-1}, u_{N-1}]`` keeps the symmetric
+    indefinite matrix banded (half-bandwidth 6); it is one vectorised scatter into a precomputed
+    layout (:attr:`Discretisation.kkt_pattern`) and one LAPACK banded LU (gbsv, partial
+    pivoting). Returns (du (N,), dx (N, 3) with dx_0 = 0, dlambda (N-1, 3)).
+    """
+    n = d.nodes
+    flat, template, iu, ix, il = d.kkt_pattern
+    blocks = _step_blocks(d, lin.A).ravel()
+    buf = template.copy()
+    buf[flat] = np.concatenate([H[1:].ravel(), blocks, blocks])
+    rhs = np.empty(7 * n - 6)
+    rhs[iu] = r_u
+    rhs[ix[1:]] = r_x[1:]
+    rhs[il] = r_c
+    sol = _band_solve(_band_matrix(buf, 19), 6, 6, rhs)
+    dx = np.zeros((n, 3))
+    dx[1:] = sol[ix[1:]]
+    return sol[iu], dx, sol[il]
 
 
 def kkt_newton_step(
     d: Discretisation, traj: Trajectory, lam: Array, grad: Array, H: Array
 ) -> tuple[Array, Array]:
-    """Newton step (du, dx) of the reduced problem from the sparse KKT system.
+    """Newton step (du, dx) of the reduced problem from the sparse KKT system (:func:`kkt_solve`).
 
-    Unknown ordering ``[u_0, lam_0, (x_j, u_j, lam_j)_{j=1..N-2}, x_{N-1}, u_{N-1}]`` keeps the
-    symmetric indefinite KKT matrix ``[[H, C^T], [C, 0]]`` banded (half-bandwidth 6); one
-    LAPACK banded LU (gbsv, partial pivoting) solves it. The state is feasible (c = 0) and
-    lambda is the adjoint, so the right-hand side is ``-[0, dJ/du, 0]``.
+    The state is feasible (c = 0) and lambda is the adjoint, so the right-hand side is
+    ``-[0, dJ/du, 0]``. The dynamics come from ``traj.lin`` when present.
     """
     n = d.nodes
+    lin = traj.lin if traj.lin is not None else linearise(traj.x, traj.u, d.table)
+    du, dx, _ = kkt_solve(d, lin, H, -grad, np.zeros((n, 3)), np.zeros((n - 1, 3)))
+    return du, dx
+
+
+def lagrangian_gradient(
+    d: Discretisation, lin: Linearisation, lam: Array, pen: PenaltyState
+) -> tuple[Array, Array, Array]:
+    """(dL/du (N,), dL/dx (N, 3), defects c (N-1, 3)) of ``L = J + P + lambda . c`` at any
+    (x, u) = (lin.x, lin.u), feasible or not. At a feasible point with the adjoint lambda,
+    dL/dx = 0 (rows 1..N-1) and dL/du is the reduced gradient of :func:`adjoint`.
+    """
+    x, u, A = lin.x, lin.u, lin.A
     h2 = 0.5 * d.h
-    _, A = dynamics_jacobian(traj.x, traj.u, d.table)
-    rows, cols, iu, ix, _, size = d.kkt_pattern
-    eye = np.eye(3)
-    blk_next = (eye - h2 * A[1:]).ravel()  # c_i w.r.t. x_{i+1}
-    blk_prev = (-(eye + h2 * A[1:-1])).ravel()  # c_i w.r.t. x_i, i >= 1
-    coup = np.full(n - 1, h2)  # c_i w.r.t. u_i and u_{i+1}: -h/2 df/du = (0, h/2, 0)
-    vals = np.concatenate(
-        [H[1:].ravel(), d.w, blk_next, blk_next, blk_prev, blk_prev, coup, coup, coup, coup]
-    )
-    kl = ku = 6
-    ab = np.zeros((2 * kl + ku + 1, size))
-    ab[kl + ku + rows - cols, cols] = vals
-    rhs = np.zeros(size)
-    rhs[iu] = -grad
-    sol = _band_solve(ab, kl, ku, rhs)
-    dx = np.zeros((n, 3))
-    dx[1:] = sol[ix[1:]]
-    return sol[iu], dx
+    c = x[1:] - x[:-1] - h2 * (lin.f[1:] + lin.f[:-1])
+    Lx = state_gradient(d, x, pen, lin=lin)
+    Lx[1:] += lam - h2 * np.einsum("nab,na->nb", A[1:], lam)  # (I - h/2 A_{i+1})^T lambda_i
+    Lx[1:-1] -= lam[1:] + h2 * np.einsum("nab,na->nb", A[1:-1], lam[1:])  # -(I + h/2 A_i)^T lambda_i
+    Lu = d.w * u
+    Lu[:-1] += h2 * lam[:, 1]
+    Lu[1:] += h2 * lam[:, 1]
+    return Lu, Lx, c

@@ -1,21 +1,26 @@
-"""Fast solver of the discretised eq. optimal_kappa: reduced-space Newton through the KKT system.
+"""Fast solver of the discretised eq. optimal_kappa: Newton's method on the KKT conditions.
 
-Each iteration (``docs/optimal.md`` has the derivation):
+A cold start runs three stages (``docs/optimal.md`` has the derivation and measurements):
 
-1. the exact discrete adjoint gives the gradient dJ/dkappa (including the dependence of
-   kappa_o on the control through s_o) and the nodal costates p;
-2. the Newton direction solves the banded KKT system of the Lagrangian with the exact
-   Hessian (second derivatives of eq. rho_alpha_2 weighted by the costates); if that direction
-   is not a descent direction (non-convex region) the Gauss-Newton Hessian is used instead,
-   whose reduced Hessian is positive definite;
-3. a backtracking (Armijo) line search on the reduced cost: every trial control is integrated
-   (Newton on the whole trapezoidal trajectory, warm-started from the linearised prediction),
-   so iterates always satisfy the dynamics; a singular trial (1 + rho kappa_o <= 0) is rejected.
+1. coarse grid (about N/8 nodes): full-space SQP steps (Newton on the KKT conditions, no line
+   search) from the initial guess; each costs one linearisation and one banded KKT solve. The
+   steps are trusted only while their predicted change contracts; otherwise the damped reduced
+   Newton iterations below globalise the coarse problem first (to ``coarse_tol``), then SQP;
+2. fine grid: SQP steps from the interpolated coarse (kappa, states, multipliers) until the
+   predicted change is deep in Newton's quadratic region, then c = 0 restored exactly;
+3. fine grid: reduced-space Newton iterations that certify the optimum and, if needed, finish:
+   the exact discrete adjoint gives dJ/dkappa (including the dependence of kappa_o on the
+   control through s_o) and the costates; the Newton direction solves the banded KKT system
+   with the exact Hessian (Gauss-Newton if it is not a descent direction); an Armijo line
+   search integrates every trial control (iterates satisfy the dynamics).
 
-Stopping rule: the discrete PMP residual ``max_s |kappa + p_2| <= tol`` (curvature units;
-at that point the cost is optimal to about tol^2). State constraints: augmented Lagrangian
-outer loop (multiplier update ``y <- max(0, y - mu q)``, ``mu <- 10 mu`` when violation
-does not shrink 4x); when no constraint is active it ends after the first inner solve.
+Stopping rules (reduced Newton, at a feasible iterate with exact costates): the discrete PMP
+residual ``max_s |kappa + p_2| <= tol``, or, with ``cost_tol``, the Newton decrement
+``-1/2 dJ . dkappa <= cost_tol |J|`` - the second-order prediction of J - J*, asymptotically
+exact at a non-degenerate minimum (an estimate, not a bound: the problem is not convex; the
+benchmark measures the actual error). State constraints: augmented-Lagrangian outer loop
+(``y <- max(0, y - mu q)``, ``mu <- 10 mu`` when the violation does not shrink 4x); when no
+constraint is active it ends after the first inner solve.
 """
 
 from __future__ import annotations
@@ -31,18 +36,27 @@ from ..errors import InvalidParameterError
 from .discrete import (
     ForwardSolveError,
     PenaltyState,
+    SingularSystemError,
     Trajectory,
-    _constraint_values,
+    _constraints,
     adjoint,
     evaluate,
     kkt_newton_step,
+    kkt_solve,
+    lagrangian_gradient,
     lagrangian_hessian_blocks,
-    solve_states,
+    linearise,
+    solve_states_linearised,
 )
 from .guess import initial_control
 from .problem import GraspProblem, GraspResult, make_result
 
 __all__ = ["solve"]
+
+COARSE_SWITCH = 3e-4
+"""SQP switch on the coarse grid: its solution only seeds the fine solve (see :func:`_sqp_steps`)."""
+FINE_SWITCH = 3e-5
+"""SQP switch on the fine grid when only the residual tolerance ``tol`` is given."""
 
 Array = NDArray[np.float64]
 
@@ -57,22 +71,31 @@ def solve(
     constraint_tol: float = 1e-8,
     hessian: str = "exact",
     coarse: int | None = -1,
+    cost_tol: float | None = None,
+    coarse_tol: float = 1.0,
 ) -> GraspResult:
     """Solve eq. optimal_kappa (discretised) by Newton's method on the KKT conditions.
 
     ``initial``: 'approach' (default), 'zero', N curvatures, or a previous GraspResult
-    (warm start; its augmented-Lagrangian multipliers are reused when the grids match).
-    ``tol``: stopping threshold on ``max |kappa + p_2|``. ``hessian``: 'exact' (Newton,
-    quadratic convergence) or 'gauss-newton' (linear convergence, always convex).
+    (warm start; its augmented-Lagrangian multipliers are reused when the grids match; no
+    mesh sequencing). ``tol``: stopping threshold on ``max |kappa + p_2|``. ``cost_tol``: also
+    stop when the Newton decrement predicts ``J - J* <= cost_tol |J|`` (module docstring).
+    ``hessian``: 'exact' (Newton, quadratic convergence) or 'gauss-newton' (linear convergence,
+    always convex) for the reduced Newton iterations.
     ``coarse``: mesh sequencing - for a cold start the problem is first solved on ``coarse``
-    nodes (default -1: about N/8, at least 41; None or 0: off) and its solution, interpolated,
-    starts the fine solve (the coarse solution is within O(h_coarse^2) of the fine one, so the
-    fine Newton iterations start in their quadratic region).
-    Returns a :class:`GraspResult` with ``history`` = cost, residual, step length and
-    Hessian kind (1 exact, 0 Gauss-Newton) per fine iteration; ``history['coarse_iterations']``.
+    nodes (default -1: about N/8, at least 41; None or 0: off) by SQP steps (after damped Newton
+    iterations down to the residual ``coarse_tol`` if the SQP steps do not contract from the
+    guess); its solution, interpolated, starts SQP steps on the fine grid (the coarse solution is
+    within O(h_coarse^2) of the fine one, so they start in Newton's quadratic region).
+    Returns a :class:`GraspResult`; ``iterations`` counts fine-grid Newton steps (SQP and
+    reduced); ``history`` = cost, residual, step length and Hessian kind (1 exact,
+    0 Gauss-Newton) per reduced Newton iteration, ``sqp_steps`` (fine grid),
+    ``coarse_sqp_steps`` and ``coarse_iterations`` (damped Newton on the coarse grid).
     """
     if not (np.isfinite(tol) and tol > 0.0):
         raise InvalidParameterError(f"tol must be > 0, got {tol!r}")
+    if cost_tol is not None and not (np.isfinite(cost_tol) and cost_tol > 0.0):
+        raise InvalidParameterError(f"cost_tol must be > 0 or None, got {cost_tol!r}")
     if int(max_iterations) != max_iterations or max_iterations < 1:
         raise InvalidParameterError(f"max_iterations must be an integer >= 1, got {max_iterations!r}")
     if hessian not in ("exact", "gauss-newton"):
@@ -81,23 +104,57 @@ def solve(
     d = problem.disc
     n = d.nodes
     n_coarse = max(41, n // 8) if coarse == -1 else int(coarse or 0)
-    coarse_its = 0
-    opts = dict(tol=tol, max_iterations=max_iterations, max_outer=max_outer, constraint_tol=constraint_tol, hessian=hessian)
+    coarse_its = coarse_sqp = sqp_steps = 0
+    opts = dict(
+        tol=tol,
+        max_iterations=max_iterations,
+        max_outer=max_outer,
+        constraint_tol=constraint_tol,
+        hessian=hessian,
+        cost_tol=cost_tol,
+    )
     pen = PenaltyState.zero(n, problem.penalty)
     if isinstance(initial, GraspResult) or not 3 <= n_coarse < n // 2:
         u, guess = initial_control(problem, initial)
         if isinstance(initial, GraspResult) and initial.multipliers is not None and initial.multipliers.shape == (n, 4):
             pen = PenaltyState(initial.multipliers.copy(), max(problem.penalty, float(initial.problem.penalty)))
     else:
-        cp = _coarsened(problem, n_coarse)
+        cp = replace(problem, disc=d.coarsened(n_coarse))
+        pen_c = PenaltyState.zero(n_coarse, problem.penalty)
         u_c, guess_c = initial_control(cp, initial)
-        # the coarse solution only seeds the fine solve: its discretisation error O(h_c^2) is far
-        # above 1e-2, so solving it more tightly buys nothing
-        pre = _newton(cp, u_c, guess_c, PenaltyState.zero(n_coarse, problem.penalty), **{**opts, "tol": max(tol, 1e-2)})
-        coarse_its = pre.iterations
+        # states and adjoint of the initial guess (no iteration), then SQP steps from there
+        # (exact Hessian only: the Gauss-Newton option runs the damped iterations throughout)
+        start = _newton(cp, u_c, guess_c, pen_c, **{**opts, "tol": np.inf})
+        exact = hessian == "exact"
+        s0 = start.traj
+        u_c, x_c, lam_c, coarse_sqp, ok = (
+            _sqp_steps(cp, s0.u, s0.x, start.lam, pen_c, cost_bound=s0.total, switch=COARSE_SWITCH)
+            if exact
+            else (s0.u, s0.x, start.lam, 0, False)
+        )
+        if not ok:
+            # globalise with the damped reduced Newton iterations, then SQP again; the coarse
+            # solution only seeds the fine solve (its discretisation error O(h_c^2) is far above
+            # coarse_tol), so the coarse problem is not solved more tightly than that
+            pre = _newton(cp, u_c, x_c, pen_c, **{**opts, "tol": max(tol, coarse_tol), "cost_tol": None})
+            coarse_its = pre.iterations
+            p0 = pre.traj
+            u_c, x_c, lam_c, coarse_sqp, _ = (
+                _sqp_steps(cp, p0.u, p0.x, pre.lam, pre.pen, cost_bound=p0.total, switch=COARSE_SWITCH)
+                if exact
+                else (p0.u, p0.x, pre.lam, 0, False)
+            )
         t_c, t_f = cp.s / cp.s[-1], problem.s / problem.s[-1]
-        u = np.interp(t_f, t_c, pre.traj.u)
-        guess = np.stack([np.interp(t_f, t_c, v) for v in pre.traj.x.T], axis=-1)
+        u = np.interp(t_f, t_c, u_c)
+        guess = np.stack([np.interp(t_f, t_c, v) for v in x_c.T], axis=-1)
+        m_c, m_f = 0.5 * (t_c[1:] + t_c[:-1]), 0.5 * (t_f[1:] + t_f[:-1])  # lambda_i lives on step i
+        lam = np.stack([np.interp(m_f, m_c, v) for v in lam_c.T], axis=-1)
+        if exact:
+            # after a step of predicted relative change p, Newton's quadratic convergence leaves a
+            # decrement of about p^2 (measured constant <= 1): stop the SQP steps where the
+            # certification below is expected to pass
+            switch = FINE_SWITCH if cost_tol is None else min(np.sqrt(cost_tol), 1e-3)
+            u, guess, _, sqp_steps, _ = _sqp_steps(problem, u, guess, lam, pen, switch=switch)
     out = _newton(problem, u, guess, pen, **opts)
     wall = time.perf_counter() - t_start
     return make_result(
@@ -109,10 +166,15 @@ def solve(
         cost=out.traj.cost,
         penalty=out.traj.penalty,
         residual=out.residual,
-        iterations=out.iterations,
+        iterations=out.iterations + sqp_steps,
         wall_time=wall,
         converged=out.converged,
-        history={**{k: np.asarray(v) for k, v in out.history.items()}, "coarse_iterations": np.asarray(coarse_its)},
+        history={
+            **{k: np.asarray(v) for k, v in out.history.items()},
+            "coarse_iterations": np.asarray(coarse_its),
+            "coarse_sqp_steps": np.asarray(coarse_sqp),
+            "sqp_steps": np.asarray(sqp_steps),
+        },
         multipliers=out.pen.y,
         message=out.message,
     )
@@ -141,12 +203,13 @@ def _newton(
     max_outer: int,
     constraint_tol: float,
     hessian: str,
+    cost_tol: float | None,
 ) -> _NewtonOutcome:
     """Augmented-Lagrangian outer loop around damped Newton iterations (module docstring)."""
     d = problem.disc
     n = d.nodes
     try:
-        x = solve_states(d, u, guess)
+        x, lin = solve_states_linearised(d, u, guess)
     except ForwardSolveError as exc:
         raise InvalidParameterError(
             f"the initial curvature makes the contact kinematics singular ({exc}); give another initial guess"
@@ -158,28 +221,34 @@ def _newton(
     prev_violation = np.inf
     lam = np.zeros((n - 1, 3))
     res = np.inf
-    traj = evaluate(d, u, x, pen)
-    for _outer in range(max_outer):
-        traj = evaluate(d, traj.u, traj.x, pen)
+    traj = evaluate(d, u, x, pen, lin)
+    for outer in range(max_outer):
+        if outer:  # new multipliers / penalty weight
+            traj = evaluate(d, traj.u, traj.x, pen, traj.lin)
         lam, grad = adjoint(d, traj, pen)
         res = float(np.max(np.abs(grad / d.w)))
         use_exact = hessian == "exact"
         inner_ok = False
+        predicted: float | None = None
         while iterations < max_iterations:
             if res <= tol:
                 inner_ok = True
                 break
-            iterations += 1
-            H = lagrangian_hessian_blocks(d, traj.x, lam, pen, gauss_newton=not use_exact)
+            H = lagrangian_hessian_blocks(d, traj.x, lam, pen, gauss_newton=not use_exact, lin=traj.lin)
             du, dx = kkt_newton_step(d, traj, lam, grad, H)
             slope = float(grad @ du)
             if not slope < 0.0 and use_exact:
-                H = lagrangian_hessian_blocks(d, traj.x, lam, pen, gauss_newton=True)
+                H = lagrangian_hessian_blocks(d, traj.x, lam, pen, gauss_newton=True, lin=traj.lin)
                 du, dx = kkt_newton_step(d, traj, lam, grad, H)
                 slope = float(grad @ du)
                 exact_used = 0.0
             else:
                 exact_used = 1.0 if use_exact else 0.0
+            if cost_tol is not None and exact_used and 0.0 < -0.5 * slope <= cost_tol * abs(traj.total):
+                predicted = -0.5 * slope  # Newton decrement / 2: the predicted J - J*; step not taken
+                inner_ok = True
+                break
+            iterations += 1
             step, new = _line_search(d, traj, du, dx, slope, pen)
             if new is None:
                 if use_exact:
@@ -200,12 +269,18 @@ def _newton(
             if not message:
                 message = f"iteration limit {max_iterations} reached (residual {res:.3g} > tol {tol:.3g})"
             break
-        q, _, _, _ = _constraint_values(d, traj.x)
+        q = _constraints(d, traj.x, traj.lin)
         violation = float(np.max(np.maximum(0.0, -q)))
         y_new = np.maximum(0.0, pen.y - pen.mu * q)
         if violation <= constraint_tol and np.max(np.abs(y_new - pen.y)) <= constraint_tol * pen.mu:
             converged = True
-            message = f"converged: residual {res:.3g} <= tol {tol:.3g}, constraint violation {violation:.3g}"
+            if predicted is None:
+                message = f"converged: residual {res:.3g} <= tol {tol:.3g}, constraint violation {violation:.3g}"
+            else:
+                message = (
+                    f"converged: predicted cost error {predicted:.3g} <= cost_tol |J| (Newton decrement), "
+                    f"residual {res:.3g}, constraint violation {violation:.3g}"
+                )
             break
         mu = pen.mu * (10.0 if violation > 0.25 * prev_violation else 1.0)
         prev_violation = violation
@@ -215,15 +290,60 @@ def _newton(
     return _NewtonOutcome(traj, lam, pen, res, iterations, converged, message, hist)
 
 
-def _coarsened(problem: GraspProblem, nodes: int) -> GraspProblem:
-    """The same problem on ``nodes`` grid points (profiles interpolated linearly)."""
+def _sqp_steps(
+    problem: GraspProblem,
+    u: Array,
+    x: Array,
+    lam: Array,
+    pen: PenaltyState,
+    *,
+    cost_bound: float = np.inf,
+    switch: float = FINE_SWITCH,
+    max_steps: int = 6,
+) -> tuple[Array, Array, Array, int, bool]:
+    """Full Newton steps on the KKT conditions (SQP without line search) from (x, u, lambda),
+    which need not satisfy the dynamics (e.g. the interpolated coarse solution): each step costs
+    one linearisation and one KKT solve (:func:`kkt_solve`, the defects c in the right-hand
+    side), with no forward integration and no adjoint.
+
+    Runs until a step's predicted change of the Lagrangian, 1/2 |dL/d(x, u) . d|, is <=
+    ``switch`` times the cost at the point it starts from (Newton's quadratic region), then
+    restores c = 0 for the final control (trajectory Newton) and checks that its cost is below
+    ``cost_bound``. The steps are only trusted while they contract (each predicted change at
+    most half the previous one) and the linearisation stays regular (finite, 1 + rho kappa_o
+    > 0); otherwise, or if the restoration fails, the starting point is returned with ``False``.
+    Returns (u, x, lambda, steps, success), x satisfying the dynamics on success.
+    """
     d = problem.disc
-    s = np.linspace(0.0, float(d.s[-1]), nodes)
-    h = float(s[1] - s[0])
-    w = np.full(nodes, h)
-    w[0] = w[-1] = 0.5 * h
-    disc = replace(d, s=s, h=h, w=w, rho_d=np.interp(s, d.s, d.rho_d), alpha_d=np.interp(s, d.s, d.alpha_d))
-    return replace(problem, disc=disc)
+    u0, x0, lam0 = u, x, lam
+    x = x.copy()
+    x[0] = d.x0
+    prev = np.inf
+    for steps in range(1, max_steps + 1):
+        lin = linearise(x, u, d.table)
+        if not (np.all(np.isfinite(lin.f)) and np.all(lin.D > 0.0)):
+            break
+        Lu, Lx, c = lagrangian_gradient(d, lin, lam, pen)
+        H = lagrangian_hessian_blocks(d, x, lam, pen, gauss_newton=False, lin=lin)
+        try:
+            du, dx, dlam = kkt_solve(d, lin, H, -Lu, -Lx, -c)
+        except SingularSystemError:
+            break
+        predicted = 0.5 * abs(float(Lu @ du + np.sum(Lx[1:] * dx[1:])))
+        if not predicted <= 0.5 * prev:
+            break
+        prev = predicted
+        scale = abs(evaluate(d, u, x, pen, lin).total)
+        u, x, lam = u + du, x + dx, lam + dlam
+        if predicted <= switch * scale:
+            try:
+                x, lin = solve_states_linearised(d, u, x, march=False)
+            except ForwardSolveError:
+                break
+            if cost_bound == np.inf or evaluate(d, u, x, pen, lin).total < cost_bound:
+                return u, x, lam, steps, True
+            break
+    return u0, x0, lam0, 0, False
 
 
 def _line_search(d, traj, du, dx, slope, pen):  # type: ignore[no-untyped-def]
@@ -233,11 +353,11 @@ def _line_search(d, traj, du, dx, slope, pen):  # type: ignore[no-untyped-def]
     while t >= 1e-10:
         u = traj.u + t * du
         try:
-            x = solve_states(d, u, traj.x + t * dx)
+            x, lin = solve_states_linearised(d, u, traj.x + t * dx, march=False)
         except ForwardSolveError:
             t *= 0.5
             continue
-        new = evaluate(d, u, x, pen)
+        new = evaluate(d, u, x, pen, lin)
         if new.total <= f0 + 1e-4 * t * slope:
             return t, new
         if t == 1.0 and abs(slope) <= 1e-10 * (1.0 + abs(f0)) and new.total <= f0 + 1e-13 * (1.0 + abs(f0)):

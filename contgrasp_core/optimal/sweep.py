@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidParameterError
-from .discrete import ForwardSolveError, PenaltyState, adjoint, evaluate, solve_states
+from .discrete import ForwardSolveError, PenaltyState, adjoint, evaluate, solve_states_linearised
 from .guess import initial_control
 from .problem import GraspProblem, GraspResult, make_result
 
@@ -62,7 +62,7 @@ def sweep(
     d = problem.disc
     u, guess = initial_control(problem, initial)
     try:
-        x = solve_states(d, u, guess)
+        x, lin = solve_states_linearised(d, u, guess)
     except ForwardSolveError as exc:
         raise InvalidParameterError(
             f"the initial curvature makes the contact kinematics singular ({exc}); give another initial guess"
@@ -73,7 +73,7 @@ def sweep(
     n_bad, first_bad, last_bad = 0, None, None
     converged = False
     message = f"iteration limit {max_iterations} reached"
-    traj = evaluate(d, u, x, pen)
+    traj = evaluate(d, u, x, pen, lin)
     lam, grad = adjoint(d, traj, pen, frozen=frozen)
     k = 0
     while True:
@@ -103,13 +103,13 @@ def sweep(
             break
         u_new = u - eta * grad / d.w  # eq. forward_backward: kappa + eta (-p2 - kappa)
         try:
-            x = solve_states(d, u_new, traj.x)
+            x, lin = solve_states_linearised(d, u_new, traj.x)
         except ForwardSolveError as exc:
             message = f"forward integration singular at iteration {k + 1} ({exc}); eta = {eta:.3g} too large?"
             break
         u = u_new
         k += 1
-        traj = evaluate(d, u, x, pen)
+        traj = evaluate(d, u, x, pen, lin)  # the linearisation of the forward solve serves the adjoint
         lam, grad = adjoint(d, traj, pen, frozen=frozen)
     lam_exact, grad_exact = adjoint(d, traj, pen) if frozen else (lam, grad)
     wall = time.perf_counter() - t_start
