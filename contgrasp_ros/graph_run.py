@@ -16,13 +16,15 @@ from typing import Any
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool
 
+from contgrasp_core.errors import ContgraspError
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos
+from contgrasp_ros.runtime import make_executor
 
 __all__ = ["Monitor", "run_graph"]
 
@@ -46,6 +48,7 @@ class Monitor(Node):
         self.create_subscription(GraspQuality, qos.TOPIC_QUALITY, self._on_quality, qos.STREAM)
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, qos.STREAM)
         self.pause = self.create_client(SetBool, "/rod_simulator/pause")
+        self.loop_wall_time: float | None = None
 
     def _on_rod(self, msg: RodState) -> None:
         self.rod = msg
@@ -126,6 +129,7 @@ def _summary(mon: Monitor) -> dict[str, Any]:
         "max_penetration": num("max_penetration"),
         "steps": int(num("step") or 0),
         "simulator_state": st.get("state", "unknown"),
+        "loop_wall_time_s": mon.loop_wall_time,
     }
     rod = mon.rod
     out["final"] = None if rod is None else {"s": list(rod.s), "x": list(rod.x), "y": list(rod.y), "theta": list(rod.theta)}
@@ -136,7 +140,7 @@ def _summary(mon: Monitor) -> dict[str, Any]:
     return out
 
 
-def _drive(mon: Monitor, executor: SingleThreadedExecutor, group: Any, timeout: float) -> str | None:
+def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float) -> str | None:
     """Connect, resume, wait for the end. Returns an error text or None."""
     end = time.monotonic() + timeout
 
@@ -153,6 +157,7 @@ def _drive(mon: Monitor, executor: SingleThreadedExecutor, group: Any, timeout: 
         executor.spin_once(timeout_sec=0.05)
         if (err := dead()) or time.monotonic() > end:
             return err or "timed out waiting for the graph to connect"
+    loop_start = time.perf_counter()
     fut = mon.pause.call_async(SetBool.Request(data=False))
     while not fut.done():
         executor.spin_once(timeout_sec=0.05)
@@ -164,6 +169,7 @@ def _drive(mon: Monitor, executor: SingleThreadedExecutor, group: Any, timeout: 
             return err
         if time.monotonic() > end:
             return "wall-clock timeout"
+    mon.loop_wall_time = time.perf_counter() - loop_start
     # let the last contact/quality of the final state arrive
     settle_end = time.monotonic() + 1.0
     while time.monotonic() < settle_end:
@@ -182,7 +188,7 @@ def run_graph(params: dict[str, dict[str, Any]], *, in_process: bool, params_fil
 
     sim_params = {**params["rod_simulator"], "start_paused": True}
     rclpy.init(args=[])
-    executor = SingleThreadedExecutor()
+    executor = make_executor()
     nodes: list[Node] = []
     group = None
     code = 0
@@ -194,7 +200,10 @@ def run_graph(params: dict[str, dict[str, Any]], *, in_process: bool, params_fil
             for cls, name in ((RodSimulator, "rod_simulator"), (BoundarySensor, "boundary_sensor"),
                               (GraspController, "grasp_controller"), (GraspQualityNode, "grasp_quality")):
                 values = sim_params if name == "rod_simulator" else params[name]
-                nodes.append(cls(parameter_overrides=_overrides({**values, "use_sim_time": True})))
+                try:
+                    nodes.append(cls(parameter_overrides=_overrides({**values, "use_sim_time": True})))
+                except (rclpy.exceptions.InvalidParameterValueException, ContgraspError, TypeError) as exc:
+                    return {"error": f"{name}: invalid parameter: {exc}", "exit_codes": {}, "pids": {}}, 2
         else:
             import os
 

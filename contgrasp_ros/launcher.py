@@ -57,6 +57,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID for the graph (default: a random free-looking id 1..101)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds to run at most (overrides the parameter file)")
     p.add_argument("--in-process", action="store_true", help="run all nodes in this process on one executor")
+    p.add_argument("--executor", choices=("single", "events"), default=None,
+                   help="rclpy executor of every node: single-threaded (default) or the experimental events executor")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
     p.add_argument("--plot", type=Path, default=None, help="write a Fig. 4-style figure of the run from the received topics")
     p.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
@@ -78,6 +80,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("contgrasp-launch: --domain-id must be in 0..232", file=sys.stderr)
         return 2
     os.environ["ROS_DOMAIN_ID"] = str(domain)
+    if args.executor:
+        os.environ["CONTGRASP_EXECUTOR"] = args.executor
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "contgrasp_ros_log"))
     from contgrasp_ros.graph_run import run_graph

@@ -2,18 +2,33 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
 
-__all__ = ["declare", "DropCounter", "run_node"]
+__all__ = ["declare", "DropCounter", "make_executor", "run_node"]
+
+
+def make_executor(context: object | None = None) -> Executor:
+    """The executor named by ``CONTGRASP_EXECUTOR``: ``single`` (default, SingleThreadedExecutor)
+    or ``events`` (rclpy.experimental.EventsExecutor, lower latency). The multi-threaded
+    executor is deliberately not offered: on 2 cores its tail latency is large (DESIGN.md)."""
+    kind = os.environ.get("CONTGRASP_EXECUTOR", "single")
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    if kind != "single":
+        raise ValueError(f"CONTGRASP_EXECUTOR must be 'single' or 'events', got {kind!r}")
+    return SingleThreadedExecutor(context=context)
 
 
 def declare(
@@ -81,7 +96,7 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
         ) as exc:
             print(f"{getattr(factory, '__name__', 'node')}: invalid parameter: {exc}", file=sys.stderr)
             return 2
-        executor = SingleThreadedExecutor()
+        executor = make_executor()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -1,0 +1,95 @@
+"""Benchmark: the closed loop with and without ROS 2 middleware, at the same control period.
+
+For the paper scenario (packaged parameters) at a 1 kHz control rate in simulated time
+(control period = integrator step = 1 ms), over the same number of control cycles:
+
+  (a) core only: LoopSession + sensing + feedback in one Python loop (no ROS);
+  (b) the ROS graph with all nodes in one process on one executor (`contgrasp-launch --in-process`);
+  (c) the ROS graph as separate processes (`contgrasp-launch`), lock-step;
+
+each with the single-threaded executor and with rclpy's experimental EventsExecutor. Prints
+control cycles per wall second and the overhead ratios (b)/(a), (c)/(a). Wall times of (b) and
+(c) are the launcher's own measurement from the simulator's first state to its last (graph
+start-up and discovery excluded), so all three time the same cycles.
+
+Usage: .venv/bin/python benchmarks/ros_loop.py [--duration 0.5 --n-elements 50]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+from contgrasp_core.rod import Obstacle, RodModel, RodSystem
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains
+from contgrasp_core.rod.session import LoopSession, boundary_from_spec, feedback_at_joints, sense_observation
+from contgrasp_ros.launcher import default_params_file, load_params
+
+
+def core_only(params: dict) -> tuple[float, int]:
+    sim, ctl = params["rod_simulator"], params["grasp_controller"]
+    keys = ("length", "n_elements", "radius_base", "radius_tip", "density", "youngs_modulus", "damping",
+            "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction", "base_angle")
+    model = RodModel(base_position=(sim["base_x"], sim["base_y"]), **{k: sim[k] for k in keys})
+    boundary = boundary_from_spec(sim["object_kind"], sim["object_params"])
+    config = ClosedLoopConfig(duration=sim["duration"], control_period=sim["control_period"],
+                              settle_speed=sim["settle_speed"], settle_hold=sim["settle_hold"], min_time=sim["min_time"])
+    gains = paper_gains(model, ctl["object_radius"], mu1=ctl["mu1"], length_unit=ctl["length_unit"])
+    session = LoopSession(RodSystem(model, Obstacle(boundary)), config)
+    t0 = time.perf_counter()
+    while True:
+        obs = session.observe()
+        if session.finished:
+            break
+        c = sense_observation(obs, boundary, params["boundary_sensor"]["contact_tolerance"])
+        session.advance(feedback_at_joints(model, gains, c.rho, c.alpha))
+    return time.perf_counter() - t0, session.k
+
+
+def graph(params_file: Path, *extra: str) -> tuple[float, int, int]:
+    exe = Path(sys.executable).parent / "contgrasp-launch"
+    out = subprocess.run([str(exe), "--json", "--params", str(params_file), *extra], capture_output=True, text=True, timeout=3600)
+    if out.returncode != 0:
+        raise SystemExit(f"launch failed: {out.stderr[-2000:]}")
+    s = json.loads(out.stdout)
+    return float(s["loop_wall_time_s"]), int(s["steps"]), int(s["missed_deadlines"])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--duration", type=float, default=0.5, help="simulated seconds (default 0.5 = 500 cycles)")
+    ap.add_argument("--n-elements", type=int, default=50)
+    args = ap.parse_args()
+    data = yaml.safe_load(default_params_file().read_text())
+    data["/**"]["ros__parameters"]["n_elements"] = args.n_elements
+    sim = data["rod_simulator"]["ros__parameters"]
+    sim.update(duration=args.duration, control_period=0.001, dt=0.0, min_time=1e5)  # no early settle: fixed cycles
+    data["grasp_quality"]["ros__parameters"]["rate_hz"] = 20.0
+    tmp = Path(tempfile.mkdtemp()) / "bench.yaml"
+    tmp.write_text(yaml.safe_dump(data))
+    params = load_params(tmp)
+    print(f"python {sys.version.split()[0]}, cores {os.cpu_count()}, N = {args.n_elements}, control 1 kHz (sim), "
+          f"{args.duration:g} s simulated, load average {os.getloadavg()[0]:.2f}")
+    a, ka = core_only(params)
+    print(f"(a) core only              : {a:7.2f} s  {ka / a:8.1f} cycles/s")
+    rows = {}
+    for ex in ("single", "events"):
+        for mode, extra in (("(b) in-process", ("--in-process",)), ("(c) processes ", ())):
+            w, k, missed = graph(tmp, "--executor", ex, *extra)
+            assert k == ka, f"{mode} ran {k} cycles, core {ka}"
+            rows[(mode, ex)] = w
+            print(f"{mode} [{ex:6s}]    : {w:7.2f} s  {k / w:8.1f} cycles/s  ratio to (a) {w / a:5.2f}  missed {missed}")
+    best_c = min(rows[("(c) processes ", e)] for e in ("single", "events"))
+    print(f"target (c)/(a) <= 2 at 1 kHz: best (c)/(a) = {best_c / a:.2f} -> {'met' if best_c / a <= 2 else 'NOT met'}")
+
+
+if __name__ == "__main__":
+    main()
