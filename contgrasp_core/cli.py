@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__, cli_grasp, cli_kinematics, cli_quality
+from . import __version__, cli_grasp, cli_kinematics, cli_quality, cli_simulate
 from .errors import ContgraspError
 
 __all__ = ["build_parser", "main"]
@@ -36,6 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_kinematics.add_parser(sub, [common])
     cli_quality.add_parser(sub, [common])
     cli_grasp.add_parsers(sub, [common])
+    cli_simulate.add_parser(sub, [common])
     return parser
 
 

@@ -6,10 +6,11 @@ One control cycle k (paper Sec. V-B):
    publishes) and the settle/duration bookkeeping;
 2. :func:`sense_observation` - geometric sensing of (rho, alpha, delta, s_o) from those arrays
    (:func:`contgrasp_core.contact.sense`, eq. rho_alpha_definition) (what the sensor does);
-3. :func:`feedback_at_joints` - the couple of eq. dynamic_feedback at the joints (what the
-   controller does);
-4. :meth:`LoopSession.advance` - hold the couple for one control period (the integrator's
-   substeps) to reach state k + 1 (what the simulator does when the couple arrives).
+3. :func:`feedback_at_joints` - the couple of eq. dynamic_feedback at the joints and its
+   first-order expansion in (rho, alpha) (what the controller does);
+4. :meth:`LoopSession.advance` - hold the couple, to first order in the state
+   (:class:`HeldExpansion`), for one control period (the integrator's substeps) to reach
+   state k + 1 (what the simulator does when the couple arrives).
 
 Because the ROS nodes call exactly these functions on exactly these arrays (CDR carries
 float64 unchanged), a lock-step ROS run reproduces the core-only run bit for bit.
@@ -31,8 +32,17 @@ from contgrasp_core.rod import chain
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, FeedbackGains
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
 from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["Observation", "LoopSession", "sense_observation", "feedback_at_joints", "boundary_from_spec"]
+__all__ = [
+    "Observation",
+    "LoopSession",
+    "FeedbackExpansion",
+    "HeldExpansion",
+    "sense_observation",
+    "feedback_at_joints",
+    "boundary_from_spec",
+]
 
 Array = NDArray[np.float64]
 
@@ -125,14 +135,25 @@ class LoopSession:
         self._observed = obs
         return obs
 
-    def advance(self, couple: Array) -> None:
-        """Hold ``couple`` (N,) at the joints for one control period (integrator substeps)."""
-        u = np.asarray(couple, dtype=float)
-        if u.shape != (self.system.model.n_elements,) or not np.all(np.isfinite(u)):
-            raise InvalidParameterError(f"couple must be {self.system.model.n_elements} finite values, got {u.shape}")
+    def advance(self, couple: Array | FeedbackExpansion) -> None:
+        """Hold the couple at the joints for one control period (integrator substeps).
+
+        A plain array (N,) is a zero-order hold; a :class:`FeedbackExpansion` is held to first
+        order in the state (:class:`HeldExpansion`).
+        """
+        expansion = couple if isinstance(couple, FeedbackExpansion) else None
+        u = np.asarray(expansion.u if expansion is not None else couple, dtype=float)
+        n = self.system.model.n_elements
+        if u.shape != (n,) or not np.all(np.isfinite(u)):
+            raise InvalidParameterError(f"couple must be {n} finite values, got {u.shape}")
+        if expansion is not None:
+            parts = (expansion.rho_ref, expansion.alpha_ref, expansion.g_rho, expansion.g_alpha)
+            if any(np.shape(p) != (n,) or not np.all(np.isfinite(p)) for p in parts):
+                raise InvalidParameterError(f"the feedback expansion needs {n} finite values per field")
         if self.finished:
             raise InvalidParameterError("the run is finished; reset to start again")
-        loads = RodLoads(couple=u)
+        held = None if expansion is None else HeldExpansion(self.system.model, self.system.obstacle, expansion)
+        loads = RodLoads(couple=u, feedback=held)
         st = self.state
         for _ in range(self.config.substeps):
             st, info = self.system.step(st, self.dt, loads)
@@ -146,13 +167,70 @@ def sense_observation(obs: Observation, boundary: Boundary, tol: float = 0.0) ->
     return sense(ArmShape(s=obs.s, r=obs.x, theta=obs.theta), boundary, obs.radius, tol=tol)
 
 
-def feedback_at_joints(model: RodModel, gains: FeedbackGains, rho: Array, alpha: Array) -> Array:
-    """Couple of eq. dynamic_feedback at the N joints from (rho, alpha) sensed at the N+1 nodes."""
+@dataclass(frozen=True)
+class FeedbackExpansion:
+    """The feedback law at the N joints, expanded to first order about the sensed state:
+    ``u(rho, alpha) ~ u + g_rho (rho - rho_ref) + g_alpha (alpha - alpha_ref)`` (N m, N m/m, N m/rad)."""
+
+    u: Array
+    rho_ref: Array
+    alpha_ref: Array
+    g_rho: Array
+    g_alpha: Array
+
+
+def feedback_at_joints(model: RodModel, gains: FeedbackGains, rho: Array, alpha: Array) -> FeedbackExpansion:
+    """Couple of eq. dynamic_feedback at the N joints from (rho, alpha) sensed at the N+1 nodes,
+    with its partial derivatives ``du/drho = -EI sin(alpha) / l^2`` and
+    ``du/dalpha = -EI (mu1 sin(alpha) + (rho/l - mu2) cos(alpha)) / l`` (l the law's length unit)."""
     rho, alpha = np.asarray(rho, dtype=float), np.asarray(alpha, dtype=float)
     n = model.n_elements
     if rho.shape != (n + 1,) or alpha.shape != (n + 1,):
         raise InvalidParameterError(f"rho and alpha must be given at the {n + 1} nodes, got {rho.shape}, {alpha.shape}")
-    return feedback_couple(rho[:-1], alpha[:-1], model.joint_ei, gains.mu1, gains.mu2, length_unit=gains.length_unit)
+    r, a = rho[:-1], alpha[:-1]
+    lu, ei = gains.length_unit, model.joint_ei
+    u = feedback_couple(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
+    g_rho = -ei * np.sin(a) / lu**2
+    g_alpha = -ei * (np.asarray(gains.mu1) * np.sin(a) + (r / lu - np.asarray(gains.mu2)) * np.cos(a)) / lu
+    return FeedbackExpansion(u=u, rho_ref=r, alpha_ref=a, g_rho=g_rho, g_alpha=g_alpha)
+
+
+@dataclass(frozen=True)
+class HeldExpansion:
+    """First-order hold of the feedback law in the STATE (not in time).
+
+    Between samples the integrator adds ``g_rho (rho(theta) - rho_ref) + g_alpha (alpha(theta) -
+    alpha_ref)`` to the held couple, with (rho, alpha)(theta) sensed on the rod at the new state
+    inside every Newton iteration, and its derivative to the Newton matrix. A plain zero-order
+    hold of this law is unstable at any practical control rate (the law acts like a stiffness at
+    the element scale, where the tapered tip's bending modes reach ~1000 rad/s; measured: the
+    arm crumples at a 1 kHz hold); holding the expansion keeps the continuous law's stability
+    while the controller still only runs once per control period.
+    """
+
+    model: RodModel
+    obstacle: Obstacle
+    expansion: FeedbackExpansion
+
+    def couple_and_jacobian(
+        self, theta: Array, *, jacobian: bool = True, nodes: Array | None = None, normals: Array | None = None
+    ) -> tuple[Array, Array | None]:
+        """Deviation of the couple from the held value (N,) and its derivative (N, N)."""
+        m, e = self.model, self.expansion
+        x = (chain.nodes(m, theta) if nodes is None else nodes)[:-1]
+        th_n = chain.node_angles(m, theta)[:-1]
+        pr = self.obstacle.project(x)
+        d_alpha = np.mod(pr.phi + 0.5 * np.pi - th_n - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
+        du = e.g_rho * (pr.signed_distance - e.rho_ref) + e.g_alpha * d_alpha
+        if not jacobian:
+            return du, None
+        b = chain.frames(theta)[1] if normals is None else normals
+        # d rho_k / d theta_l = h n_k . b_l for l < k; d alpha_k / d theta_{k-1}, theta_k = -1/2
+        jac = (e.g_rho * m.h)[:, None] * np.tril(pr.normal_out @ b.T, -1)
+        k = np.arange(1, m.n_elements)
+        jac[k, k] -= 0.5 * e.g_alpha[1:]
+        jac[k, k - 1] -= 0.5 * e.g_alpha[1:]
+        return du, jac
 
 
 def boundary_from_spec(kind: str, params: list[float] | Array) -> Boundary:

@@ -1,0 +1,28 @@
+"""Planar Cosserat/Kirchhoff rod dynamics (paper eq. dynamics, eq. boundary_conditions).
+
+Reduced coordinates (element angles; exactly inextensible and unshearable), implicit
+time stepping with Newton, drag, damping, couple control and penalty contact with any
+:class:`~contgrasp_core.boundary.Boundary`; a closed-loop runner for the feedback law.
+See ``docs/rod.md``.
+"""
+
+from contgrasp_core.rod import chain
+from contgrasp_core.rod.control import FeedbackGains, StateFeedback, paper_gains
+from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem, StepFailedError, StepOptions
+from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.obstacle import Obstacle, ObstacleProjection
+
+__all__ = [
+    "RodModel",
+    "RodState",
+    "RodLoads",
+    "RodSystem",
+    "StepOptions",
+    "StepFailedError",
+    "Obstacle",
+    "ObstacleProjection",
+    "FeedbackGains",
+    "StateFeedback",
+    "paper_gains",
+    "chain",
+]

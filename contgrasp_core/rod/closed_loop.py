@@ -1,0 +1,214 @@
+"""Closed-loop grasp: the rod engine driven by the feedback law (paper Sec. V-B, V-C).
+
+Two ways to close the loop:
+
+* ``control_period=None`` (default): continuous feedback. The law is evaluated on the rod's own
+  state inside every implicit step (:class:`~contgrasp_core.rod.control.StateFeedback`), which is
+  the continuous-time loop of paper Prop. 2 and stays stable at large steps ``dt``.
+* ``control_period=T``: sampled feedback. Every ``T`` seconds the runner senses ``(rho, alpha)``
+  at the rod nodes from the current centreline (eq. rho_alpha_definition), evaluates the couple of
+  eq. dynamic_feedback at the joints and holds it (zero-order hold) while the integrator advances
+  with steps ``dt`` dividing ``T``. This is what a lock-step ROS loop does; it needs ``T`` well
+  below the fastest bending period of the tip (see docs/rod.md) or the loop flutters.
+
+The runner records the state every ``record_period`` and stops when the rod has settled (maximum
+node speed below ``settle_speed`` for ``settle_hold`` seconds after ``min_time``) or at
+``duration``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.feedback import feedback_couple
+from contgrasp_core.rod import chain
+from contgrasp_core.rod.control import FeedbackGains, StateFeedback, paper_gains
+from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
+from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.obstacle import Obstacle
+
+__all__ = ["FeedbackGains", "paper_gains", "StateFeedback", "NodeSensing", "sense_nodes", "ClosedLoopConfig",
+           "ClosedLoopResult", "run_closed_loop"]
+
+
+@dataclass(frozen=True)
+class NodeSensing:
+    """Sensed contact geometry at the rod nodes: ``rho`` (signed distance of the centreline to the
+    boundary, m), ``alpha`` (rad, in (-pi, pi]), ``s_o``, ``foot`` (N+1, 2) and the surface
+    penetration ``delta = r(s) - rho`` (paper eq. delta)."""
+
+    rho: np.ndarray
+    alpha: np.ndarray
+    s_o: np.ndarray
+    foot: np.ndarray
+    delta: np.ndarray
+
+
+def sense_nodes(model: RodModel, obstacle: Obstacle, theta: np.ndarray) -> NodeSensing:
+    """Geometric sensing (eq. rho_alpha_definition) at the nodes of the rod with angles ``theta``.
+
+    Same definitions as :func:`contgrasp_core.contact.sense` (checked in the tests), using the
+    fast :class:`Obstacle` projection.
+    """
+    x = chain.nodes(model, theta)
+    th = chain.node_angles(model, theta)
+    pr = obstacle.project(x)
+    alpha = np.mod(pr.phi + 0.5 * np.pi - th + np.pi, 2.0 * np.pi) - np.pi
+    return NodeSensing(rho=pr.signed_distance, alpha=alpha, s_o=pr.s_o, foot=pr.foot,
+                       delta=model.radius(model.s_nodes) - pr.signed_distance)
+
+
+@dataclass(frozen=True)
+class ClosedLoopConfig:
+    """Run settings (s, m/s): ``duration``; ``control_period`` (None = continuous feedback);
+    integrator step ``dt`` (with a control period it must divide it; None = the control period,
+    or 0.01 s for continuous feedback); ``record_period`` (None = every control update / step);
+    ``settle_speed``, ``settle_hold``, ``min_time``."""
+
+    duration: float = 20.0
+    control_period: float | None = None
+    dt: float | None = None
+    record_period: float | None = None
+    settle_speed: float = 2e-4
+    settle_hold: float = 0.5
+    min_time: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("duration", "settle_speed", "settle_hold", "control_period", "dt", "record_period"):
+            v = getattr(self, name)
+            if v is None and name in ("control_period", "dt", "record_period"):
+                continue
+            if not (np.isfinite(v) and v > 0):
+                raise InvalidParameterError(f"{name} must be finite and > 0, got {v!r}")
+        if not (np.isfinite(self.min_time) and self.min_time >= 0):
+            raise InvalidParameterError("min_time must be finite and >= 0")
+        if self.control_period is not None and self.dt is not None:
+            n = self.control_period / self.dt
+            if abs(n - round(n)) > 1e-9 or round(n) < 1:
+                raise InvalidParameterError(
+                    f"dt={self.dt!r} must divide control_period={self.control_period!r}")
+
+    @property
+    def period(self) -> float:
+        """Interval between control updates (sampled) or between recorded integrator steps."""
+        if self.control_period is not None:
+            return self.control_period
+        return 0.01 if self.dt is None else self.dt
+
+    @property
+    def substeps(self) -> int:
+        if self.control_period is None or self.dt is None:
+            return 1
+        return int(round(self.control_period / self.dt))
+
+
+@dataclass(frozen=True)
+class ClosedLoopResult:
+    """Time series at every control update ``k`` (K samples): ``t`` (K,), node positions ``x``
+    (K, N+1, 2), node angles ``theta`` (K, N+1), sensed ``rho``, ``alpha`` (K, N+1), applied
+    ``couple`` (K, N), ``penetration`` (K,) max surface penetration (m) and
+    ``penetration_ratio`` (K,) max penetration / local radius, ``max_speed`` (K,) (m/s);
+    ``settled``, ``settle_time`` (s or None), ``wall_time`` (s), ``newton_iterations``,
+    the ``final_state`` and the run's ``model``, ``gains`` and ``config``."""
+
+    t: np.ndarray
+    x: np.ndarray
+    theta: np.ndarray
+    rho: np.ndarray
+    alpha: np.ndarray
+    couple: np.ndarray
+    penetration: np.ndarray
+    penetration_ratio: np.ndarray
+    max_speed: np.ndarray
+    settled: bool
+    settle_time: float | None
+    wall_time: float
+    newton_iterations: int
+    final_state: RodState
+    model: RodModel
+    gains: FeedbackGains
+    config: ClosedLoopConfig = field(repr=False)
+
+
+def _speeds(model: RodModel, st: RodState) -> float:
+    _, b = chain.frames(st.theta)
+    v = np.cumsum(model.h * b * st.omega[:, None], axis=0)
+    return float(np.hypot(v[:, 0], v[:, 1]).max())
+
+
+def _single_thread_blas():
+    """Small dense solves are fastest on one BLAS thread (and oversubscription on a busy machine
+    costs 10x); scoped to the run when :mod:`threadpoolctl` is available."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig = ClosedLoopConfig(),
+                    state: RodState | None = None) -> ClosedLoopResult:
+    """Run the feedback loop (eq. dynamic_feedback on the rod of eq. dynamics) from ``state``
+    (default: straight at rest) until settled or ``config.duration``."""
+    if system.obstacle is None:
+        raise InvalidParameterError("the closed loop needs an obstacle to sense (RodSystem.obstacle is None)")
+    with _single_thread_blas():
+        return _run(system, gains, config, state)
+
+
+def _run(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig, state: RodState | None) -> ClosedLoopResult:
+    m = system.model
+    ei = m.joint_ei
+    st = system.straight_state() if state is None else state
+    period = config.period
+    n_ctrl = int(np.ceil(config.duration / period - 1e-9))
+    dt = period / config.substeps
+    rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / period)))
+    continuous = config.control_period is None
+    fb = StateFeedback(m, system.obstacle, gains) if continuous else None
+    r_nodes = m.radius(m.s_nodes)
+    rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
+    iters = 0
+    dt_next = dt
+    quiet_since: float | None = None
+    settled = False
+    wall0 = time.perf_counter()
+    for k in range(n_ctrl + 1):
+        sn = sense_nodes(m, system.obstacle, st.theta)
+        u = feedback_couple(sn.rho[:-1], sn.alpha[:-1], ei, gains.mu1, gains.mu2, length_unit=gains.length_unit)
+        speed = _speeds(m, st)
+        done = False
+        if speed < config.settle_speed:
+            quiet_since = st.t if quiet_since is None else quiet_since
+            done = st.t >= config.min_time and st.t - quiet_since >= config.settle_hold
+        else:
+            quiet_since = None
+        if k % rec_every == 0 or done or k == n_ctrl:
+            pen_c = m.r_centres - system.obstacle.project(chain.centres(m, st.theta)).signed_distance
+            pen = max(float(sn.delta.max()), float(pen_c.max()), 0.0)
+            ratio = max(float((sn.delta / r_nodes).max()), float((pen_c / m.r_centres).max()), 0.0)
+            for key, val in (("t", st.t), ("x", chain.nodes(m, st.theta)), ("theta", chain.node_angles(m, st.theta)),
+                             ("rho", sn.rho), ("alpha", sn.alpha), ("couple", u), ("pen", pen), ("ratio", ratio),
+                             ("speed", speed)):
+                rec[key].append(val)
+        if done:
+            settled = True
+            break
+        if k == n_ctrl:
+            break
+        loads = RodLoads(feedback=fb) if continuous else RodLoads(couple=u)
+        st, info = system.advance(st, period, loads, dt_try=dt_next)
+        dt_next = min(info["dt_next"], dt)
+        iters += info["iterations"]
+    wall = time.perf_counter() - wall0
+    arr = {k: np.asarray(v) for k, v in rec.items()}
+    return ClosedLoopResult(
+        t=arr["t"], x=arr["x"], theta=arr["theta"], rho=arr["rho"], alpha=arr["alpha"], couple=arr["couple"],
+        penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=settled,
+        settle_time=(quiet_since if settled else None), wall_time=wall, newton_iterations=iters,
+        final_state=st, model=m, gains=gains, config=config)

@@ -1,0 +1,86 @@
+"""The feedback couple as a function of the rod state, for implicit (continuous) feedback.
+
+With a zero-order hold the couple of eq. dynamic_feedback is sampled every control period and
+held; the loop then inherits a sampling-rate stability limit (the law acts at the element scale,
+where the tapered tip has bending frequencies of thousands of rad/s). :class:`StateFeedback`
+instead evaluates the law inside every Newton iteration of the implicit step, at the new state,
+and supplies its derivative ``du/dtheta`` to the Newton matrix, so the continuous-time loop of
+paper Prop. 2 is integrated with the same unconditional stability as the elastic forces.
+
+Sensing is at the joints ``s_k = k h`` (the clamp and the internal nodes; the tip carries no
+couple): ``rho_k`` the signed distance of node ``k`` to the boundary, ``alpha_k = phi + pi/2 -
+theta_k`` with ``theta_k`` the mean angle of the adjacent elements (eq. rho_alpha_definition).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from contgrasp_core.feedback import CENTIMETRE, adaptive_mu2, feedback_couple
+from contgrasp_core.rod import chain
+from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.obstacle import Obstacle
+
+__all__ = ["FeedbackGains", "paper_gains", "StateFeedback"]
+
+
+@dataclass(frozen=True)
+class FeedbackGains:
+    """Gains of eq. dynamic_feedback at the rod joints: ``mu1`` (scalar or (N,)), ``mu2`` (scalar
+    or (N,), law units) and ``length_unit`` (metres per law unit, cm by default)."""
+
+    mu1: float | np.ndarray = 1.0
+    mu2: float | np.ndarray = 0.0
+    length_unit: float = CENTIMETRE
+
+
+def paper_gains(model: RodModel, object_radius: float, *, mu1: float = 1.0,
+                length_unit: float = CENTIMETRE) -> FeedbackGains:
+    """``mu1 = 1`` and the adaptive ``mu2(s) = r(s) - 1/(r_obj + r(s))`` (appendix) at the joints."""
+    return FeedbackGains(mu1=mu1, mu2=adaptive_mu2(model.radius(model.joint_s), object_radius,
+                                                   length_unit=length_unit), length_unit=length_unit)
+
+
+@dataclass(frozen=True)
+class StateFeedback:
+    """``u(theta)`` of eq. dynamic_feedback sensed on the rod itself, with its Jacobian."""
+
+    model: RodModel
+    obstacle: Obstacle
+    gains: FeedbackGains
+
+    def couple(self, theta: np.ndarray) -> np.ndarray:
+        """The couple at the joints (N,) in N m for element angles ``theta``."""
+        return self.couple_and_jacobian(theta, jacobian=False)[0]
+
+    def couple_and_jacobian(self, theta: np.ndarray, *, jacobian: bool = True, nodes: np.ndarray | None = None,
+                            normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """``u`` (N,) and ``du/dtheta`` (N, N) (the latter without the small terms from the motion
+        of the foot's tangent angle; exactness is not needed in a Newton matrix). ``nodes``
+        (N+1, 2) and element ``normals`` (N, 2) may be passed when already computed."""
+        m, g = self.model, self.gains
+        x = (chain.nodes(m, theta) if nodes is None else nodes)[:-1]
+        th_n = chain.node_angles(m, theta)[:-1]
+        pr = self.obstacle.project(x)
+        alpha = pr.phi + 0.5 * np.pi - th_n
+        rho = pr.signed_distance
+        ei = m.joint_ei
+        u = feedback_couple(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
+        if not jacobian:
+            return u, None
+        lu = g.length_unit
+        sa, ca = np.sin(alpha), np.cos(alpha)
+        dk_da = (np.asarray(g.mu1) * sa + (rho / lu - np.asarray(g.mu2)) * ca) / lu
+        dk_dr = sa / lu**2
+        n = m.n_elements
+        b = chain.frames(theta)[1] if normals is None else normals
+        # d rho_k / d theta_l = h n_k . b_l for l < k (node k moves with the elements before it)
+        du = (-ei * dk_dr * m.h)[:, None] * np.tril(pr.normal_out @ b.T, -1)
+        # d alpha_k / d theta = -d theta_node_k / d theta; theta_node_k = (theta_{k-1} + theta_k)/2
+        coef = ei * dk_da * 0.5  # -EI * dk/dalpha * (-1/2)
+        k = np.arange(1, n)
+        du[k, k] += coef[1:]
+        du[k, k - 1] += coef[1:]
+        return u, du

@@ -1,0 +1,117 @@
+"""External loads on the rod's element centres and their linearisations (paper eq. dynamics).
+
+* Fluid drag ``f^drag`` (appendix D): per unit length
+  ``-c_n d |v.b| (v.b) b - c_t d |v.a| (v.a) a`` with the local diameter ``d = 2 r(s)``.
+* Contact with a fixed object (paper Remark "Contact forces", Sec. V-C "modeled as an
+  obstacle, rudimentary repulsive contact forces"): the rod's outer surface at element ``i``
+  penetrates the object by ``p_i = r_i - n_i . (c_i - foot_i)`` where ``foot_i`` and the outward
+  normal ``n_i`` come from the closest-point projection at the start of the time step (the
+  boundary is replaced by its tangent line for the duration of one step). The force per unit
+  length is ``max(k p + c dp/dt, 0) n_i`` for ``p > 0``: stiff, damped and never adhesive.
+  Optional regularised Coulomb friction ``-mu |f_n| tanh(v_t / v_eps) t_i`` along the object
+  tangent.
+
+Each function returns centre forces (N, 2) (already multiplied by the element length) and the
+matrices of the force derivative needed by the implicit integrator.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from contgrasp_core.rod.chain import projected_jacobian
+from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.obstacle import Obstacle
+
+__all__ = ["ContactFrame", "contact_frame", "drag_forces", "contact_forces"]
+
+
+@dataclass(frozen=True)
+class ContactFrame:
+    """Tangent-line model of the object near each centre, frozen over one step.
+
+    ``rows`` indices of centres considered (within ``margin`` of contact); ``foot``, ``normal``
+    (outward), ``tangent`` (n, 2) for those rows.
+    """
+
+    rows: np.ndarray
+    foot: np.ndarray
+    normal: np.ndarray
+    tangent: np.ndarray
+
+
+def contact_frame(model: RodModel, obstacle: Obstacle | None, c: np.ndarray, margin: float) -> ContactFrame | None:
+    """Project the centres ``c`` (N, 2) and keep those whose surface is within ``margin`` (m)."""
+    if obstacle is None:
+        return None
+    pr = obstacle.project(c)
+    rows = np.flatnonzero(pr.signed_distance - model.r_centres < margin)
+    if rows.size == 0:
+        return None
+    n = pr.normal_out[rows]
+    return ContactFrame(rows=rows, foot=pr.foot[rows], normal=n, tangent=np.stack([-n[:, 1], n[:, 0]], axis=1))
+
+
+def drag_forces(model: RodModel, a: np.ndarray, b: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quadratic drag on the centres: forces (N, 2) and the derivative coefficients
+    ``(g_n, g_t)`` with ``d f/d v = -(g_n b b^T + g_t a a^T)`` per centre."""
+    vn = np.sum(v * b, axis=1)
+    vt = np.sum(v * a, axis=1)
+    dl = 2.0 * model.r_centres * model.h
+    fn = -model.drag_normal * dl * np.abs(vn) * vn
+    ft = -model.drag_tangential * dl * np.abs(vt) * vt
+    f = fn[:, None] * b + ft[:, None] * a
+    return f, 2.0 * model.drag_normal * dl * np.abs(vn), 2.0 * model.drag_tangential * dl * np.abs(vt)
+
+
+@dataclass(frozen=True)
+class ContactLoad:
+    """Contact result for one evaluation: ``forces`` (N, 2); ``penetration`` (n,) on the frame
+    rows; ``stiffness``/``damping`` (n,) force derivatives along the normal (active rows only
+    non-zero); ``friction_damping`` (n,) derivative of the friction force along the tangent."""
+
+    forces: np.ndarray
+    penetration: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    friction_damping: np.ndarray
+
+
+def contact_forces(model: RodModel, frame: ContactFrame, c: np.ndarray, v: np.ndarray) -> ContactLoad:
+    """Penalty contact forces on the centres for positions ``c`` and velocities ``v`` (N, 2)."""
+    r = frame.rows
+    pen = model.r_centres[r] - np.sum((c[r] - frame.foot) * frame.normal, axis=1)
+    pen_rate = -np.sum(v[r] * frame.normal, axis=1)
+    fn = model.h * (model.contact_stiffness * pen + model.contact_damping * pen_rate)
+    active = (pen > 0) & (fn > 0)
+    fn = np.where(active, fn, 0.0)
+    forces = np.zeros_like(c)
+    forces[r] = fn[:, None] * frame.normal
+    fr_damp = np.zeros_like(fn)
+    if model.friction > 0:
+        vt = np.sum(v[r] * frame.tangent, axis=1)
+        x = vt / model.friction_velocity
+        forces[r] -= (model.friction * fn * np.tanh(x))[:, None] * frame.tangent
+        fr_damp = model.friction * fn / model.friction_velocity / np.cosh(x) ** 2
+    k = np.where(active, model.h * model.contact_stiffness, 0.0)
+    d = np.where(active, model.h * model.contact_damping, 0.0)
+    return ContactLoad(forces=forces, penetration=pen, stiffness=k, damping=d, friction_damping=fr_damp)
+
+
+def contact_matrices(model: RodModel, theta: np.ndarray, frame: ContactFrame, load: ContactLoad) -> tuple[np.ndarray, np.ndarray]:
+    """Generalised contact stiffness and damping matrices ``(K_c, D_c)`` (N, N)."""
+    act = (load.stiffness > 0) | (load.friction_damping > 0)
+    n = model.n_elements
+    if not np.any(act):
+        z = np.zeros((n, n))
+        return z, z
+    rows = frame.rows[act]
+    pn = projected_jacobian(model, theta, frame.normal[act], rows)
+    kc = pn.T @ (load.stiffness[act][:, None] * pn)
+    dc = pn.T @ (load.damping[act][:, None] * pn)
+    if model.friction > 0:
+        pt = projected_jacobian(model, theta, frame.tangent[act], rows)
+        dc = dc + pt.T @ (load.friction_damping[act][:, None] * pt)
+    return kc, dc

@@ -1,0 +1,174 @@
+"""Material and discretisation of the planar Kirchhoff rod (paper eq. dynamics, appendix D).
+
+The rod of length ``L`` is cut into ``N`` equal elements of length ``h = L/N``. Element ``i``
+carries the tangent angle ``theta_i`` at its centre ``s = (i + 1/2) h`` (reduced coordinates:
+the rod is exactly inextensible and unshearable). Bending joints sit at the nodes
+``s_k = k h``, ``k = 0..N-1``; joint 0 is the clamp (distance ``h/2`` to the first centre),
+the free tip ``s = L`` carries no couple (eq. boundary_conditions).
+
+The cross-section is a circle whose radius tapers linearly from ``radius_base`` to
+``radius_tip``; ``A = pi r^2``, ``I = pi r^4 / 4`` from the local radius.
+
+Parameters (SI):
+
+* ``damping`` ``zeta`` (1/s): mass-proportional viscous damping, force density
+  ``-zeta rho_m A r_t`` and couple density ``-zeta rho_m I theta_t``. This is the paper's
+  ``-zeta r_t`` / ``-zeta theta_t`` with the coefficient scaled by the local inertia, the same
+  law as PyElastica's ``AnalyticalLinearDamper(uniform_damping_constant=zeta)``.
+* ``drag_normal``, ``drag_tangential`` (kg/m^3): quadratic fluid drag with force per unit length
+  ``-c d(s) |v_n| v_n`` normal and ``-c_t d(s) |v_t| v_t`` tangential, ``d = 2 r`` the local
+  diameter (``c = rho_water C_d / 2``; the octopus values 5110 and 25.55 are
+  ``511 * 10`` and ``511 * 0.05``).
+* ``contact_stiffness`` (N/m^2) and ``contact_damping`` (N s/m^2): penalty contact with the
+  object, force per unit length ``max(k p - c dp/dt, 0)`` along the outward object normal for a
+  penetration ``p = r(s) - distance > 0`` of the rod surface; ``friction`` (Coulomb coefficient,
+  regularised over ``friction_velocity`` m/s). See :mod:`contgrasp_core.rod.loads`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from contgrasp_core.errors import InvalidParameterError
+
+__all__ = ["RodModel"]
+
+
+def _pos(name: str, v: float, *, allow_zero: bool = False) -> float:
+    v = float(v)
+    ok = np.isfinite(v) and (v >= 0 if allow_zero else v > 0)
+    if not ok:
+        rng = ">= 0" if allow_zero else "> 0"
+        raise InvalidParameterError(f"{name} must be finite and {rng}, got {v!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class RodModel:
+    """A clamped-free planar rod: geometry, material, environment, discretisation (SI)."""
+
+    length: float = 0.20
+    n_elements: int = 100
+    radius_base: float = 0.01
+    radius_tip: float = 0.001
+    density: float = 1042.0
+    youngs_modulus: float = 1.0e4
+    base_position: tuple[float, float] = (0.0, 0.0)
+    base_angle: float = 0.0
+    damping: float = 0.0
+    drag_normal: float = 0.0
+    drag_tangential: float = 0.0
+    contact_stiffness: float = 2.0e3
+    contact_damping: float = 0.05
+    friction: float = 0.0
+    friction_velocity: float = 1.0e-3
+
+    def __post_init__(self) -> None:
+        _pos("length", self.length)
+        if int(self.n_elements) != self.n_elements or self.n_elements < 2:
+            raise InvalidParameterError(f"n_elements must be an integer >= 2, got {self.n_elements!r}")
+        _pos("radius_base", self.radius_base)
+        _pos("radius_tip", self.radius_tip)
+        _pos("density", self.density)
+        _pos("youngs_modulus", self.youngs_modulus)
+        for name in ("damping", "drag_normal", "drag_tangential", "contact_stiffness",
+                     "contact_damping", "friction"):
+            _pos(name, getattr(self, name), allow_zero=True)
+        _pos("friction_velocity", self.friction_velocity)
+        bp = np.asarray(self.base_position, dtype=float)
+        if bp.shape != (2,) or not np.all(np.isfinite(bp)):
+            raise InvalidParameterError(f"base_position must be two finite numbers, got {self.base_position!r}")
+        if not np.isfinite(self.base_angle):
+            raise InvalidParameterError("base_angle must be finite (radians)")
+        if max(self.radius_base, self.radius_tip) >= 0.5 * self.length:
+            raise InvalidParameterError("radii must be < length/2 for a slender rod")
+
+    # ---- discretisation -------------------------------------------------------------------
+    @property
+    def h(self) -> float:
+        """Element length ``L / N``."""
+        return self.length / self.n_elements
+
+    @cached_property
+    def s_nodes(self) -> np.ndarray:
+        """Node arclengths ``k h``, ``k = 0..N`` (N+1,)."""
+        return np.linspace(0.0, self.length, self.n_elements + 1)
+
+    @cached_property
+    def s_centres(self) -> np.ndarray:
+        """Element-centre arclengths ``(i + 1/2) h`` (N,)."""
+        return (np.arange(self.n_elements) + 0.5) * self.h
+
+    def radius(self, s: np.ndarray) -> np.ndarray:
+        """Linearly tapered radius r(s) (m)."""
+        s = np.asarray(s, dtype=float)
+        return self.radius_base + (self.radius_tip - self.radius_base) * s / self.length
+
+    def bending_stiffness(self, s: np.ndarray) -> np.ndarray:
+        """``EI(s) = E pi r(s)^4 / 4`` (N m^2)."""
+        return self.youngs_modulus * np.pi * self.radius(s) ** 4 / 4.0
+
+    @cached_property
+    def r_centres(self) -> np.ndarray:
+        return self.radius(self.s_centres)
+
+    @cached_property
+    def mass(self) -> np.ndarray:
+        """Element masses ``rho_m A h`` at the centres (N,)."""
+        return self.density * np.pi * self.r_centres**2 * self.h
+
+    @cached_property
+    def rot_inertia(self) -> np.ndarray:
+        """Element rotational inertias ``rho_m I h`` (N,)."""
+        return self.density * np.pi * self.r_centres**4 / 4.0 * self.h
+
+    @cached_property
+    def weight_matrix(self) -> np.ndarray:
+        """``W_jk = sum_i m_i w_ij w_ik`` with ``w_ij = 1`` (j < i), ``1/2`` (j = i), 0 else (N, N);
+        see :mod:`contgrasp_core.rod.chain`."""
+        n = self.n_elements
+        w = np.tril(np.ones((n, n)), -1)
+        w[np.diag_indices(n)] = 0.5
+        return (w * self.mass[:, None]).T @ w
+
+    @cached_property
+    def joint_s(self) -> np.ndarray:
+        """Joint arclengths: the clamp and the internal nodes, ``k h``, ``k = 0..N-1``."""
+        return self.s_nodes[:-1]
+
+    @cached_property
+    def joint_ei(self) -> np.ndarray:
+        """Bending stiffness at the joints (N,)."""
+        return self.bending_stiffness(self.joint_s)
+
+    @cached_property
+    def joint_len(self) -> np.ndarray:
+        """Distance between the angles a joint connects: ``h/2`` at the clamp, ``h`` inside (N,)."""
+        d = np.full(self.n_elements, self.h)
+        d[0] = 0.5 * self.h
+        return d
+
+    @cached_property
+    def stiffness_matrix(self) -> np.ndarray:
+        """Constant bending stiffness matrix ``K`` with ``U = 1/2 (theta - theta_b e0)^T K (...)``.
+
+        With ``kappa_k = (theta_k - theta_{k-1}) / D_k`` (``theta_{-1} = theta_base``) the
+        bending energy is ``sum 1/2 EI_k kappa_k^2 D_k``; ``K`` is tridiagonal (N, N).
+        """
+        n = self.n_elements
+        c = self.joint_ei / self.joint_len  # EI_k / D_k
+        k = np.zeros((n, n))
+        idx = np.arange(n)
+        k[idx, idx] += c
+        k[idx[:-1], idx[:-1]] += c[1:]
+        k[idx[1:], idx[:-1]] -= c[1:]
+        k[idx[:-1], idx[1:]] -= c[1:]
+        return k
+
+    def joint_curvature(self, theta: np.ndarray) -> np.ndarray:
+        """Discrete curvature at the joints ``(theta_k - theta_{k-1}) / D_k`` (N,)."""
+        prev = np.concatenate(([self.base_angle], theta[:-1]))
+        return (theta - prev) / self.joint_len

@@ -1,0 +1,129 @@
+"""Rod obstacle/sensing, the closed-loop paper scenario (Sec. V-C) and the simulate subcommand."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import pytest
+
+from contgrasp_core.arm import ArmShape
+from contgrasp_core.boundary import circle, deformed_circle, ellipse
+from contgrasp_core.contact import sense
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.rod import Obstacle, RodState, RodSystem, chain
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains, run_closed_loop, sense_nodes
+from contgrasp_core.rod.scenario import paper_model, paper_object
+
+_wrap = lambda a: np.mod(a + np.pi, 2 * np.pi) - np.pi  # noqa: E731
+
+
+@pytest.mark.parametrize("b", [circle(0.025, (0.08, 0.08)), ellipse(0.03, 0.018, (0.08, 0.07), 0.3),
+                               deformed_circle(0.025, center=(0.08, 0.08))], ids=["circle", "ellipse", "deformed"])
+def test_obstacle_projection_matches_boundary_project(b):
+    rng = np.random.default_rng(0)
+    q = np.array([0.08, 0.08]) + rng.uniform(-0.06, 0.06, size=(200, 2))
+    q = q[np.hypot(*(q - [0.08, 0.08]).T) > 0.005]
+    ref = b.project(q)
+    got = Obstacle(b).project(q)
+    np.testing.assert_allclose(got.foot, ref.foot, atol=1e-8)
+    np.testing.assert_allclose(got.signed_distance, ref.signed_distance, atol=1e-8)
+    np.testing.assert_allclose(_wrap(got.phi - b.tangent_angle(ref.s_o)), 0.0, atol=1e-6)
+
+
+def test_node_sensing_matches_foundation_sense():
+    m = paper_model(n_elements=40)
+    theta = np.linspace(0.0, 2.5, 40)
+    b = paper_object()
+    sn = sense_nodes(m, Obstacle(b), theta)
+    shape = ArmShape(s=m.s_nodes, r=chain.nodes(m, theta), theta=chain.node_angles(m, theta))
+    cs = sense(shape, b, m.radius(m.s_nodes))
+    np.testing.assert_allclose(sn.rho, cs.rho, atol=1e-10)
+    np.testing.assert_allclose(_wrap(sn.alpha - cs.alpha), 0.0, atol=1e-8)
+    np.testing.assert_allclose(sn.delta, cs.delta, atol=1e-10)
+
+
+@pytest.fixture(scope="module")
+def paper_run():
+    m = paper_model()
+    system = RodSystem(m, Obstacle(paper_object()))
+    return run_closed_loop(system, paper_gains(m, 0.025), ClosedLoopConfig(duration=6.0, dt=0.01, record_period=0.01))
+
+
+def test_paper_scenario_grasps_and_settles(paper_run):
+    res, m = paper_run, paper_run.model
+    assert res.settled and res.settle_time < 6.0
+    r = m.radius(m.s_nodes)
+    rho, alpha = res.rho[-1], res.alpha[-1]
+    # the arm wraps the circle: the distal half hugs it within a few local radii, parallel to it
+    distal = m.s_nodes > 0.11
+    assert np.all(rho[distal] < 1.6 * r[distal])
+    assert np.all(np.abs(alpha[distal] - np.pi / 2) < 0.1)
+    # tip angle around the object centre: it curled past the top of the circle
+    d = res.x[-1][-1] - np.array([0.08, 0.08])
+    assert np.arctan2(d[1], d[0]) > np.pi / 3
+    # contact region: rho/rho_d close to 1, alpha close to but below pi/2 (taper)
+    contact = rho <= 1.5 * r
+    assert np.mean(np.abs(rho[contact] / r[contact] - 1)) < 0.2
+    assert -0.1 < np.mean(alpha[contact] - np.pi / 2) < 0.0
+    # settled penetration below 1 % of the local radius
+    assert res.penetration_ratio[-1] < 0.01
+
+
+def test_paper_scenario_matches_static_theory_where_unobstructed(paper_run):
+    from contgrasp_core.cli_simulate import static_solution
+
+    res, m = paper_run, paper_run.model
+    s, rho_th, alpha_th = static_solution(res, 0.025)
+    r = m.radius(s)
+    # eq. rho_alpha_2 + eq. curvature_feedback from the base: the rod follows it up to where the
+    # static solution would cut into the object (paper: "arm not being able to pass through the
+    # object"); the contact reaction loads the proximal rod too, so agreement there is approximate
+    free = s < s[np.argmax(rho_th < r)] - 0.01
+    assert free.sum() > 30
+    np.testing.assert_allclose(res.alpha[-1][free], alpha_th[free], atol=0.12)
+    np.testing.assert_allclose(res.rho[-1][free], rho_th[free], rtol=0.15)
+    # and far from the contact, near the base, closely
+    near = (s >= 0.01) & (s < 0.03)
+    np.testing.assert_allclose(res.alpha[-1][near], alpha_th[near], atol=0.04)
+
+
+def test_sampled_feedback_agrees_with_continuous_over_short_horizon():
+    m = paper_model(n_elements=40)
+    system = RodSystem(m, Obstacle(paper_object()))
+    g = paper_gains(m, 0.025)
+    cont = run_closed_loop(system, g, ClosedLoopConfig(duration=0.02, dt=5e-4, min_time=1.0))
+    zoh = run_closed_loop(system, g, ClosedLoopConfig(duration=0.02, control_period=5e-4, min_time=1.0))
+    assert cont.t[-1] == pytest.approx(zoh.t[-1])
+    diff = np.hypot(*(cont.x[-1] - zoh.x[-1]).T).max()
+    moved = np.hypot(*(cont.x[-1] - cont.x[0]).T).max()
+    assert moved > 1e-3 and diff < 0.1 * moved
+
+
+def test_closed_loop_rejects_bad_config():
+    with pytest.raises(InvalidParameterError):
+        ClosedLoopConfig(duration=-1.0)
+    with pytest.raises(InvalidParameterError):
+        ClosedLoopConfig(control_period=0.01, dt=0.003)
+    with pytest.raises(InvalidParameterError):
+        run_closed_loop(RodSystem(paper_model(n_elements=10)), paper_gains(paper_model(n_elements=10), 0.025))
+
+
+def test_simulate_subcommand_json_and_plot(tmp_path):
+    from contgrasp_core import cli_simulate
+
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers()
+    cli_simulate.add_parser(sub)
+    png = tmp_path / "fig4.png"
+    args = ap.parse_args(["simulate", "--duration", "0.2", "--plot", str(png)])
+    out = args.func(args)
+    for key in ("final", "settled", "settle_time_s", "sim_time_s", "wall_time_s", "max_penetration",
+                "mean_abs_rho_ratio_minus_1_contact", "mean_abs_alpha_minus_half_pi_contact"):
+        assert key in out
+    assert set(out["final"]) >= {"x", "y", "theta", "rho", "alpha"}
+    assert len(out["final"]["x"]) == 101
+    assert out["sim_time_s"] == pytest.approx(0.2)
+    assert png.stat().st_size > 10_000
+    with pytest.raises(InvalidParameterError):
+        args.func(ap.parse_args(["simulate", "--object", "square"]))
