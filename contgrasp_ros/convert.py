@@ -16,7 +16,7 @@ from contgrasp_core.boundary import Boundary, from_points
 from contgrasp_core.contact import ContactState
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.quality import GraspQuality
-from contgrasp_core.rod.session import boundary_from_spec
+from contgrasp_core.rod.session import FeedbackExpansion, boundary_from_spec
 from contgrasp_msgs.msg import ContactState as ContactStateMsg
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary
 from contgrasp_msgs.msg import GraspQuality as GraspQualityMsg
@@ -146,15 +146,28 @@ def contact_arrays(msg: ContactStateMsg) -> ContactArrays:
     )
 
 
-def couple_to_msg(s: Array, u: Array, header: Header, step: int) -> CoupleControl:
-    """CoupleControl message: internal couple u (N m) at arclengths s."""
-    return CoupleControl(header=header, step=int(step), s=np.asarray(s).tolist(), u=np.asarray(u).tolist())
+def couple_to_msg(s: Array, couple: Array | FeedbackExpansion, header: Header, step: int) -> CoupleControl:
+    """CoupleControl message: the couple u (N m) at the joint arclengths s, with the law's
+    first-order expansion when given a :class:`FeedbackExpansion`."""
+    msg = CoupleControl(header=header, step=int(step), s=np.asarray(s).tolist())
+    if isinstance(couple, FeedbackExpansion):
+        msg.u = couple.u.tolist()
+        msg.rho_ref, msg.alpha_ref = couple.rho_ref.tolist(), couple.alpha_ref.tolist()
+        msg.du_drho, msg.du_dalpha = couple.g_rho.tolist(), couple.g_alpha.tolist()
+    else:
+        msg.u = np.asarray(couple).tolist()
+    return msg
 
 
-def couple_arrays(msg: CoupleControl) -> tuple[int, Array, Array]:
-    """Validated (step, s, u) of a CoupleControl message."""
-    a = _arrays(msg, ("s", "u"))
-    return int(msg.step), a["s"], a["u"]
+def couple_arrays(msg: CoupleControl) -> tuple[int, Array, Array | FeedbackExpansion]:
+    """Validated (step, s, couple) of a CoupleControl message; the couple is a
+    :class:`FeedbackExpansion` when the message carries the expansion, else the array u."""
+    if len(msg.rho_ref) == len(msg.alpha_ref) == len(msg.du_drho) == len(msg.du_dalpha) == 0:
+        a = _arrays(msg, ("s", "u"))
+        return int(msg.step), a["s"], a["u"]
+    a = _arrays(msg, ("s", "u", "rho_ref", "alpha_ref", "du_drho", "du_dalpha"))
+    exp = FeedbackExpansion(u=a["u"], rho_ref=a["rho_ref"], alpha_ref=a["alpha_ref"], g_rho=a["du_drho"], g_alpha=a["du_dalpha"])
+    return int(msg.step), a["s"], exp
 
 
 def quality_to_msg(q: GraspQuality, header: Header, step: int, tol: float) -> GraspQualityMsg:

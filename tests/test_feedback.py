@@ -130,3 +130,22 @@ def test_validation_of_inputs():
         closed_loop_kinematics(-1.0, 1.0, np.linspace(0, 1, 5), 1.0, 1.0, 0.0)
     with pytest.raises(InvalidParameterError):
         closed_loop_kinematics(1.0, 1.0, np.array([0.0, 0.0, 1.0]), 1.0, 1.0, 0.0)
+
+
+def test_feedback_expansion_gains_are_the_law_derivatives() -> None:
+    """du/drho and du/dalpha of the controller's expansion against central differences."""
+    from contgrasp_core.rod.closed_loop import paper_gains
+    from contgrasp_core.rod.scenario import paper_model
+    from contgrasp_core.rod.session import feedback_at_joints
+
+    model = paper_model(20)
+    gains = paper_gains(model, 0.025)
+    rng = np.random.default_rng(0)
+    rho = rng.uniform(0.001, 0.08, 21)
+    alpha = rng.uniform(0.2, 2.9, 21)
+    e = feedback_at_joints(model, gains, rho, alpha)
+    h_r, h_a = 1e-7, 1e-6
+    d_rho = (feedback_at_joints(model, gains, rho + h_r, alpha).u - feedback_at_joints(model, gains, rho - h_r, alpha).u) / (2 * h_r)
+    d_alpha = (feedback_at_joints(model, gains, rho, alpha + h_a).u - feedback_at_joints(model, gains, rho, alpha - h_a).u) / (2 * h_a)
+    np.testing.assert_allclose(e.g_rho, d_rho, rtol=1e-6, atol=1e-14)
+    np.testing.assert_allclose(e.g_alpha, d_alpha, rtol=1e-6, atol=1e-14)

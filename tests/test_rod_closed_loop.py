@@ -127,3 +127,40 @@ def test_simulate_subcommand_json_and_plot(tmp_path):
     assert png.stat().st_size > 10_000
     with pytest.raises(InvalidParameterError):
         args.func(ap.parse_args(["simulate", "--object", "square"]))
+
+
+def test_held_expansion_is_the_law_to_first_order() -> None:
+    """The couple held to first order in the state differs from the law evaluated at the new
+    state by O(|dtheta|^2) (halving the perturbation quarters the error)."""
+    import numpy as np
+
+    from contgrasp_core.rod import Obstacle, RodSystem
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains
+    from contgrasp_core.rod.scenario import paper_model, paper_object
+    from contgrasp_core.rod.session import HeldExpansion, LoopSession, feedback_at_joints, sense_observation
+
+    model, obj = paper_model(30), paper_object()
+    system = RodSystem(model, Obstacle(obj))
+    gains = paper_gains(model, 0.025)
+    session = LoopSession(system, ClosedLoopConfig(duration=1.0, control_period=0.002))
+    theta0 = session.state.theta + 0.3 * np.sin(np.linspace(0, 3, model.n_elements))
+    session.state = type(session.state)(t=0.0, theta=theta0, omega=session.state.omega)
+
+    def law(theta):  # type: ignore[no-untyped-def]
+        session.state = type(session.state)(t=0.0, theta=theta, omega=session.state.omega)
+        session._observed = None
+        c = sense_observation(session.observe(), obj)
+        return feedback_at_joints(model, gains, c.rho, c.alpha)
+
+    e = law(theta0)
+    held = HeldExpansion(model, system.obstacle, e)
+    du0, _ = held.couple_and_jacobian(theta0, jacobian=False)
+    np.testing.assert_allclose(du0, 0.0, atol=1e-12 * np.max(np.abs(e.u)))
+    direction = np.cos(np.linspace(0, 5, model.n_elements))
+    errs = []
+    for eps in (1e-2, 5e-3, 2.5e-3):
+        th = theta0 + eps * direction
+        du, _ = held.couple_and_jacobian(th, jacobian=False)
+        errs.append(np.max(np.abs(law(th).u - (e.u + du))))
+    ratios = np.array(errs[:-1]) / np.array(errs[1:])
+    assert np.all(ratios > 3.5), ratios

@@ -176,13 +176,16 @@ def test_grasp_controller_matches_core_and_takes_new_gains(graph) -> None:  # ty
     assert spin_until(ex, lambda: len(got) == 1)
     ref = feedback_at_joints(model, paper_gains(model, 0.025), state.rho, state.alpha)
     assert got[0].step == 4
-    np.testing.assert_array_equal(got[0].u, ref)
+    np.testing.assert_array_equal(got[0].u, ref.u)
+    np.testing.assert_array_equal(got[0].du_drho, ref.g_rho)
+    np.testing.assert_array_equal(got[0].du_dalpha, ref.g_alpha)
+    np.testing.assert_array_equal(got[0].rho_ref, state.rho[:-1])
     np.testing.assert_array_equal(got[0].s, model.joint_s)
     assert not node.set_parameters([Parameter("mu1", value=-1.0)])[0].successful  # out of range: refused
     assert node.set_parameters([Parameter("mu1", value=2.0)])[0].successful
     c_pub.publish(contact_to_msg(state, Header(), 5))
     assert spin_until(ex, lambda: len(got) == 2)
-    np.testing.assert_array_equal(got[1].u, feedback_at_joints(model, paper_gains(model, 0.025, mu1=2.0), state.rho, state.alpha))
+    np.testing.assert_array_equal(got[1].u, feedback_at_joints(model, paper_gains(model, 0.025, mu1=2.0), state.rho, state.alpha).u)
     wrong = sense(shape_from_curvature(np.linspace(0, 0.2, 5), np.zeros(5), BasePose()), obj, 0.01)
     c_pub.publish(contact_to_msg(wrong, Header(), 6))  # 5 nodes for a 12-element rod
     assert spin_until(ex, lambda: node.drops.total == 1)

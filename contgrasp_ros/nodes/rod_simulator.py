@@ -29,7 +29,7 @@ from visualization_msgs.msg import MarkerArray
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
 from contgrasp_core.rod import Obstacle, RodSystem
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
-from contgrasp_core.rod.session import LoopSession, Observation, boundary_from_spec
+from contgrasp_core.rod.session import FeedbackExpansion, LoopSession, Observation, boundary_from_spec
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_ros import qos
 from contgrasp_ros.convert import boundary_to_msg, couple_arrays
@@ -106,8 +106,8 @@ class RodSimulator(Node):
     # ------------------------------------------------------------------ loop
     def _reset_session(self) -> None:
         self.session = LoopSession(self.system, self.config)
-        self.last_couple = np.zeros(self.model.n_elements)
-        self.pending: np.ndarray | None = None
+        self.last_couple: np.ndarray | FeedbackExpansion = np.zeros(self.model.n_elements)
+        self.pending: np.ndarray | FeedbackExpansion | None = None
         self.waiting_since: float | None = None
         self.published = False
         self.next_marker_t = 0.0
@@ -158,7 +158,7 @@ class RodSimulator(Node):
                               values=[KeyValue(key=k, value=v) for k, v in values.items()])
         self.pub_diag.publish(DiagnosticArray(header=Header(stamp=_stamp(float(s.state.t))), status=[st]))
 
-    def _advance(self, couple: np.ndarray) -> None:
+    def _advance(self, couple: np.ndarray | FeedbackExpansion) -> None:
         try:
             self.session.advance(couple)
         except ContgraspError as exc:
@@ -181,7 +181,8 @@ class RodSimulator(Node):
     def on_couple(self, msg: CoupleControl) -> None:
         try:
             step, s, u = couple_arrays(msg)
-            if len(u) != self.model.n_elements or not np.allclose(s, self.model.joint_s, rtol=0, atol=1e-12):
+            n = len(u.u) if isinstance(u, FeedbackExpansion) else len(u)
+            if n != self.model.n_elements or not np.allclose(s, self.model.joint_s, rtol=0, atol=1e-12):
                 raise ContgraspError(f"couple must be given at the {self.model.n_elements} joints s = k h")
         except ContgraspError as exc:
             self.drops.drop(qos.TOPIC_COUPLE, str(exc))
@@ -210,7 +211,7 @@ class RodSimulator(Node):
                 f"({self.missed} missed deadlines so far)",
                 throttle_duration_sec=2.0,
             )
-            self._advance(self.last_couple if fallback == "hold" else np.zeros_like(self.last_couple))
+            self._advance(self.last_couple if fallback == "hold" else np.zeros(self.model.n_elements))
 
     # ------------------------------------------------------------------ services
     def on_pause(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:

@@ -1,0 +1,70 @@
+"""Fig. 4-style figure of a graph run, drawn from what travelled over the topics.
+
+Top: six snapshots of the arm (with its radius) around the object. Bottom: rho/rho_d and
+alpha along s at those times, with the static theoretical solution of eq. curvature_feedback
+(closed-loop kinematics from the base's contact state, :func:`contgrasp_core.feedback.closed_loop_kinematics`)
+dashed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from contgrasp_core.arm import ArmShape
+from contgrasp_core.errors import ContgraspError
+from contgrasp_core.feedback import adaptive_mu2, closed_loop_kinematics
+from contgrasp_core.plots import draw_arm, draw_boundary, save
+from contgrasp_core.rod.session import boundary_from_spec
+
+__all__ = ["run_figure"]
+
+
+def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path: str) -> None:
+    """Draw the figure of ``summary['history']`` (the launcher's monitor samples) to ``path``."""
+    import matplotlib.pyplot as plt
+
+    hist = summary["history"]
+    sim, ctl = params["rod_simulator"], params["grasp_controller"]
+    boundary = boundary_from_spec(sim["object_kind"], sim["object_params"])
+    picks = np.unique(np.linspace(0, len(hist) - 1, 6).round().astype(int))
+    fig = plt.figure(figsize=(11, 8))
+    ax = fig.add_subplot(2, 1, 1)
+    draw_boundary(ax, boundary)
+    colours = plt.cm.Purples(np.linspace(0.35, 1.0, len(picks)))
+    for colour, i in zip(colours, picks):
+        h = hist[i]
+        shape = ArmShape(np.asarray(h["s"]), np.stack([h["x"], h["y"]], -1), np.asarray(h["theta"]))
+        draw_arm(ax, shape, np.asarray(h["radius"]), color=colour, alpha=0.45, label=f"t = {h['t']:.2f} s")
+    ax.set_aspect("equal")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title("closed-loop grasp through the ROS graph")
+    ax_r, ax_a = fig.add_subplot(2, 2, 3), fig.add_subplot(2, 2, 4)
+    for colour, i in zip(colours, picks):
+        h = hist[i]
+        s, radius = np.asarray(h["s"]), np.asarray(h["radius"])
+        ax_r.plot(s / s[-1], np.asarray(h["rho"]) / radius, color=colour, lw=1.2)
+        ax_a.plot(s / s[-1], h["alpha"], color=colour, lw=1.2)
+    h = hist[-1]
+    s, radius = np.asarray(h["s"]), np.asarray(h["radius"])
+    if boundary.kind == "circle" and ctl.get("adaptive_mu2", True):
+        lu = ctl["length_unit"]
+        mu2 = adaptive_mu2(radius, ctl["object_radius"], length_unit=lu)
+        try:
+            static = closed_loop_kinematics(
+                h["rho"][0], h["alpha"][0], s, ctl["mu1"], lambda sv: np.interp(sv, s, mu2),
+                1.0 / boundary.params["R"], length_unit=lu,
+            )
+            ax_r.plot(s / s[-1], static.rho / radius, "k--", lw=1.0, label="static solution")
+            ax_a.plot(s / s[-1], static.alpha, "k--", lw=1.0)
+            ax_r.legend(fontsize=8)
+        except ContgraspError:
+            pass  # no admissible static solution from this base state: nothing to draw
+    ax_r.set_xlabel("s / L")
+    ax_r.set_ylabel("rho / rho_d")
+    ax_a.set_xlabel("s / L")
+    ax_a.set_ylabel("alpha [rad]")
+    ax_a.axhline(np.pi / 2, color="0.6", lw=0.8, ls=":")
+    fig.tight_layout()
+    save(fig, path)
