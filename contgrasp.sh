@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # contgrasp developer entry point: set everything up, then run the main job or the tests.
 #
-#   bash contgrasp.sh run    # set up (idempotent) and run the main job -> results/
+#   bash contgrasp.sh run    # set up (idempotent) and run the main job (the ROS closed loop) -> results/
 #   bash contgrasp.sh test   # set up (idempotent) and run the whole test suite
 #   bash contgrasp.sh setup  # only set up
 #
@@ -54,8 +54,9 @@ setup() {
     want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
     if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
         echo "== installing contgrasp and its dependencies into .venv"
-        "$py" -m pip install --quiet --upgrade pip
-        "$py" -m pip install --quiet -e ".[test,msgs]"
+        # (pip's warnings about this machine's unused local index folders are filtered out)
+        "$py" -m pip install --quiet --upgrade pip 2> >(grep -v "is ignored" >&2)
+        "$py" -m pip install --quiet -e ".[test,msgs]" 2> >(grep -v "is ignored\|!!\|wheel_obj" >&2)
         echo "$want" >"$stamp"
     fi
     # The interface package is compiled with the machine's cmake and C/C++ compilers.
@@ -74,9 +75,12 @@ setup() {
 
 run_main() {
     mkdir -p results
+    echo "== closed-loop grasp through the ROS 2 graph (separate processes, lock-step sim time)"
+    "$venv/bin/contgrasp-launch" --plot results/closed_loop.png --summary-file results/closed_loop.json
+    echo "== figure: results/closed_loop.png, summary: results/closed_loop.json"
     for obj in circle ellipse deformed; do
         echo "== contact kinematics around the $obj -> results/kinematics_$obj.png"
-        "$venv/bin/contgrasp" kinematics --object "$obj" --plot "results/kinematics_$obj.png"
+        "$venv/bin/contgrasp" kinematics --object "$obj" --plot "results/kinematics_$obj.png" >/dev/null
     done
 }
 

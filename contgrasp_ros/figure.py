@@ -28,7 +28,11 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
     hist = summary["history"]
     sim, ctl = params["rod_simulator"], params["grasp_controller"]
     boundary = boundary_from_spec(sim["object_kind"], sim["object_params"])
-    picks = np.unique(np.linspace(0, len(hist) - 1, 6).round().astype(int))
+    # the motion happens early (the arm swings in within ~0.3 s): snapshots at the start, through
+    # the swing, and at the end
+    times = np.array([h["t"] for h in hist])
+    wanted = [0.0, 0.05, 0.1, 0.15, 0.25, times[-1]]
+    picks = np.unique([int(np.argmin(np.abs(times - w))) for w in wanted])
     fig = plt.figure(figsize=(11, 8))
     ax = fig.add_subplot(2, 1, 1)
     draw_boundary(ax, boundary)
@@ -61,6 +65,7 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
             ax_r.legend(fontsize=8)
         except ContgraspError:
             pass  # no admissible static solution from this base state: nothing to draw
+    ax_r.set_ylim(0.0, 3.0)
     ax_r.set_xlabel("s / L")
     ax_r.set_ylabel("rho / rho_d")
     ax_a.set_xlabel("s / L")

@@ -34,7 +34,7 @@ NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"
 class Monitor(Node):
     """Observes the run: last rod state, contact and quality, a history, the simulator status."""
 
-    def __init__(self, history_period: float = 0.1, **kw: Any) -> None:
+    def __init__(self, history_period: float = 0.01, **kw: Any) -> None:
         super().__init__("contgrasp_monitor", **kw)
         self.rod: RodState | None = None
         self.contact: ContactState | None = None

@@ -58,9 +58,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=None, help="simulated seconds to run at most (overrides the parameter file)")
     p.add_argument("--in-process", action="store_true", help="run all nodes in this process on one executor")
     p.add_argument("--executor", choices=("single", "events"), default=None,
-                   help="rclpy executor of every node: single-threaded (default) or the experimental events executor")
+                   help="with --in-process: single-threaded (default) or rclpy's experimental events executor "
+                        "(separate node processes always use the single-threaded executor, see docs/ros.md)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
     p.add_argument("--plot", type=Path, default=None, help="write a Fig. 4-style figure of the run from the received topics")
+    p.add_argument("--summary-file", type=Path, default=None, help="also write the JSON summary to this file")
     p.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
     return p
 
@@ -81,6 +83,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     if args.executor:
+        if not args.in_process:
+            print("contgrasp-launch: --executor applies to --in-process runs only", file=sys.stderr)
+            return 2
         os.environ["CONTGRASP_EXECUTOR"] = args.executor
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "contgrasp_ros_log"))
@@ -97,6 +102,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         run_figure(summary, params, str(args.plot))
         summary["plot"] = str(args.plot)
     summary.pop("history", None)
+    if args.summary_file is not None:
+        args.summary_file.parent.mkdir(parents=True, exist_ok=True)
+        args.summary_file.write_text(json.dumps(summary, indent=1))
     if args.json:
         print(json.dumps(summary))
     else:
