@@ -512,9 +512,9 @@ def load_points(path: str) -> NDArray[np.float64]:
             continue
         try:
             rows.append([float(fields[0]), float(fields[1])])
-        except (ValueError, IndexError):
-            if rows:
-                raise DegenerateBoundaryError(f"{path}:{line_no}: expected two numbers x, y, got {line!r}")
+        except (ValueError, IndexError) as exc:
+            if rows:  # a header line before the data is fine; garbage after it is not
+                raise DegenerateBoundaryError(f"{path}:{line_no}: expected two numbers x, y, got {line!r}") from exc
     if not rows:
         raise DegenerateBoundaryError(f"{path}: no x, y rows found")
     return np.asarray(rows)

@@ -234,7 +234,7 @@ def integrate_contact(
         events=events,
     )
     names = ["rho > 0", "0 < alpha < pi", "0 < alpha < pi", "1 + rho kappa_o > 0"]
-    for name, t_ev in zip(names, sol.t_events):
+    for name, t_ev in zip(names, sol.t_events, strict=True):
         if len(t_ev):
             s_bad = float(t_ev[0])
             raise ContactValidityError(

@@ -221,5 +221,5 @@ def closed_loop_kinematics(
     if not sol.success:  # pragma: no cover - solver failure is reported, not hidden
         raise InvalidParameterError(f"closed-loop kinematics integration failed: {sol.message}")
     rho, alpha, so = sol.y
-    kappa = np.array([curvature_feedback(r, a, m1(si), m2(si), length_unit=lu) for r, a, si in zip(rho, alpha, s)])
+    kappa = np.array([curvature_feedback(r, a, m1(si), m2(si), length_unit=lu) for r, a, si in zip(rho, alpha, s, strict=True)])
     return ClosedLoopKinematics(s=s.copy(), rho=rho, alpha=alpha, kappa=kappa, s_o=so)

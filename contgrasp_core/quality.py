@@ -134,6 +134,12 @@ def contact_weights(s: ArrayLike, delta: ArrayLike, tol: float | ArrayLike = 0.0
     return w
 
 
+def _weights_and_maps(
+    s: ArrayLike, gamma: ArrayLike, phi: ArrayLike, delta: ArrayLike, tol: float | ArrayLike, ref: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    return contact_weights(s, delta, tol), point_grasp_maps(gamma, phi, ref)
+
+
 def gramian(
     s: ArrayLike,
     gamma: ArrayLike,
@@ -148,8 +154,7 @@ def gramian(
     ``gamma``/``phi`` are the contact (shadow) points and boundary tangent angles along the
     arm grid ``s``; ``delta`` the contact depth (eq. delta).
     """
-    w = contact_weights(s, delta, tol)
-    maps = point_grasp_maps(gamma, phi, ref)
+    w, maps = _weights_and_maps(s, gamma, phi, delta, tol, ref)
     return np.einsum("i,iak,ibk->ab", w, maps, maps), float(w.sum())
 
 
@@ -166,9 +171,8 @@ def continuum_operator(
 
     Its singular values equal ``sqrt(eig(W))`` of :func:`gramian` (Prop. 2).
     """
-    w = contact_weights(s, delta, tol)
-    maps = point_grasp_maps(gamma, phi, ref) * np.sqrt(w)[:, None, None]
-    return np.concatenate(list(maps), axis=1)
+    w, maps = _weights_and_maps(s, gamma, phi, delta, tol, ref)
+    return np.concatenate(list(maps * np.sqrt(w)[:, None, None]), axis=1)
 
 
 @dataclass(frozen=True)

@@ -219,7 +219,7 @@ def boundary_to_msg(boundary: Boundary, header: Header, samples: int = 256) -> O
 def boundary_from_msg(msg: ObjectBoundary) -> Boundary:
     """Rebuild the boundary: analytic kinds from their parameters, anything else (user outlines,
     Fourier curves) from the samples as a closed spline."""
-    params = dict(zip(msg.parameter_names, msg.parameter_values))
+    params = dict(zip(msg.parameter_names, msg.parameter_values, strict=False))
     try:
         if msg.kind in _PARAM_ORDER:
             missing = [k for k in _PARAM_ORDER[msg.kind] if k not in params]

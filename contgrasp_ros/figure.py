@@ -37,7 +37,7 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
     ax = fig.add_subplot(2, 1, 1)
     draw_boundary(ax, boundary)
     colours = plt.cm.Purples(np.linspace(0.35, 1.0, len(picks)))
-    for colour, i in zip(colours, picks):
+    for colour, i in zip(colours, picks, strict=True):
         h = hist[i]
         shape = ArmShape(np.asarray(h["s"]), np.stack([h["x"], h["y"]], -1), np.asarray(h["theta"]))
         draw_arm(ax, shape, np.asarray(h["radius"]), color=colour, alpha=0.45, label=f"t = {h['t']:.2f} s")
@@ -45,7 +45,7 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
     ax.legend(loc="upper left", fontsize=8)
     ax.set_title("closed-loop grasp through the ROS graph")
     ax_r, ax_a = fig.add_subplot(2, 2, 3), fig.add_subplot(2, 2, 4)
-    for colour, i in zip(colours, picks):
+    for colour, i in zip(colours, picks, strict=True):
         h = hist[i]
         s, radius = np.asarray(h["s"]), np.asarray(h["radius"])
         ax_r.plot(s / s[-1], np.asarray(h["rho"]) / radius, color=colour, lw=1.2)

@@ -12,9 +12,10 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
+from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import ContgraspError
 
-__all__ = ["declare", "DropCounter", "make_executor", "run_node"]
+__all__ = ["declare", "DropCounter", "ObjectTracker", "make_executor", "run_node"]
 
 
 def make_executor(context: object | None = None) -> Executor:
@@ -77,6 +78,28 @@ class DropCounter:
             f"dropped message on {topic} ({self.total} dropped so far): {reason}",
             throttle_duration_sec=self._period,
         )
+
+
+class ObjectTracker:
+    """Keeps the latest valid object boundary from the transient-local object topic; invalid
+    boundaries are dropped and counted (the previous one stays in use)."""
+
+    def __init__(self, node: Node, drops: DropCounter) -> None:
+        from contgrasp_msgs.msg import ObjectBoundary
+        from contgrasp_ros import qos
+
+        self.boundary: Boundary | None = None
+        self._drops = drops
+        self._topic = qos.TOPIC_OBJECT
+        node.create_subscription(ObjectBoundary, qos.TOPIC_OBJECT, self._on_object, qos.LATCHED)
+
+    def _on_object(self, msg: object) -> None:
+        from contgrasp_ros.convert import boundary_from_msg
+
+        try:
+            self.boundary = boundary_from_msg(msg)  # type: ignore[arg-type]
+        except ContgraspError as exc:
+            self._drops.drop(self._topic, str(exc))
 
 
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:

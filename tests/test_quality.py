@@ -32,7 +32,7 @@ def test_GGt_depends_only_on_contact_points(pts: list[tuple[float, float, float]
     """G G^T = [[I2, g], [g^T, |g|^2]] with g = gamma^perp, whatever the tangent angles."""
     arr = np.array(pts)
     maps = point_grasp_maps(arr[:, :2], arr[:, 2])
-    for G, (x, y, _) in zip(maps, pts):
+    for G, (x, y, _) in zip(maps, pts, strict=True):
         g = np.array([-y, x])
         expected = np.block([[np.eye(2), g[:, None]], [g[None, :], np.array([[g @ g]])]])
         np.testing.assert_allclose(G @ G.T, expected, atol=1e-9 * (1 + g @ g))
@@ -113,23 +113,23 @@ def test_prop2_singular_values_equal_sqrt_eigenvalues() -> None:
 
 def test_discrete_map_converges_to_continuum() -> None:
     """(l/n) G~ G~^T with n evenly spaced contacts -> W (midpoint rule, second order)."""
-    R, l = 2.0, 5.0
+    R, length = 2.0, 5.0
     ref = metrics_from_gramian(
         np.array(
             [
-                [l, 0, R * R * (np.cos(l / R) - 1)],
-                [0, l, R * R * np.sin(l / R)],
-                [R * R * (np.cos(l / R) - 1), R * R * np.sin(l / R), R * R * l],
+                [length, 0, R * R * (np.cos(length / R) - 1)],
+                [0, length, R * R * np.sin(length / R)],
+                [R * R * (np.cos(length / R) - 1), R * R * np.sin(length / R), R * R * length],
             ]
         )
     )
     errs = []
     for n in (10, 20, 40, 80):
-        sm = (np.arange(n) + 0.5) * l / n
+        sm = (np.arange(n) + 0.5) * length / n
         Gt = discrete_grasp_map(R * np.stack([np.cos(sm / R), np.sin(sm / R)], -1), sm / R + np.pi / 2)
-        errs.append(np.max(np.abs((l / n) * Gt @ Gt.T - ref.W)))
-        disc = singular_value_metrics(np.sqrt(l / n) * Gt)
-        np.testing.assert_allclose(np.sort(disc["singular_values"]) ** 2, np.linalg.eigvalsh((l / n) * Gt @ Gt.T), rtol=1e-9)
+        errs.append(np.max(np.abs((length / n) * Gt @ Gt.T - ref.W)))
+        disc = singular_value_metrics(np.sqrt(length / n) * Gt)
+        np.testing.assert_allclose(np.sort(disc["singular_values"]) ** 2, np.linalg.eigvalsh((length / n) * Gt @ Gt.T), rtol=1e-9)
     assert errs[-1] < 1e-3 and np.all(np.diff(np.log2(errs)) < -1.8)
 
 

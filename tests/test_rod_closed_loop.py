@@ -11,7 +11,7 @@ from contgrasp_core.arm import ArmShape
 from contgrasp_core.boundary import circle, deformed_circle, ellipse
 from contgrasp_core.contact import sense
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.rod import Obstacle, RodState, RodSystem, chain
+from contgrasp_core.rod import Obstacle, RodSystem, chain
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains, run_closed_loop, sense_nodes
 from contgrasp_core.rod.scenario import paper_model, paper_object
 

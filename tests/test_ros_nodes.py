@@ -81,7 +81,7 @@ def test_boundary_sensor_matches_core_and_survives_bad_messages(graph) -> None: 
     probe.create_subscription(ContactState, qos.TOPIC_CONTACT, got.append, qos.STREAM)
     obj = circle(0.025, (0.08, 0.08))
     obj_pub.publish(boundary_to_msg(obj, Header(frame_id="world")))
-    assert spin_until(ex, lambda: sensor.boundary is not None and rod_pub.get_subscription_count() > 0)
+    assert spin_until(ex, lambda: sensor.object.boundary is not None and rod_pub.get_subscription_count() > 0)
     shape = arm_near(obj, BasePose(0.0, 0.0, 0.0))
     radius = np.linspace(0.01, 0.001, len(shape.s))
     rod_pub.publish(rod_msg(3, shape, radius, 1.25))
@@ -128,7 +128,7 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
     probe.create_subscription(GraspQuality, qos.TOPIC_QUALITY, got.append, qos.STREAM)
     obj = ellipse(0.04, 0.02, (0.08, 0.06))
     obj_pub.publish(boundary_to_msg(obj, Header()))
-    assert spin_until(ex, lambda: node.boundary is not None and c_pub.get_subscription_count() > 0)
+    assert spin_until(ex, lambda: node.object.boundary is not None and c_pub.get_subscription_count() > 0)
     shape = arm_near(obj, BasePose(0.0, 0.0, 0.3))
     state = sense(shape, obj, 0.02, tol=0.01)
     for k, t in enumerate([0.0, 0.1, 0.6]):  # 2 Hz in sim time: the 0.1 s message is skipped

@@ -78,7 +78,7 @@ def test_executors_give_identical_maps() -> None:
 def test_nelder_mead_improves_on_the_grid_within_bounds(tmp_path) -> None:  # type: ignore[no-untyped-def]
     spec = MapSpec("ellipse", psi_steps=6, d_steps=2, **FAST)
     qm = quality_map(spec, executor="serial", optimise=True)
-    for metric, opt in qm.optimum.items():
+    for opt in qm.optimum.values():
         assert spec.d_min <= opt["d"] <= spec.d_max
         assert opt["value"] >= opt["grid_value"] * (1 - 1e-12)
         assert len(opt["x"]) == len(opt["y"]) == spec.nodes

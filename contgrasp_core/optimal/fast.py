@@ -48,7 +48,7 @@ from .discrete import (
     linearise,
     solve_states_linearised,
 )
-from .guess import initial_control
+from .guess import initial_control, initial_states
 from .problem import GraspProblem, GraspResult, make_result
 
 __all__ = ["solve"]
@@ -208,12 +208,7 @@ def _newton(
     """Augmented-Lagrangian outer loop around damped Newton iterations (module docstring)."""
     d = problem.disc
     n = d.nodes
-    try:
-        x, lin = solve_states_linearised(d, u, guess)
-    except ForwardSolveError as exc:
-        raise InvalidParameterError(
-            f"the initial curvature makes the contact kinematics singular ({exc}); give another initial guess"
-        ) from exc
+    x, lin = initial_states(d, u, guess)
     hist: dict[str, list[float]] = {"cost": [], "residual": [], "step": [], "exact_hessian": []}
     iterations = 0
     converged = False

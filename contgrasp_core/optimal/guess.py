@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InvalidParameterError
+from .discrete import ForwardSolveError, solve_states_linearised
 from .problem import GraspProblem, GraspResult
 
 __all__ = ["initial_control", "approach_control"]
@@ -89,3 +90,16 @@ def initial_control(problem: GraspProblem, initial: Any) -> tuple[Array, Array |
     if u.shape != (n,) or not np.all(np.isfinite(u)):
         raise InvalidParameterError(f"initial curvature must be {n} finite values, got shape {u.shape}")
     return u.copy(), None
+
+
+def initial_states(d: Any, u: Array, guess: Array | None) -> tuple[Array, Any]:
+    """States (and their linearisation) of the initial control, shared by both solvers.
+
+    Raises InvalidParameterError when the initial curvature makes the kinematics singular.
+    """
+    try:
+        return solve_states_linearised(d, u, guess)
+    except ForwardSolveError as exc:
+        raise InvalidParameterError(
+            f"the initial curvature makes the contact kinematics singular ({exc}); give another initial guess"
+        ) from exc

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from .discrete import ForwardSolveError, PenaltyState, adjoint, evaluate, solve_states_linearised
-from .guess import initial_control
+from .guess import initial_control, initial_states
 from .problem import GraspProblem, GraspResult, make_result
 
 __all__ = ["sweep"]
@@ -61,12 +61,7 @@ def sweep(
     t_start = time.perf_counter()
     d = problem.disc
     u, guess = initial_control(problem, initial)
-    try:
-        x, lin = solve_states_linearised(d, u, guess)
-    except ForwardSolveError as exc:
-        raise InvalidParameterError(
-            f"the initial curvature makes the contact kinematics singular ({exc}); give another initial guess"
-        ) from exc
+    x, lin = initial_states(d, u, guess)
     pen = PenaltyState.zero(d.nodes, problem.penalty)
     costs: list[float] = []
     residuals: list[float] = []

@@ -10,13 +10,12 @@ import numpy as np
 from rclpy.node import Node
 
 from contgrasp_core.arm import ArmShape
-from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError
-from contgrasp_msgs.msg import ContactState, ObjectBoundary, RodState
+from contgrasp_msgs.msg import ContactState, RodState
 from contgrasp_ros import qos
-from contgrasp_ros.convert import boundary_from_msg, contact_to_msg, rod_state_arrays
-from contgrasp_ros.runtime import DropCounter, declare, run_node
+from contgrasp_ros.convert import contact_to_msg, rod_state_arrays
+from contgrasp_ros.runtime import DropCounter, ObjectTracker, declare, run_node
 
 
 class BoundarySensor(Node):
@@ -25,28 +24,22 @@ class BoundarySensor(Node):
     def __init__(self, **node_kwargs: object) -> None:
         super().__init__("boundary_sensor", **node_kwargs)  # type: ignore[arg-type]
         declare(self, "contact_tolerance", 0.0, "contact where delta >= -tolerance [m]", lo=0.0, hi=1.0)
-        self.boundary: Boundary | None = None
         self.drops = DropCounter(self)
+        self.object = ObjectTracker(self, self.drops)
         self.sensed = 0
         self.pub = self.create_publisher(ContactState, qos.TOPIC_CONTACT, qos.STREAM)
-        self.create_subscription(ObjectBoundary, qos.TOPIC_OBJECT, self.on_object, qos.LATCHED)
         self.create_subscription(RodState, qos.TOPIC_ROD_STATE, self.on_rod_state, qos.STREAM)
 
-    def on_object(self, msg: ObjectBoundary) -> None:
-        try:
-            self.boundary = boundary_from_msg(msg)
-        except ContgraspError as exc:
-            self.drops.drop(qos.TOPIC_OBJECT, str(exc))
-
     def on_rod_state(self, msg: RodState) -> None:
-        if self.boundary is None:
+        boundary = self.object.boundary
+        if boundary is None:
             self.drops.drop(qos.TOPIC_ROD_STATE, "no object boundary received yet")
             return
         try:
             rod = rod_state_arrays(msg)
             shape = ArmShape(s=rod.s, r=np.stack([rod.x, rod.y], -1), theta=rod.theta)
             tol = self.get_parameter("contact_tolerance").value
-            state = sense(shape, self.boundary, rod.radius, tol=tol)
+            state = sense(shape, boundary, rod.radius, tol=tol)
         except ContgraspError as exc:
             self.drops.drop(qos.TOPIC_ROD_STATE, str(exc))
             return

@@ -7,13 +7,12 @@ from __future__ import annotations
 
 from rclpy.node import Node
 
-from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.quality import grasp_quality
-from contgrasp_msgs.msg import ContactState, GraspQuality, ObjectBoundary
+from contgrasp_msgs.msg import ContactState, GraspQuality
 from contgrasp_ros import qos
-from contgrasp_ros.convert import boundary_from_msg, contact_arrays, quality_to_msg
-from contgrasp_ros.runtime import DropCounter, declare, run_node
+from contgrasp_ros.convert import contact_arrays, quality_to_msg
+from contgrasp_ros.runtime import DropCounter, ObjectTracker, declare, run_node
 
 
 class GraspQualityNode(Node):
@@ -25,21 +24,15 @@ class GraspQualityNode(Node):
         declare(self, "contact_tolerance", -1.0, "contact tolerance [m]; < 0 uses the sensor's", lo=-1.0, hi=1.0)
         declare(self, "reference_x", 0.0, "wrench reference point x [m] (object frame origin)", lo=-1e6, hi=1e6)
         declare(self, "reference_y", 0.0, "wrench reference point y [m]", lo=-1e6, hi=1e6)
-        self.boundary: Boundary | None = None
         self.drops = DropCounter(self)
+        self.object = ObjectTracker(self, self.drops)
         self.last_t: float | None = None
         self.pub = self.create_publisher(GraspQuality, qos.TOPIC_QUALITY, qos.STREAM)
-        self.create_subscription(ObjectBoundary, qos.TOPIC_OBJECT, self.on_object, qos.LATCHED)
         self.create_subscription(ContactState, qos.TOPIC_CONTACT, self.on_contact, qos.STREAM)
 
-    def on_object(self, msg: ObjectBoundary) -> None:
-        try:
-            self.boundary = boundary_from_msg(msg)
-        except ContgraspError as exc:
-            self.drops.drop(qos.TOPIC_OBJECT, str(exc))
-
     def on_contact(self, msg: ContactState) -> None:
-        if self.boundary is None:
+        boundary = self.object.boundary
+        if boundary is None:
             self.drops.drop(qos.TOPIC_CONTACT, "no object boundary received yet")
             return
         try:
@@ -55,7 +48,7 @@ class GraspQualityNode(Node):
         tol = c.tol if tol < 0 else tol
         ref = (self.get_parameter("reference_x").value, self.get_parameter("reference_y").value)
         try:
-            phi = self.boundary.tangent_angle(c.s_o)
+            phi = boundary.tangent_angle(c.s_o)
             q = grasp_quality(c.s, c.shadow, phi, c.delta, tol=tol, ref=ref)
         except ContgraspError as exc:
             self.drops.drop(qos.TOPIC_CONTACT, str(exc))
