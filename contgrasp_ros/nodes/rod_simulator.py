@@ -66,7 +66,7 @@ class RodSimulator(Node):
             min_time=declare(self, "min_time", 1.0, "never settled before [s]", lo=0.0, hi=1e6),
         )
         self.lockstep = declare(self, "lockstep", True, "advance only when the couple for the current step arrived", read_only=True)
-        declare(self, "couple_timeout", 2.0, "lock-step: wall seconds to wait for a couple", lo=1e-3, hi=3600.0)
+        declare(self, "couple_timeout", 10.0, "lock-step: wall seconds to wait for a couple", lo=1e-3, hi=3600.0)
         declare(self, "timeout_fallback", "hold", "lock-step timeout: 'hold' the last couple or apply 'zero'")
         self.start_paused = declare(self, "start_paused", False, "wait for ~/pause(false) before the first step")
         declare(self, "marker_period", 0.05, "simulated seconds between RViz marker updates (0 = off)", lo=0.0, hi=1e6)
