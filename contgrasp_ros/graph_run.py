@@ -236,7 +236,8 @@ def run_graph(params: dict[str, dict[str, Any]], *, in_process: bool, params_fil
             rclpy.shutdown()
     summary["exit_codes"] = summary_codes
     summary["pids"] = {c.name: c.proc.pid for c in group.children} if group is not None else {}
-    failing = [c for name, c in summary_codes.items() if c not in (0, -2)]
-    if code == 0 and failing:
-        code = failing[0] if failing[0] > 0 else 1
+    # a child's own non-zero exit code wins (negative codes are the signals we stopped it with)
+    failing = [c for c in summary_codes.values() if c > 0]
+    if failing:
+        code = failing[0]
     return summary, code

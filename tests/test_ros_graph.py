@@ -122,3 +122,24 @@ def test_graph_as_processes_is_deterministic_and_leaves_nothing_behind(tmp_path:
         np.testing.assert_allclose(out["final"]["x"], x_core[:, 0], rtol=0, atol=1e-9)
         np.testing.assert_allclose(out["final"]["y"], x_core[:, 1], rtol=0, atol=1e-9)
     assert runs[0]["final"] == runs[1]["final"]
+
+
+def test_launcher_reports_a_node_that_fails_to_start(tmp_path: Path) -> None:
+    """An invalid parameter stops that node at start-up (exit 2); the launcher names it, stops
+    the others and exits non-zero with the failing node's code."""
+    data = yaml.safe_load(small_params(tmp_path).read_text())
+    data["grasp_quality"]["ros__parameters"]["rate_hz"] = -5.0
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(data))
+    proc = launch("--json", "--params", str(bad), "--timeout", "120")
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    out = json.loads(proc.stdout)
+    assert "grasp_quality" in out["error"] and "code 2" in out["error"]
+    assert out["exit_codes"]["grasp_quality"] == 2
+    assert "rate_hz" in proc.stderr
+    assert not any(alive(pid) for pid in out["pids"].values())
+
+
+def test_launcher_rejects_bad_usage() -> None:
+    assert launch("--duration", "-1").returncode == 2
+    assert launch("--executor", "events").returncode == 2  # events executor: in-process only

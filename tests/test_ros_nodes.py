@@ -245,3 +245,20 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
     n_before = len(states)
     assert spin_until(ex, lambda: fut.done() and len(states) > n_before)
     assert states[n_before].step == 0
+
+
+def test_rod_simulator_free_running_advances_on_wall_time(graph) -> None:  # type: ignore[no-untyped-def]
+    """Free-running mode (real-time demos): the rod advances every control period of wall time
+    with the latest couple, whether or not a controller answers."""
+    from rclpy.parameter import Parameter
+
+    from contgrasp_ros.nodes.rod_simulator import RodSimulator
+
+    ctx, ex, add = graph
+    over = [Parameter(k, value=v) for k, v in dict(n_elements=10, lockstep=False, control_period=0.02, duration=10.0).items()]
+    add(RodSimulator(context=ctx, parameter_overrides=over))
+    probe = add(rclpy.create_node("probe", context=ctx))
+    states: list[RodState] = []
+    probe.create_subscription(RodState, qos.TOPIC_ROD_STATE, states.append, qos.STREAM)
+    assert spin_until(ex, lambda: len(states) >= 5, timeout=20)
+    assert [m.step for m in states[-3:]] == sorted(m.step for m in states[-3:])
