@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import random
 import sys
 import tempfile
 
@@ -16,12 +17,14 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 
 _domains = itertools.count()
+# a random starting point per test run: two concurrent runs on one machine (a developer's and
+# a benchmark's, say) rarely share a domain, and graphs on different domains cannot cross-talk
+_BASE = random.SystemRandom().randint(0, 100)
 
 
 def fresh_domain_id() -> int:
-    """A ROS_DOMAIN_ID for one test: distinct within this run, spread across concurrent runs."""
-    base = int(os.environ.get("ROS_DOMAIN_ID", os.getpid() % 90 + 10))
-    return (base + next(_domains)) % 100 + 1
+    """A ROS_DOMAIN_ID in 1..101 for one test: distinct within this run."""
+    return (_BASE + next(_domains)) % 101 + 1
 
 
 @pytest.fixture
