@@ -24,6 +24,7 @@ from contgrasp_core.optimal.discrete import (
     dynamics_hessian,
     dynamics_jacobian,
     evaluate,
+    kkt_resolve,
     kkt_solve,
     lagrangian_gradient,
     lagrangian_hessian_blocks,
@@ -31,6 +32,7 @@ from contgrasp_core.optimal.discrete import (
     march_states,
     residual,
     solve_states,
+    solve_states_linearised,
 )
 from contgrasp_core.optimal.guess import approach_control
 
@@ -387,6 +389,46 @@ def test_banded_kkt_solve_matches_a_dense_solve():
     assert np.allclose(du, sol[24:nz], rtol=1e-9, atol=1e-11)
     assert np.allclose(dlam.ravel(), sol[nz:], rtol=1e-9, atol=1e-11)
     assert np.all(dx[0] == 0.0)
+
+
+def test_kkt_factor_reuse_matches_a_fresh_solve():
+    """kkt_solve(keep_factor=True) and kkt_resolve with the kept factors equal plain kkt_solve."""
+    p = paper_problem("deformed", nodes=40)
+    d = p.disc
+    rng = np.random.default_rng(3)
+    u = approach_control(p)[0]
+    x = solve_states(d, u)
+    lam = rng.standard_normal((39, 3))
+    pen = PenaltyState.zero(40, p.penalty)
+    lin = linearise(x, u, d.table)
+    H = lagrangian_hessian_blocks(d, x, lam, pen, gauss_newton=False, lin=lin)
+    rhs = [(rng.standard_normal(40), rng.standard_normal((40, 3)), rng.standard_normal((39, 3))) for _ in range(2)]
+    *first, factor = kkt_solve(d, lin, H, *rhs[0], keep_factor=True)
+    pairs = ((first, kkt_solve(d, lin, H, *rhs[0])), (kkt_resolve(d, factor, *rhs[1]), kkt_solve(d, lin, H, *rhs[1])))
+    for got, ref in pairs:
+        for a, b in zip(got, ref, strict=True):
+            assert np.allclose(a, b, rtol=1e-10, atol=1e-12)
+
+
+def test_chord_trajectory_newton_reaches_the_same_states():
+    """solve_states_linearised(chord=True) (LU reuse once converging) gives Newton's states."""
+    p = paper_problem("ellipse", nodes=200)
+    d = p.disc
+    u = approach_control(p)[0]
+    ref = solve_states(d, u)
+    guess = ref + 1e-4 * np.sin(np.arange(200))[:, None]
+    x, lin = solve_states_linearised(d, u, guess, march=False, chord=True)
+    assert np.max(np.abs(x - ref)) < 1e-11
+    assert np.max(np.abs(residual(d, x, u))) < 1e-12
+    assert lin.x is x
+
+
+def test_coarse_sqp_starts_from_the_guess_multipliers_not_an_inflated_penalty():
+    """The ellipse's approach guess violates rho >= m; the coarse SQP stage still converges
+    from it (no damped iterations) and the fine result meets the constraints."""
+    r = solve(paper_problem("ellipse", nodes=500), cost_tol=1e-7)
+    assert r.converged and r.constraints.ok
+    assert int(r.history["coarse_iterations"]) == 0 and int(r.history["coarse_sqp_steps"]) >= 1
 
 
 @pytest.mark.parametrize("name", ["circle", "ellipse", "deformed"])

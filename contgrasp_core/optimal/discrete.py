@@ -60,6 +60,8 @@ __all__ = [
     "lagrangian_hessian_blocks",
     "kkt_newton_step",
     "kkt_solve",
+    "kkt_resolve",
+    "KKTFactor",
     "lagrangian_gradient",
     "ForwardSolveError",
     "SingularSystemError",
@@ -301,7 +303,7 @@ def residual(d: Discretisation, x: Array, u: Array) -> Array:
 
 
 # ----------------------------------------------------------------------------- banded linear algebra
-_GBSV = get_lapack_funcs(("gbsv",), (np.zeros((1, 1)),))[0]
+_GBSV, _GBTRF, _GBTRS = get_lapack_funcs(("gbsv", "gbtrf", "gbtrs"), (np.zeros((1, 1)),))
 
 
 class SingularSystemError(RuntimeError):
@@ -392,6 +394,7 @@ def solve_states_linearised(
     tol: float = 1e-13,
     max_newton: int = 12,
     march: bool = True,
+    chord: bool = False,
 ) -> tuple[Array, Linearisation]:
     """:func:`solve_states` and the dynamics linearised at the returned states.
 
@@ -399,6 +402,9 @@ def solve_states_linearised(
     it), so the adjoint and the KKT matrix at the new iterate need no further evaluation.
     ``march=False``: raise ForwardSolveError instead of falling back to :func:`march_states`
     when Newton from ``guess`` fails (a line search then simply shortens its step).
+    ``chord=True``: once an iteration has reduced the defects 1000-fold (the Jacobian then
+    changes by about the size of the remaining correction), later iterations reuse its LU
+    factors (LAPACK gbtrs) instead of forming and factorising a new Jacobian.
     """
     if guess is not None and guess.shape == (d.nodes, 3):
         x = guess.copy()
@@ -406,6 +412,7 @@ def solve_states_linearised(
         scale = 1.0 + np.max(np.abs(x), axis=0)
         prev = np.inf
         rises = 0
+        factor = None
         for _ in range(max_newton):
             if not np.all(np.isfinite(x)):
                 break
@@ -420,12 +427,27 @@ def solve_states_linearised(
             rises = 0 if err < prev else rises + 1
             if not np.isfinite(err) or rises > 1:
                 break
+            contracted = err <= 1e-3 * prev
             prev = err
-            ab, kl, ku = _state_jacobian_band(d, lin.A, transpose=False)
-            try:
-                dx = _band_solve(ab, kl, ku, -c.ravel())
-            except SingularSystemError:
-                break
+            if factor is not None and contracted:
+                dx, info = _GBTRS(factor[0], 5, 2, -c.ravel(), factor[1], overwrite_b=True)
+                if info != 0:
+                    break
+            else:
+                ab, kl, ku = _state_jacobian_band(d, lin.A, transpose=False)
+                if chord:
+                    lu, piv, info = _GBTRF(ab, kl, ku, overwrite_ab=True)
+                    if info != 0:
+                        break
+                    factor = (lu, piv)
+                    dx, info = _GBTRS(lu, kl, ku, -c.ravel(), piv, overwrite_b=True)
+                    if info != 0:
+                        break
+                else:
+                    try:
+                        dx = _band_solve(ab, kl, ku, -c.ravel())
+                    except SingularSystemError:
+                        break
             x[1:] += dx.reshape(-1, 3)
     if not march:
         raise ForwardSolveError("Newton on the trapezoidal trajectory did not converge from the guess")
@@ -643,25 +665,24 @@ def lagrangian_hessian_blocks(
     return H
 
 
-def _kkt_pattern(d: Discretisation) -> tuple[Array, Array, Array, Array, Array]:
-    """Layout of the banded KKT matrix (19 band rows, see kkt_newton_step).
+def _kkt_pattern(d: Discretisation) -> tuple[Array, Array, Array, Array]:
+    """Layout of the banded KKT matrix with the controls eliminated (19 band rows, see
+    :func:`kkt_solve`).
 
     Returns (flat positions of the per-iteration entries - the Hessian blocks H_1..H_{N-1},
     then the :func:`_step_blocks` below and right of the diagonal -, a flat band buffer holding
-    the constant entries w (u-u) and h/2 (lambda_2-u couplings), iu, ix, il) where ``iu`` (N,),
-    ``ix`` (N, 3) and ``il`` (N-1, 3) are the unknowns' positions (ix[0] = -1: x_0 is fixed).
+    the constant entries (the Schur complement of the control block diag(w) on the lambda_2
+    unknowns), ix, il) where ``ix`` (N, 3) and ``il`` (N-1, 3) are the unknowns' positions
+    (ix[0] = -1: x_0 is fixed).
     """
     n = d.nodes
-    size = 7 * n - 6
-    iu = np.empty(n, dtype=np.int64)
+    size = 6 * n - 6
     ix = np.full((n, 3), -1, dtype=np.int64)
     il = np.empty((n - 1, 3), dtype=np.int64)
-    iu[0] = 0
-    il[0] = [1, 2, 3]
-    base = 4 + 7 * np.arange(n - 1)
+    il[0] = [0, 1, 2]
+    base = 3 + 6 * np.arange(n - 1)
     ix[1:] = base[:, None] + np.arange(3)
-    iu[1:] = base + 3
-    il[1:] = base[:-1, None] + 4 + np.arange(3)
+    il[1:] = base[:-1, None] + 3 + np.arange(3)
     a, b = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
     i = np.arange(n - 1)
     i1 = i[1:]
@@ -674,40 +695,92 @@ def _kkt_pattern(d: Discretisation) -> tuple[Array, Array, Array, Array, Array]:
     def flat(r: Array, c: Array) -> Array:
         return (12 + r - c) + 19 * c
 
+    # c_i depends on u_i and u_{i+1} through -h/2 df/du = (0, h/2, 0); eliminating
+    # du_j = (r_u,j - h/2 (dlambda_{j-1,2} + dlambda_{j,2})) / w_j leaves -h^2/4 (1/w_i + 1/w_{i+1})
+    # on the lambda_{i,2} diagonal and -h^2 / (4 w_{i+1}) between lambda_{i,2} and lambda_{i+1,2}
+    q = 0.25 * d.h * d.h / d.w
     template = np.zeros(19 * size)
-    template[flat(iu, iu)] = d.w
-    for uu in (iu[i], iu[i + 1]):  # c_i depends on u_i and u_{i+1} through -h/2 df/du = (0, h/2, 0)
-        template[flat(il[i, 1], uu)] = 0.5 * d.h
-        template[flat(uu, il[i, 1])] = 0.5 * d.h
-    return flat(rows, cols), template, iu, ix, il
+    template[flat(il[:, 1], il[:, 1])] = -(q[:-1] + q[1:])
+    template[flat(il[:-1, 1], il[1:, 1])] = -q[1:-1]
+    template[flat(il[1:, 1], il[:-1, 1])] = -q[1:-1]
+    return flat(rows, cols), template, ix, il
+
+
+@dataclass(frozen=True, eq=False)
+class KKTFactor:
+    """The banded LU factors (LAPACK gbtrf) of one KKT matrix, for further right-hand sides
+    (:func:`kkt_resolve`; a triangular solve costs about a third of a factorisation)."""
+
+    lu: Array
+    piv: Array
 
 
 def kkt_solve(
-    d: Discretisation, lin: Linearisation, H: Array, r_u: Array, r_x: Array, r_c: Array
-) -> tuple[Array, Array, Array]:
+    d: Discretisation,
+    lin: Linearisation,
+    H: Array,
+    r_u: Array,
+    r_x: Array,
+    r_c: Array,
+    *,
+    keep_factor: bool = False,
+) -> tuple[Array, Array, Array] | tuple[Array, Array, Array, KKTFactor]:
     """Solve the KKT system ``[[H, C^T], [C, 0]] (dx, du, dlambda) = (r_x, r_u, r_c)``.
 
     ``H``: the per-node state blocks of the Lagrangian Hessian (the control block is diag(w));
     ``C = dc/d(x, u)`` from ``lin``; ``r_u`` (N,), ``r_x`` (N, 3) (row 0 unused: x_0 is
-    fixed), ``r_c`` (N-1, 3). Unknown ordering
-    ``[u_0, lam_0, (x_j, u_j, lam_j)_{j=1..N-2}, x_{N-1}, u_{N-1}]`` keeps the symmetric
-    indefinite matrix banded (half-bandwidth 6); it is one vectorised scatter into a precomputed
-    layout (:attr:`Discretisation.kkt_pattern`) and one LAPACK banded LU (gbsv, partial
-    pivoting). Returns (du (N,), dx (N, 3) with dx_0 = 0, dlambda (N-1, 3)).
+    fixed), ``r_c`` (N-1, 3). The control block diag(w) is eliminated first (Schur
+    complement on the lambda_2 unknowns: 6N - 6 unknowns instead of 7N - 6); the ordering
+    ``[lam_0, (x_j, lam_j)_{j=1..N-2}, x_{N-1}]`` keeps the symmetric indefinite matrix banded
+    (half-bandwidth 6); it is one vectorised scatter into a precomputed layout
+    (:attr:`Discretisation.kkt_pattern`) and one LAPACK banded LU (gbsv, partial pivoting). Returns (du (N,), dx (N, 3) with dx_0 = 0, dlambda (N-1, 3)), and with
+    ``keep_factor`` also the :class:`KKTFactor` (gbtrf + gbtrs instead of gbsv).
     """
-    n = d.nodes
-    flat, template, iu, ix, il = d.kkt_pattern
+    flat, template, _, _ = d.kkt_pattern
     blocks = _step_blocks(d, lin.A).ravel()
     buf = template.copy()
     buf[flat] = np.concatenate([H[1:].ravel(), blocks, blocks])
-    rhs = np.empty(7 * n - 6)
-    rhs[iu] = r_u
+    ab = _band_matrix(buf, 19)
+    if not keep_factor:
+        return _kkt_unpack(d, _band_solve(ab, 6, 6, _kkt_rhs(d, r_u, r_x, r_c)), r_u)
+    lu, piv, info = _GBTRF(ab, 6, 6, overwrite_ab=True)
+    if info != 0:
+        raise SingularSystemError(f"banded factorisation failed (LAPACK gbtrf info = {info})")
+    factor = KKTFactor(lu, piv)
+    return (*kkt_resolve(d, factor, r_u, r_x, r_c), factor)
+
+
+def kkt_resolve(
+    d: Discretisation, factor: KKTFactor, r_u: Array, r_x: Array, r_c: Array
+) -> tuple[Array, Array, Array]:
+    """:func:`kkt_solve` with a new right-hand side and the factors of an earlier matrix."""
+    sol, info = _GBTRS(factor.lu, 6, 6, _kkt_rhs(d, r_u, r_x, r_c), factor.piv, overwrite_b=True)
+    if info != 0:
+        raise SingularSystemError(f"banded solve failed (LAPACK gbtrs info = {info})")
+    return _kkt_unpack(d, sol, r_u)
+
+
+def _kkt_rhs(d: Discretisation, r_u: Array, r_x: Array, r_c: Array) -> Array:
+    """Right-hand side of the reduced (control-eliminated) KKT system."""
+    _, _, ix, il = d.kkt_pattern
+    rhs = np.empty(6 * d.nodes - 6)
     rhs[ix[1:]] = r_x[1:]
     rhs[il] = r_c
-    sol = _band_solve(_band_matrix(buf, 19), 6, 6, rhs)
-    dx = np.zeros((n, 3))
+    ru_w = r_u / d.w
+    rhs[il[:, 1]] -= 0.5 * d.h * (ru_w[:-1] + ru_w[1:])
+    return rhs
+
+
+def _kkt_unpack(d: Discretisation, sol: Array, r_u: Array) -> tuple[Array, Array, Array]:
+    """(du, dx, dlambda) from the reduced solution (du recovered from the eliminated rows)."""
+    _, _, ix, il = d.kkt_pattern
+    dx = np.zeros((d.nodes, 3))
     dx[1:] = sol[ix[1:]]
-    return sol[iu], dx, sol[il]
+    dlam = sol[il]
+    s = r_u.copy()
+    s[:-1] -= 0.5 * d.h * dlam[:, 1]
+    s[1:] -= 0.5 * d.h * dlam[:, 1]
+    return s / d.w, dx, dlam
 
 
 def kkt_newton_step(

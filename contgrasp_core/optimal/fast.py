@@ -4,15 +4,20 @@ A cold start runs three stages (``docs/optimal.md`` has the derivation and measu
 
 1. coarse grid (about N/8 nodes): full-space SQP steps (Newton on the KKT conditions, no line
    search) from the initial guess; each costs one linearisation and one banded KKT solve. The
-   steps are trusted only while their predicted change contracts; otherwise the damped reduced
-   Newton iterations below globalise the coarse problem first (to ``coarse_tol``), then SQP;
+   steps are trusted only while their predicted change contracts; they stop at a predicted
+   change of ``COARSE_SWITCH`` J (the coarse solution only seeds the fine grid); otherwise the
+   damped reduced Newton iterations below globalise the coarse problem first (to
+   ``coarse_tol``), then SQP;
 2. fine grid: SQP steps from the interpolated coarse (kappa, states, multipliers) until the
-   predicted change is deep in Newton's quadratic region, then c = 0 restored exactly;
+   predicted change is deep in Newton's quadratic region, then c = 0 restored exactly (chord
+   trajectory Newton); the KKT factors of the last step are kept;
 3. fine grid: reduced-space Newton iterations that certify the optimum and, if needed, finish:
    the exact discrete adjoint gives dJ/dkappa (including the dependence of kappa_o on the
    control through s_o) and the costates; the Newton direction solves the banded KKT system
    with the exact Hessian (Gauss-Newton if it is not a descent direction); an Armijo line
-   search integrates every trial control (iterates satisfy the dynamics).
+   search integrates every trial control (iterates satisfy the dynamics). With ``cost_tol`` the
+   first check reuses the kept KKT factors (a chord step, not taken); a new matrix is formed
+   only if that check fails.
 
 Stopping rules (reduced Newton, at a feasible iterate with exact costates): the discrete PMP
 residual ``max_s |kappa + p_2| <= tol``, or, with ``cost_tol``, the Newton decrement
@@ -35,6 +40,8 @@ from numpy.typing import NDArray
 from ..errors import InvalidParameterError
 from .discrete import (
     ForwardSolveError,
+    KKTFactor,
+    Linearisation,
     PenaltyState,
     SingularSystemError,
     Trajectory,
@@ -42,6 +49,7 @@ from .discrete import (
     adjoint,
     evaluate,
     kkt_newton_step,
+    kkt_resolve,
     kkt_solve,
     lagrangian_gradient,
     lagrangian_hessian_blocks,
@@ -53,8 +61,10 @@ from .problem import GraspProblem, GraspResult, make_result
 
 __all__ = ["solve"]
 
-COARSE_SWITCH = 3e-4
-"""SQP switch on the coarse grid: its solution only seeds the fine solve (see :func:`_sqp_steps`)."""
+COARSE_SWITCH = 3e-2
+"""SQP switch on the coarse grid: its solution only seeds the fine solve (see :func:`_sqp_steps`);
+the fine grid's first step changes J by 2-5e-2 J on the Fig. 2 problems anyway (the coarse-to-fine
+discretisation difference), so tighter coarse solves buy nothing."""
 FINE_SWITCH = 3e-5
 """SQP switch on the fine grid when only the residual tolerance ``tol`` is given."""
 
@@ -114,6 +124,8 @@ def solve(
         cost_tol=cost_tol,
     )
     pen = PenaltyState.zero(n, problem.penalty)
+    start_traj: Trajectory | None = None
+    chord: KKTFactor | None = None
     if isinstance(initial, GraspResult) or not 3 <= n_coarse < n // 2:
         u, guess = initial_control(problem, initial)
         if isinstance(initial, GraspResult) and initial.multipliers is not None and initial.multipliers.shape == (n, 4):
@@ -122,15 +134,17 @@ def solve(
         cp = replace(problem, disc=d.coarsened(n_coarse))
         pen_c = PenaltyState.zero(n_coarse, problem.penalty)
         u_c, guess_c = initial_control(cp, initial)
-        # states and adjoint of the initial guess (no iteration), then SQP steps from there
-        # (exact Hessian only: the Gauss-Newton option runs the damped iterations throughout)
-        start = _newton(cp, u_c, guess_c, pen_c, **{**opts, "tol": np.inf})
+        # states and adjoint of the initial guess (no iteration, for the penalty state pen_c the
+        # SQP steps use), then SQP steps from there (exact Hessian only: the Gauss-Newton
+        # option runs the damped iterations throughout)
+        x_c, lin_c = initial_states(cp.disc, u_c, guess_c)
+        s0 = evaluate(cp.disc, u_c, x_c, pen_c, lin_c)
+        lam_s0, _ = adjoint(cp.disc, s0, pen_c)
         exact = hessian == "exact"
-        s0 = start.traj
-        u_c, x_c, lam_c, coarse_sqp, ok = (
-            _sqp_steps(cp, s0.u, s0.x, start.lam, pen_c, cost_bound=s0.total, switch=COARSE_SWITCH)
+        u_c, x_c, lam_c, coarse_sqp, ok, _ = (
+            _sqp_steps(cp, s0.u, s0.x, lam_s0, pen_c, cost_bound=s0.total, switch=COARSE_SWITCH, lin0=s0.lin)
             if exact
-            else (s0.u, s0.x, start.lam, 0, False)
+            else (s0.u, s0.x, lam_s0, 0, False, None)
         )
         if not ok:
             # globalise with the damped reduced Newton iterations, then SQP again; the coarse
@@ -139,10 +153,10 @@ def solve(
             pre = _newton(cp, u_c, x_c, pen_c, **{**opts, "tol": max(tol, coarse_tol), "cost_tol": None})
             coarse_its = pre.iterations
             p0 = pre.traj
-            u_c, x_c, lam_c, coarse_sqp, _ = (
-                _sqp_steps(cp, p0.u, p0.x, pre.lam, pre.pen, cost_bound=p0.total, switch=COARSE_SWITCH)
+            u_c, x_c, lam_c, coarse_sqp, _, _ = (
+                _sqp_steps(cp, p0.u, p0.x, pre.lam, pre.pen, cost_bound=p0.total, switch=COARSE_SWITCH, lin0=p0.lin)
                 if exact
-                else (p0.u, p0.x, pre.lam, 0, False)
+                else (p0.u, p0.x, pre.lam, 0, False, None)
             )
         t_c, t_f = cp.s / cp.s[-1], problem.s / problem.s[-1]
         u = np.interp(t_f, t_c, u_c)
@@ -154,8 +168,10 @@ def solve(
             # decrement of about p^2 (measured constant <= 1): stop the SQP steps where the
             # certification below is expected to pass
             switch = FINE_SWITCH if cost_tol is None else min(np.sqrt(cost_tol), 1e-3)
-            u, guess, _, sqp_steps, _ = _sqp_steps(problem, u, guess, lam, pen, switch=switch)
-    out = _newton(problem, u, guess, pen, **opts)
+            u, guess, _, sqp_steps, ok, last = _sqp_steps(problem, u, guess, lam, pen, switch=switch, keep_factor=cost_tol is not None)
+            if ok:
+                start_traj, chord = last
+    out = _newton(problem, u, guess, pen, **opts, start=start_traj, chord=chord)
     wall = time.perf_counter() - t_start
     return make_result(
         problem,
@@ -204,11 +220,23 @@ def _newton(
     constraint_tol: float,
     hessian: str,
     cost_tol: float | None,
+    start: Trajectory | None = None,
+    chord: KKTFactor | None = None,
 ) -> _NewtonOutcome:
-    """Augmented-Lagrangian outer loop around damped Newton iterations (module docstring)."""
+    """Augmented-Lagrangian outer loop around damped Newton iterations (module docstring).
+
+    ``start``: the trajectory of (u, guess) when it is already known to satisfy the dynamics
+    (evaluated with ``pen``). ``chord``: KKT factors of a nearby point (the last fine SQP step);
+    the first stopping check by the Newton decrement then uses them (a chord step, the step is
+    not taken) and falls back to a new factorisation when the check does not pass.
+    """
     d = problem.disc
     n = d.nodes
-    x, lin = initial_states(d, u, guess)
+    if start is not None:
+        traj = start
+    else:
+        x, lin = initial_states(d, u, guess)
+        traj = evaluate(d, u, x, pen, lin)
     hist: dict[str, list[float]] = {"cost": [], "residual": [], "step": [], "exact_hessian": []}
     iterations = 0
     converged = False
@@ -216,7 +244,6 @@ def _newton(
     prev_violation = np.inf
     lam = np.zeros((n - 1, 3))
     res = np.inf
-    traj = evaluate(d, u, x, pen, lin)
     for outer in range(max_outer):
         if outer:  # new multipliers / penalty weight
             traj = evaluate(d, traj.u, traj.x, pen, traj.lin)
@@ -229,6 +256,15 @@ def _newton(
             if res <= tol:
                 inner_ok = True
                 break
+            if chord is not None and cost_tol is not None and use_exact and not outer:
+                # decrement with the factors of the last SQP step (no new factorisation)
+                du, _, _ = kkt_resolve(d, chord, -grad, np.zeros((n, 3)), np.zeros((n - 1, 3)))
+                slope = float(grad @ du)
+                if 0.0 < -0.5 * slope <= cost_tol * abs(traj.total):
+                    predicted = -0.5 * slope
+                    inner_ok = True
+                    break
+            chord = None
             H = lagrangian_hessian_blocks(d, traj.x, lam, pen, gauss_newton=not use_exact, lin=traj.lin)
             du, dx = kkt_newton_step(d, traj, lam, grad, H)
             slope = float(grad @ du)
@@ -295,7 +331,9 @@ def _sqp_steps(
     cost_bound: float = np.inf,
     switch: float = FINE_SWITCH,
     max_steps: int = 6,
-) -> tuple[Array, Array, Array, int, bool]:
+    keep_factor: bool = False,
+    lin0: Linearisation | None = None,
+) -> tuple[Array, Array, Array, int, bool, tuple[Trajectory, KKTFactor | None] | None]:
     """Full Newton steps on the KKT conditions (SQP without line search) from (x, u, lambda),
     which need not satisfy the dynamics (e.g. the interpolated coarse solution): each step costs
     one linearisation and one KKT solve (:func:`kkt_solve`, the defects c in the right-hand
@@ -307,7 +345,10 @@ def _sqp_steps(
     ``cost_bound``. The steps are only trusted while they contract (each predicted change at
     most half the previous one) and the linearisation stays regular (finite, 1 + rho kappa_o
     > 0); otherwise, or if the restoration fails, the starting point is returned with ``False``.
-    Returns (u, x, lambda, steps, success), x satisfying the dynamics on success.
+    Returns (u, x, lambda, steps, success, last), x satisfying the dynamics on success; ``last``
+    is then (the evaluated trajectory of (u, x), the KKT factors of the last step if
+    ``keep_factor`` else None), otherwise None. ``lin0``: the dynamics linearised at the
+    starting (u, x) when the caller has them.
     """
     d = problem.disc
     u0, x0, lam0 = u, x, lam
@@ -315,13 +356,20 @@ def _sqp_steps(
     x[0] = d.x0
     prev = np.inf
     for steps in range(1, max_steps + 1):
-        lin = linearise(x, u, d.table)
+        if lin0 is not None and steps == 1:
+            lin = lin0  # computed at the same (u, x): x[0] = x0 already
+        else:
+            lin = linearise(x, u, d.table)
         if not (np.all(np.isfinite(lin.f)) and np.all(lin.D > 0.0)):
             break
         Lu, Lx, c = lagrangian_gradient(d, lin, lam, pen)
         H = lagrangian_hessian_blocks(d, x, lam, pen, gauss_newton=False, lin=lin)
         try:
-            du, dx, dlam = kkt_solve(d, lin, H, -Lu, -Lx, -c)
+            if keep_factor:
+                du, dx, dlam, factor = kkt_solve(d, lin, H, -Lu, -Lx, -c, keep_factor=True)
+            else:
+                du, dx, dlam = kkt_solve(d, lin, H, -Lu, -Lx, -c)
+                factor = None
         except SingularSystemError:
             break
         predicted = 0.5 * abs(float(Lu @ du + np.sum(Lx[1:] * dx[1:])))
@@ -332,13 +380,14 @@ def _sqp_steps(
         u, x, lam = u + du, x + dx, lam + dlam
         if predicted <= switch * scale:
             try:
-                x, lin = solve_states_linearised(d, u, x, march=False)
+                x, lin = solve_states_linearised(d, u, x, march=False, chord=True)
             except ForwardSolveError:
                 break
-            if cost_bound == np.inf or evaluate(d, u, x, pen, lin).total < cost_bound:
-                return u, x, lam, steps, True
+            traj = evaluate(d, u, x, pen, lin)
+            if traj.total < cost_bound:
+                return u, x, lam, steps, True, (traj, factor)
             break
-    return u0, x0, lam0, 0, False
+    return u0, x0, lam0, 0, False, None
 
 
 def _line_search(d, traj, du, dx, slope, pen):  # type: ignore[no-untyped-def]

@@ -40,32 +40,44 @@ def approach_control(problem: GraspProblem) -> tuple[Array, Array]:
     L = float(d.s[-1])
     k_alpha, c_rho = 20.0 / L, 6.0 / L
     rho, alpha, sig = (float(v) for v in d.x0)
-    out = np.empty(d.nodes)
-    xs = np.empty((d.nodes, 3))
     rho_d, alpha_d = d.rho_d.tolist(), d.alpha_d.tolist()
     h = d.h
-
-    def rhs(r: float, a: float, sg: float, i: int) -> tuple[float, float, float, float]:
-        sm = sg % length
-        j = min(int(sm / step), ncell - 1)
+    h2 = 0.5 * h
+    lo, hi = 0.3, math.pi - 0.3
+    sin, cos = math.sin, math.cos
+    last = ncell - 1
+    n = d.nodes
+    kaps: list[float] = []
+    states: list[tuple[float, float, float]] = []
+    # Heun's method on the approach law, the right-hand side written out twice (pure-Python
+    # scalars: this loop is call-overhead bound)
+    for i in range(n):
+        sm = sig % length
+        j = min(int(sm / step), last)
         t = sm - j * step
         k = ((c0[j] * t + c1[j]) * t + c2[j]) * t + c3[j]
-        D = max(1.0 + r * k, 0.05)
-        g = math.sin(a) / D
-        a_ref = min(max(alpha_d[i] - c_rho * (r - rho_d[i]), 0.3), math.pi - 0.3)
-        kap = k * g + k_alpha * (a - a_ref)
-        return kap, -math.cos(a), -kap + k * g, g
-
-    for i in range(d.nodes):
-        kap, f0, f1, f2 = rhs(rho, alpha, sig, i)
-        out[i] = kap
-        xs[i] = (rho, alpha, sig)
-        if i + 1 < d.nodes:
-            _, g0, g1, g2 = rhs(rho + h * f0, alpha + h * f1, sig + h * f2, i + 1)
-            rho += 0.5 * h * (f0 + g0)
-            alpha += 0.5 * h * (f1 + g1)
-            sig += 0.5 * h * (f2 + g2)
-    return out, xs
+        D = max(1.0 + rho * k, 0.05)
+        g = sin(alpha) / D
+        a_ref = min(max(alpha_d[i] - c_rho * (rho - rho_d[i]), lo), hi)
+        kap = k * g + k_alpha * (alpha - a_ref)
+        kaps.append(kap)
+        states.append((rho, alpha, sig))
+        if i + 1 == n:
+            break
+        f0, f1, f2 = -cos(alpha), -kap + k * g, g
+        r1, a1, s1 = rho + h * f0, alpha + h * f1, sig + h * f2
+        sm = s1 % length
+        j = min(int(sm / step), last)
+        t = sm - j * step
+        k = ((c0[j] * t + c1[j]) * t + c2[j]) * t + c3[j]
+        D = max(1.0 + r1 * k, 0.05)
+        g = sin(a1) / D
+        a_ref = min(max(alpha_d[i + 1] - c_rho * (r1 - rho_d[i + 1]), lo), hi)
+        kap1 = k * g + k_alpha * (a1 - a_ref)
+        rho += h2 * (f0 + -cos(a1))
+        alpha += h2 * (f1 + (-kap1 + k * g))
+        sig += h2 * (f2 + g)
+    return np.array(kaps), np.array(states)
 
 
 def initial_control(problem: GraspProblem, initial: Any) -> tuple[Array, Array | None]:
