@@ -100,9 +100,18 @@ class Boundary:
         self.length = float(self._S[-1])
         if not np.isfinite(self.length) or self.length <= 0.0:
             raise DegenerateBoundaryError(f"boundary '{kind}' has non-positive length {self.length}")
+        if not 1e-100 < self.length < 1e100:
+            raise DegenerateBoundaryError(
+                f"boundary '{kind}' has length {self.length:.3g}; supported sizes are 1e-100 .. 1e100 (choose units)"
+            )
         t_tab = np.linspace(0.0, TWO_PI, _N_TABLE + 1)
         s_tab = self._s_of_t(t_tab)
         s_tab[-1] = self.length
+        if not (np.all(np.isfinite(s_tab)) and np.all(np.diff(s_tab) > 0.0)):
+            raise DegenerateBoundaryError(
+                f"boundary '{kind}' cannot be parameterised by arclength in floating point "
+                f"(length {self.length:.3g}): its size is out of range or its speed vanishes"
+            )
         self._t_of_s_guess = CubicSpline(s_tab, t_tab)
         d1 = curve(t_tab, 1)
         phi_tab = np.unwrap(np.arctan2(d1[:, 1], d1[:, 0]))
@@ -451,6 +460,8 @@ def from_points(
         raise DegenerateBoundaryError(f"points must be an (n, 2) array, got shape {p.shape}")
     if not np.all(np.isfinite(p)):
         raise DegenerateBoundaryError("points contain NaN or infinite values")
+    if len(p) < 5:
+        raise DegenerateBoundaryError(f"need at least 5 distinct points, got {len(p)}")
     size = float(np.max(np.ptp(p, axis=0)))
     if size <= 0.0:
         raise DegenerateBoundaryError("all points coincide")
