@@ -28,6 +28,7 @@ __all__ = [
     "adaptive_mu2",
     "curvature_feedback",
     "feedback_couple",
+    "feedback_couple_gradient",
     "equilibrium_distance",
     "lyapunov",
     "lyapunov_rate",
@@ -109,6 +110,27 @@ def feedback_couple(
     if np.any(~np.isfinite(ei)) or np.any(ei <= 0):
         raise InvalidParameterError("bending_stiffness EI must be finite and > 0 (N m^2)")
     return -ei * curvature_feedback(rho, alpha, mu1, mu2, length_unit=length_unit)
+
+
+def feedback_couple_gradient(
+    rho: ArrayLike,
+    alpha: ArrayLike,
+    bending_stiffness: ArrayLike,
+    mu1: ArrayLike,
+    mu2: ArrayLike,
+    *,
+    length_unit: float = CENTIMETRE,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Partial derivatives of eq. dynamic_feedback: ``du/drho = -EI sin(alpha) / l^2`` (N m/m)
+    and ``du/dalpha = -EI (mu1 sin(alpha) + (rho/l - mu2) cos(alpha)) / l`` (N m/rad), with
+    ``l`` the law's length unit."""
+    lu = _check_unit(length_unit)
+    ei = np.asarray(bending_stiffness, dtype=float)
+    rho, alpha = np.asarray(rho, dtype=float), np.asarray(alpha, dtype=float)
+    sa, ca = np.sin(alpha), np.cos(alpha)
+    dk_da = (np.asarray(mu1, dtype=float) * sa + (rho / lu - np.asarray(mu2, dtype=float)) * ca) / lu
+    dk_dr = sa / lu**2
+    return -ei * dk_dr, -ei * dk_da
 
 
 def _check_prop1(kbar: float, mu2: float) -> None:

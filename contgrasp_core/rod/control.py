@@ -18,12 +18,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from contgrasp_core.feedback import CENTIMETRE, adaptive_mu2, feedback_couple
+from contgrasp_core.feedback import CENTIMETRE, adaptive_mu2, feedback_couple, feedback_couple_gradient
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["FeedbackGains", "paper_gains", "StateFeedback"]
+__all__ = ["FeedbackGains", "paper_gains", "StateFeedback", "sense_joints", "joint_couple_jacobian"]
 
 
 @dataclass(frozen=True)
@@ -61,26 +61,37 @@ class StateFeedback:
         of the foot's tangent angle; exactness is not needed in a Newton matrix). ``nodes``
         (N+1, 2) and element ``normals`` (N, 2) may be passed when already computed."""
         m, g = self.model, self.gains
-        x = (chain.nodes(m, theta) if nodes is None else nodes)[:-1]
-        th_n = chain.node_angles(m, theta)[:-1]
-        pr = self.obstacle.project(x)
-        alpha = pr.phi + 0.5 * np.pi - th_n
-        rho = pr.signed_distance
+        rho, alpha, normal_out = sense_joints(m, self.obstacle, theta, nodes)
         ei = m.joint_ei
         u = feedback_couple(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         if not jacobian:
             return u, None
-        lu = g.length_unit
-        sa, ca = np.sin(alpha), np.cos(alpha)
-        dk_da = (np.asarray(g.mu1) * sa + (rho / lu - np.asarray(g.mu2)) * ca) / lu
-        dk_dr = sa / lu**2
-        n = m.n_elements
+        g_rho, g_alpha = feedback_couple_gradient(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         b = chain.frames(theta)[1] if normals is None else normals
-        # d rho_k / d theta_l = h n_k . b_l for l < k (node k moves with the elements before it)
-        du = (-ei * dk_dr * m.h)[:, None] * np.tril(pr.normal_out @ b.T, -1)
-        # d alpha_k / d theta = -d theta_node_k / d theta; theta_node_k = (theta_{k-1} + theta_k)/2
-        coef = ei * dk_da * 0.5  # -EI * dk/dalpha * (-1/2)
-        k = np.arange(1, n)
-        du[k, k] += coef[1:]
-        du[k, k - 1] += coef[1:]
-        return u, du
+        return u, joint_couple_jacobian(m, g_rho, g_alpha, normal_out, b)
+
+
+def sense_joints(model: RodModel, obstacle: Obstacle, theta: np.ndarray,
+                 nodes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rho, alpha, outward normal at the foot) at the N joints (eq. rho_alpha_definition);
+    alpha is not wrapped (it is used in differences and trigonometric functions)."""
+    x = (chain.nodes(model, theta) if nodes is None else nodes)[:-1]
+    th_n = chain.node_angles(model, theta)[:-1]
+    pr = obstacle.project(x)
+    return pr.signed_distance, pr.phi + 0.5 * np.pi - th_n, pr.normal_out
+
+
+def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarray, normal_out: np.ndarray,
+                          b: np.ndarray) -> np.ndarray:
+    """``du/dtheta`` (N, N) of a joint couple with partials ``g_rho``, ``g_alpha`` (N,).
+
+    ``d rho_k / d theta_l = h n_k . b_l`` for ``l < k`` (node k moves with the elements before it);
+    ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2`` (the node angle is the mean of
+    the adjacent elements). The motion of the foot's tangent angle is neglected.
+    """
+    du = (g_rho * model.h)[:, None] * np.tril(normal_out @ b.T, -1)
+    coef = -0.5 * g_alpha
+    k = np.arange(1, model.n_elements)
+    du[k, k] += coef[1:]
+    du[k, k - 1] += coef[1:]
+    return du

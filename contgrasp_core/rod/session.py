@@ -27,9 +27,10 @@ from contgrasp_core.arm import ArmShape
 from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse
 from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.feedback import feedback_couple
+from contgrasp_core.feedback import feedback_couple, feedback_couple_gradient
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, FeedbackGains
+from contgrasp_core.rod.control import joint_couple_jacobian, sense_joints
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
@@ -190,8 +191,7 @@ def feedback_at_joints(model: RodModel, gains: FeedbackGains, rho: Array, alpha:
     r, a = rho[:-1], alpha[:-1]
     lu, ei = gains.length_unit, model.joint_ei
     u = feedback_couple(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
-    g_rho = -ei * np.sin(a) / lu**2
-    g_alpha = -ei * (np.asarray(gains.mu1) * np.sin(a) + (r / lu - np.asarray(gains.mu2)) * np.cos(a)) / lu
+    g_rho, g_alpha = feedback_couple_gradient(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
     return FeedbackExpansion(u=u, rho_ref=r, alpha_ref=a, g_rho=g_rho, g_alpha=g_alpha)
 
 
@@ -217,20 +217,13 @@ class HeldExpansion:
     ) -> tuple[Array, Array | None]:
         """Deviation of the couple from the held value (N,) and its derivative (N, N)."""
         m, e = self.model, self.expansion
-        x = (chain.nodes(m, theta) if nodes is None else nodes)[:-1]
-        th_n = chain.node_angles(m, theta)[:-1]
-        pr = self.obstacle.project(x)
-        d_alpha = np.mod(pr.phi + 0.5 * np.pi - th_n - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
-        du = e.g_rho * (pr.signed_distance - e.rho_ref) + e.g_alpha * d_alpha
+        rho, alpha, normal_out = sense_joints(m, self.obstacle, theta, nodes)
+        d_alpha = np.mod(alpha - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
+        du = e.g_rho * (rho - e.rho_ref) + e.g_alpha * d_alpha
         if not jacobian:
             return du, None
         b = chain.frames(theta)[1] if normals is None else normals
-        # d rho_k / d theta_l = h n_k . b_l for l < k; d alpha_k / d theta_{k-1}, theta_k = -1/2
-        jac = (e.g_rho * m.h)[:, None] * np.tril(pr.normal_out @ b.T, -1)
-        k = np.arange(1, m.n_elements)
-        jac[k, k] -= 0.5 * e.g_alpha[1:]
-        jac[k, k - 1] -= 0.5 * e.g_alpha[1:]
-        return du, jac
+        return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, normal_out, b)
 
 
 def boundary_from_spec(kind: str, params: list[float] | Array) -> Boundary:
