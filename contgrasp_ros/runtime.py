@@ -82,15 +82,17 @@ class DropCounter:
 
 class ObjectTracker:
     """Keeps the latest valid object boundary from the transient-local object topic; invalid
-    boundaries are dropped and counted (the previous one stays in use)."""
+    boundaries are dropped and counted (the previous one stays in use). ``on_change`` is
+    called after a new boundary was accepted."""
 
-    def __init__(self, node: Node, drops: DropCounter) -> None:
+    def __init__(self, node: Node, drops: DropCounter, on_change: Callable[[], None] | None = None) -> None:
         from contgrasp_msgs.msg import ObjectBoundary
         from contgrasp_ros import qos
 
         self.boundary: Boundary | None = None
         self._drops = drops
         self._topic = qos.TOPIC_OBJECT
+        self._on_change = on_change
         node.create_subscription(ObjectBoundary, qos.TOPIC_OBJECT, self._on_object, qos.LATCHED)
 
     def _on_object(self, msg: object) -> None:
@@ -100,6 +102,9 @@ class ObjectTracker:
             self.boundary = boundary_from_msg(msg)  # type: ignore[arg-type]
         except ContgraspError as exc:
             self._drops.drop(self._topic, str(exc))
+            return
+        if self._on_change is not None:
+            self._on_change()
 
 
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:

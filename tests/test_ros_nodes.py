@@ -262,3 +262,24 @@ def test_rod_simulator_free_running_advances_on_wall_time(graph) -> None:  # typ
     probe.create_subscription(RodState, qos.TOPIC_ROD_STATE, states.append, qos.STREAM)
     assert spin_until(ex, lambda: len(states) >= 5, timeout=20)
     assert [m.step for m in states[-3:]] == sorted(m.step for m in states[-3:])
+
+
+def test_boundary_sensor_senses_a_state_that_arrived_before_the_object(graph) -> None:  # type: ignore[no-untyped-def]
+    """The latched object can arrive after the first rod state; that state is sensed then."""
+    ctx, ex, add = graph
+    sensor = add(BoundarySensor(context=ctx))
+    probe = add(rclpy.create_node("probe", context=ctx))
+    rod_pub = probe.create_publisher(RodState, qos.TOPIC_ROD_STATE, qos.STREAM)
+    got: list[ContactState] = []
+    probe.create_subscription(ContactState, qos.TOPIC_CONTACT, got.append, qos.STREAM)
+    assert spin_until(ex, lambda: rod_pub.get_subscription_count() > 0 and probe.count_publishers(qos.TOPIC_CONTACT) > 0)
+    obj = circle(0.025, (0.08, 0.08))
+    shape = arm_near(obj, BasePose(0.0, 0.0, 0.0))
+    rod_pub.publish(rod_msg(0, shape, 0.01, 0.0))
+    assert spin_until(ex, lambda: sensor.waiting is not None)
+    assert got == []
+    obj_pub = probe.create_publisher(ObjectBoundary, qos.TOPIC_OBJECT, qos.LATCHED)
+    obj_pub.publish(boundary_to_msg(obj, Header(frame_id="world")))
+    assert spin_until(ex, lambda: len(got) == 1)
+    assert got[0].step == 0 and sensor.drops.total == 0
+    np.testing.assert_array_equal(got[0].rho, sense(shape, obj, 0.01).rho)

@@ -25,7 +25,11 @@ class BoundarySensor(Node):
         super().__init__("boundary_sensor", **node_kwargs)  # type: ignore[arg-type]
         declare(self, "contact_tolerance", 0.0, "contact where delta >= -tolerance [m]", lo=0.0, hi=1.0)
         self.drops = DropCounter(self)
-        self.object = ObjectTracker(self, self.drops)
+        # The latched object and the first rod state race (e.g. on one executor): a state that
+        # arrives first is kept and sensed as soon as the object is there, so the lock-step
+        # simulator is not left waiting for its first couple.
+        self.waiting: RodState | None = None
+        self.object = ObjectTracker(self, self.drops, on_change=self._sense_waiting)
         self.sensed = 0
         self.pub = self.create_publisher(ContactState, qos.TOPIC_CONTACT, qos.STREAM)
         self.create_subscription(RodState, qos.TOPIC_ROD_STATE, self.on_rod_state, qos.STREAM)
@@ -33,7 +37,7 @@ class BoundarySensor(Node):
     def on_rod_state(self, msg: RodState) -> None:
         boundary = self.object.boundary
         if boundary is None:
-            self.drops.drop(qos.TOPIC_ROD_STATE, "no object boundary received yet")
+            self.waiting = msg
             return
         try:
             rod = rod_state_arrays(msg)
@@ -45,6 +49,11 @@ class BoundarySensor(Node):
             return
         self.pub.publish(contact_to_msg(state, msg.header, msg.step))
         self.sensed += 1
+
+    def _sense_waiting(self) -> None:
+        msg, self.waiting = self.waiting, None
+        if msg is not None:
+            self.on_rod_state(msg)
 
 
 def main(args: list[str] | None = None) -> int:
