@@ -2,12 +2,16 @@
 
 Every ``*_arrays`` function validates what it receives (array lengths, finiteness, a strictly
 increasing arclength grid) and raises :class:`MessageError` with the reason, so nodes can drop
-a malformed message, count it and keep running.
+a malformed message, count it and keep running. The readers only use attribute access, so they
+work as well on messages decoded from a recording without ROS (``mcap_ros2`` / ``rosbags``
+objects); the message classes are imported only by the ``*_to_msg`` builders. This module
+therefore imports without a ROS installation (offline analysis, ``contgrasp analyze``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,11 +21,13 @@ from contgrasp_core.contact import ContactState
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.quality import GraspQuality
 from contgrasp_core.rod.session import FeedbackExpansion, boundary_from_spec
-from contgrasp_msgs.msg import ContactState as ContactStateMsg
-from contgrasp_msgs.msg import CoupleControl, ObjectBoundary
-from contgrasp_msgs.msg import GraspQuality as GraspQualityMsg
-from contgrasp_msgs.msg import RodState as RodStateMsg
-from std_msgs.msg import Header
+
+if TYPE_CHECKING:
+    from contgrasp_msgs.msg import ContactState as ContactStateMsg
+    from contgrasp_msgs.msg import CoupleControl, ObjectBoundary
+    from contgrasp_msgs.msg import GraspQuality as GraspQualityMsg
+    from contgrasp_msgs.msg import RodState as RodStateMsg
+    from std_msgs.msg import Header
 
 __all__ = [
     "MessageError",
@@ -92,6 +98,8 @@ def rod_state_arrays(msg: RodStateMsg) -> RodArrays:
 
 def contact_to_msg(state: ContactState, header: Header, step: int) -> ContactStateMsg:
     """ContactState message of a sensed contact state."""
+    from contgrasp_msgs.msg import ContactState as ContactStateMsg
+
     return ContactStateMsg(
         header=header,
         step=int(step),
@@ -149,6 +157,8 @@ def contact_arrays(msg: ContactStateMsg) -> ContactArrays:
 def couple_to_msg(s: Array, couple: Array | FeedbackExpansion, header: Header, step: int) -> CoupleControl:
     """CoupleControl message: the couple u (N m) at the joint arclengths s, with the law's
     first-order expansion when given a :class:`FeedbackExpansion`."""
+    from contgrasp_msgs.msg import CoupleControl
+
     msg = CoupleControl(header=header, step=int(step), s=np.asarray(s).tolist())
     if isinstance(couple, FeedbackExpansion):
         msg.u = couple.u.tolist()
@@ -172,6 +182,8 @@ def couple_arrays(msg: CoupleControl) -> tuple[int, Array, Array | FeedbackExpan
 
 def quality_to_msg(q: GraspQuality, header: Header, step: int, tol: float) -> GraspQualityMsg:
     """GraspQuality message of Q1..Q3 and W."""
+    from contgrasp_msgs.msg import GraspQuality as GraspQualityMsg
+
     return GraspQualityMsg(
         header=header,
         step=int(step),
@@ -204,6 +216,8 @@ def boundary_to_msg(boundary: Boundary, header: Header, samples: int = 256) -> O
         if isinstance(val, int | float) and not isinstance(val, bool):
             names.append(key)
             values.append(float(val))
+    from contgrasp_msgs.msg import ObjectBoundary
+
     _, pts = boundary.sample(samples)
     return ObjectBoundary(
         header=header,

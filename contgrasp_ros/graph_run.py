@@ -4,17 +4,24 @@ The :class:`Monitor` node (in the launcher's process) subscribes to the rod stat
 quality and the simulator's diagnostics; it waits until every node is up and the topics are
 matched, resumes the paused simulator through its ``~/pause`` service (std_srvs/SetBool) and
 then waits for the simulator to report ``finished`` (or ``failed``) on ``/diagnostics``.
+With recording on, the ``mcap_recorder`` starts first, the simulator is resumed only once the
+recorder subscribes to every stream, and it is stopped last, after the other nodes, so the
+recording holds the whole run; the summary's ``bag`` entry is read back from the finished file.
 """
 
 from __future__ import annotations
 
+import json
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import rclpy
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import Executor
 from rclpy.node import Node
@@ -29,13 +36,16 @@ from contgrasp_ros.runtime import make_executor
 __all__ = ["Monitor", "run_graph"]
 
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
+RECORDER = "mcap_recorder"
+RECORDED_STREAMS = (qos.TOPIC_OBJECT, qos.TOPIC_ROD_STATE, qos.TOPIC_CONTACT, qos.TOPIC_COUPLE, qos.TOPIC_QUALITY, "/clock")
 
 
 class Monitor(Node):
     """Observes the run: last rod state, contact and quality, a history, the simulator status."""
 
-    def __init__(self, history_period: float = 0.01, **kw: Any) -> None:
+    def __init__(self, history_period: float = 0.01, recording: bool = False, **kw: Any) -> None:
         super().__init__("contgrasp_monitor", **kw)
+        self.recording = recording
         self.rod: RodState | None = None
         self.contact: ContactState | None = None
         self.quality: GraspQuality | None = None
@@ -83,6 +93,10 @@ class Monitor(Node):
         """Every node is up and each stream has its publisher and subscribers matched."""
         names = set(self.get_node_names())
         if not set(NODES) <= names or not self.pause.service_is_ready():
+            return False
+        if self.recording and not all(
+            any(i.node_name == RECORDER for i in self.get_subscriptions_info_by_topic(t)) for t in RECORDED_STREAMS
+        ):
             return False
         return (
             self.count_subscribers(qos.TOPIC_ROD_STATE) >= 2
@@ -147,10 +161,12 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float) -> str 
     def dead() -> str | None:
         if group is None:
             return None
-        gone = group.exited()
-        if gone:
-            c = gone[0]
-            return f"node '{c.name}' exited with code {c.proc.returncode}"
+        for c in group.exited():
+            if c.name != RECORDER:
+                return f"node '{c.name}' exited with code {c.proc.returncode}"
+            if mon.recording:  # a failed recorder is reported, but the run goes on without it
+                mon.recording = False
+                mon.get_logger().error(f"the recorder exited with code {c.proc.returncode}; the run continues unrecorded")
         return None
 
     while not mon.connected():
@@ -179,8 +195,38 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float) -> str 
     return None
 
 
-def run_graph(params: dict[str, dict[str, Any]], *, in_process: bool, params_file: Path, timeout: float) -> tuple[dict[str, Any], int]:
-    """Run the graph once; returns (summary, exit code)."""
+def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
+    """The recorder's parameters for a launcher run: output, layout, run_info (a JSON string)."""
+    return {"output": str(record["output"]), "layout": record.get("layout", "folder"), "run_info": json.dumps(record.get("run_info", {}))}
+
+
+def bag_summary(path: Path) -> dict[str, Any]:
+    """What the finished recording holds: size, written messages per topic, the recorder's counts."""
+    from contgrasp_ros.bag import BagError
+    from contgrasp_ros.bag.reader import info, open_recording
+    from contgrasp_ros.bag.writer import RECORDER_RECORD
+
+    try:
+        rec = open_recording(path)
+        meta = info(rec)
+        counts = rec.metadata_records().get(RECORDER_RECORD, {})
+    except BagError as exc:
+        return {"path": str(path), "error": str(exc)}
+    return {
+        "path": str(path),
+        "size_bytes": meta["size_bytes"],
+        "duration_s": meta["duration_s"],
+        "messages": meta["message_count"],
+        "received": json.loads(counts.get("received", "null")),
+        "written": json.loads(counts.get("written", "null")),
+        "topics": {t["name"]: t["count"] for t in meta["topics"]},
+    }
+
+
+def run_graph(
+    params: dict[str, dict[str, Any]], *, in_process: bool, params_file: Path, timeout: float, record: dict[str, Any] | None = None
+) -> tuple[dict[str, Any], int]:
+    """Run the graph once (recording it when ``record`` gives an ``output``); returns (summary, exit code)."""
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
     from contgrasp_ros.nodes.grasp_controller import GraspController
     from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
@@ -191,10 +237,11 @@ def run_graph(params: dict[str, dict[str, Any]], *, in_process: bool, params_fil
     executor = make_executor()
     nodes: list[Node] = []
     group = None
+    tmp: Path | None = None
     code = 0
     summary: dict[str, Any] = {}
     try:
-        mon = Monitor()
+        mon = Monitor(recording=record is not None)
         nodes.append(mon)
         if in_process:
             for cls, name in ((RodSimulator, "rod_simulator"), (BoundarySensor, "boundary_sensor"),
@@ -204,18 +251,33 @@ def run_graph(params: dict[str, dict[str, Any]], *, in_process: bool, params_fil
                     nodes.append(cls(parameter_overrides=_overrides({**values, "use_sim_time": True})))
                 except (rclpy.exceptions.InvalidParameterValueException, ContgraspError, TypeError) as exc:
                     return {"error": f"{name}: invalid parameter: {exc}", "exit_codes": {}, "pids": {}}, 2
+            if record is not None:
+                from contgrasp_ros.nodes.mcap_recorder import McapRecorder
+
+                try:
+                    nodes.append(McapRecorder(parameter_overrides=_overrides(recorder_params(record))))
+                except ContgraspError as exc:
+                    return {"error": f"{RECORDER}: {exc}", "exit_codes": {}, "pids": {}}, 1
         else:
             import os
 
             from contgrasp_ros.processes import ProcessGroup
 
             group = ProcessGroup(dict(os.environ, PYTHONUNBUFFERED="1"))
+            # Launcher overrides go in a second parameter file: a node's own section in the user's
+            # file would beat a plain ``-p name:=value`` (rcl gives node-specific entries priority).
+            overrides: dict[str, Any] = {name: {"ros__parameters": {"use_sim_time": True}} for name in NODES}
+            overrides["rod_simulator"]["ros__parameters"].update(start_paused=True, duration=float(sim_params["duration"]))
+            if record is not None:
+                overrides[RECORDER] = {"ros__parameters": recorder_params(record)}
+            tmp = Path(tempfile.mkdtemp(prefix="contgrasp_launch_"))
+            override_file = tmp / "overrides.yaml"
+            override_file.write_text(yaml.safe_dump(overrides))
+            if record is not None:
+                group.start(RECORDER, [sys.executable, "-m", f"contgrasp_ros.nodes.{RECORDER}", "--ros-args", "--params-file", str(override_file)])
             for name in NODES:
-                cmd = [sys.executable, "-m", f"contgrasp_ros.nodes.{name}", "--ros-args", "--params-file", str(params_file),
-                       "-p", "use_sim_time:=true"]
-                if name == "rod_simulator":
-                    cmd += ["-p", "start_paused:=true", "-p", f"duration:={float(sim_params['duration'])}"]
-                group.start(name, cmd)
+                group.start(name, [sys.executable, "-m", f"contgrasp_ros.nodes.{name}", "--ros-args",
+                                   "--params-file", str(params_file), "--params-file", str(override_file)])
         for n in nodes:
             executor.add_node(n)
         error = _drive(mon, executor, group, timeout)
@@ -224,16 +286,19 @@ def run_graph(params: dict[str, dict[str, Any]], *, in_process: bool, params_fil
             summary["error"] = error
             code = 1
     finally:
+        summary_codes: dict[str, int] = {}
         if group is not None:
-            codes = group.stop()
-            summary_codes = {k: v for k, v in codes.items()}
-        else:
-            summary_codes = {}
+            summary_codes.update(group.stop(names=NODES))  # the recorder last: it keeps what is still in flight
+            summary_codes.update(group.stop())
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
         executor.shutdown()
-        for n in nodes:
+        for n in nodes:  # (in-process: the recorder was added last, so it is finalised last)
             n.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
+    if record is not None:
+        summary["bag"] = bag_summary(Path(record["output"]))
     summary["exit_codes"] = summary_codes
     summary["pids"] = {c.name: c.proc.pid for c in group.children} if group is not None else {}
     # a child's own non-zero exit code wins (negative codes are the signals we stopped it with)

@@ -5,7 +5,8 @@ separate processes (or, with ``--in-process``, as nodes of one executor in this 
 a YAML parameter file, a fresh ``ROS_DOMAIN_ID`` and loopback-only discovery; waits until the
 graph is connected, then resumes the (paused) simulator; runs until the simulator reports it
 finished (settled or ``--duration`` reached) and stops everything (SIGINT, then SIGTERM, then
-SIGKILL). The summary is built from what travelled over the topics.
+SIGKILL). The summary is built from what travelled over the topics. The run is recorded to MCAP
+by the ``mcap_recorder`` node (``--bag``, default ``bags/run_<time>``; ``--no-record`` skips it).
 """
 
 from __future__ import annotations
@@ -64,6 +65,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", type=Path, default=None, help="write a Fig. 4-style figure of the run from the received topics")
     p.add_argument("--summary-file", type=Path, default=None, help="also write the JSON summary to this file")
     p.add_argument("--timeout", type=float, default=1800.0, help="wall-clock limit in seconds (default 1800)")
+    p.add_argument("--bag", type=Path, default=None,
+                   help="record to this bag folder (or .mcap file with --bag-layout file); default bags/run_<time>")
+    p.add_argument("--bag-layout", choices=("folder", "file"), default=None,
+                   help="a rosbag2 bag folder with metadata.yaml (default) or one .mcap file (default when --bag ends in .mcap)")
+    p.add_argument("--no-record", action="store_true", help="do not record the run")
     return p
 
 
@@ -90,9 +96,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "contgrasp_ros_log"))
     from contgrasp_ros.graph_run import run_graph
+    from contgrasp_ros.nodes.mcap_recorder import default_output
 
+    record = None
+    if not args.no_record:
+        out = args.bag if args.bag is not None else Path(default_output())
+        layout = args.bag_layout or ("file" if out.suffix == ".mcap" else "folder")
+        if out.exists():
+            print(f"contgrasp-launch: --bag {out} already exists", file=sys.stderr)
+            return 2
+        run_info = {"params": params, "params_file": str(params_file), "argv": list(sys.argv[1:] if argv is None else argv)}
+        record = {"output": out, "layout": layout, "run_info": run_info}
     wall0 = time.perf_counter()
-    summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout)
+    summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record)
     summary["wall_time_s"] = time.perf_counter() - wall0
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
@@ -110,7 +126,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         for key in ("mode", "settled", "settle_time_s", "sim_time_s", "wall_time_s", "missed_deadlines",
                     "mean_abs_rho_ratio_minus_1_contact", "mean_abs_alpha_minus_half_pi_contact",
-                    "final_quality", "exit_codes", "error"):
+                    "final_quality", "bag", "exit_codes", "error"):
             if key in summary:
                 print(f"{key}: {summary[key]}")
     return code

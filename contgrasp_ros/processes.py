@@ -8,6 +8,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import IO
 
@@ -63,13 +64,13 @@ class ProcessGroup:
         """Children that have exited."""
         return [c for c in self.children if c.proc.poll() is not None]
 
-    def stop(self, *, sigint_timeout: float = 10.0, sigterm_timeout: float = 5.0) -> dict[str, int]:
-        """SIGINT every running child, then SIGTERM, then SIGKILL after the timeouts.
-
-        Returns each child's exit code (negative: killed by that signal).
+    def stop(self, *, names: Sequence[str] | None = None, sigint_timeout: float = 10.0, sigterm_timeout: float = 5.0) -> dict[str, int]:
+        """SIGINT every running child (or only those in ``names``), then SIGTERM, then SIGKILL
+        after the timeouts. Returns each stopped child's exit code (negative: killed by that signal).
         """
+        chosen = [c for c in self.children if names is None or c.name in names]
         for sig, timeout in ((signal.SIGINT, sigint_timeout), (signal.SIGTERM, sigterm_timeout), (signal.SIGKILL, 5.0)):
-            running = [c for c in self.children if c.proc.poll() is None]
+            running = [c for c in chosen if c.proc.poll() is None]
             if not running:
                 break
             for c in running:
@@ -80,7 +81,7 @@ class ProcessGroup:
             end = time.monotonic() + timeout
             while time.monotonic() < end and any(c.proc.poll() is None for c in running):
                 time.sleep(0.05)
-        for c in self.children:
+        for c in chosen:
             c.proc.wait()
             c.pump.join(timeout=2.0)
-        return {c.name: int(c.proc.returncode) for c in self.children}
+        return {c.name: int(c.proc.returncode) for c in chosen}

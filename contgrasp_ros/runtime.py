@@ -15,7 +15,12 @@ from rclpy.node import Node
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import ContgraspError
 
-__all__ = ["declare", "DropCounter", "ObjectTracker", "make_executor", "run_node"]
+__all__ = ["declare", "DropCounter", "FatalNodeError", "ObjectTracker", "make_executor", "run_node"]
+
+
+class FatalNodeError(ContgraspError):
+    """Raised from a callback when the node cannot go on (e.g. the recorder's disk is full):
+    :func:`run_node` cleans up and exits with code 1 and the message."""
 
 
 def make_executor(context: object | None = None) -> Executor:
@@ -110,10 +115,12 @@ class ObjectTracker:
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
     """Init rclpy, build the node, spin until shutdown (SIGINT/SIGTERM), clean up.
 
-    A node that rejects its start-up parameters exits with code 2 and a one-line reason.
+    A node that rejects its start-up parameters exits with code 2 and a one-line reason; a
+    :class:`FatalNodeError` while spinning ends it with code 1 (after the node's own clean-up).
     """
     rclpy.init(args=list(args) if args is not None else sys.argv)
     node = None
+    code = 0
     try:
         try:
             node = factory()
@@ -122,6 +129,9 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             rclpy.exceptions.ParameterException,
             ContgraspError,
         ) as exc:
+            if isinstance(exc, FatalNodeError):
+                print(f"{getattr(factory, '__name__', 'node')}: error: {exc}", file=sys.stderr)
+                return 1
             print(f"{getattr(factory, '__name__', 'node')}: invalid parameter: {exc}", file=sys.stderr)
             return 2
         executor = make_executor()
@@ -129,9 +139,13 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except FatalNodeError as exc:
+        print(f"{getattr(factory, '__name__', 'node')}: error: {exc}", file=sys.stderr)
+        code = 1
     finally:
         if node is not None:
             node.destroy_node()
+            code = max(code, int(getattr(node, "exit_code", 0)))  # a failure during the node's own clean-up
         if rclpy.ok():
             rclpy.shutdown()
-    return 0
+    return code

@@ -78,7 +78,7 @@ def test_ros2_run_finds_and_runs_the_executables() -> None:
 
     prefix = Path(get_package_prefix("contgrasp_ros"))
     assert (Path(get_package_share_directory("contgrasp_ros")) / "package.xml").exists()
-    for node in ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"):
+    for node in ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality", "mcap_recorder"):
         exe = prefix / "lib" / "contgrasp_ros" / node
         assert exe.exists() and os.access(exe, os.X_OK), exe
     env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
@@ -95,10 +95,12 @@ def test_ros2_run_finds_and_runs_the_executables() -> None:
 
 def test_graph_in_process_equals_the_core_loop(tmp_path: Path) -> None:
     params = small_params(tmp_path)
-    proc = launch("--in-process", "--json", "--params", str(params))
+    proc = launch("--in-process", "--json", "--params", str(params), "--bag", str(tmp_path / "inproc.mcap"))
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout)
     assert out["missed_deadlines"] == 0
+    assert out["bag"]["received"] == out["bag"]["written"] == out["bag"]["messages"] > 0
+    assert out["bag"]["topics"]["/contgrasp/rod_state"] == out["steps"] + 1
     x_core, k = core_run(params)
     assert out["steps"] == k
     np.testing.assert_allclose(out["final"]["x"], x_core[:, 0], rtol=0, atol=1e-9)
@@ -109,11 +111,12 @@ def test_graph_in_process_equals_the_core_loop(tmp_path: Path) -> None:
 def test_graph_as_processes_is_deterministic_and_leaves_nothing_behind(tmp_path: Path) -> None:
     params = small_params(tmp_path)
     runs = []
-    for _ in range(2):
-        proc = launch("--json", "--params", str(params))
+    for i in range(2):
+        proc = launch("--json", "--params", str(params), *(("--bag", str(tmp_path / "bag")) if i == 0 else ("--no-record",)))
         assert proc.returncode == 0, proc.stderr[-3000:]
         out = json.loads(proc.stdout)
-        assert set(out["exit_codes"]) == {"rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"}
+        assert set(out["exit_codes"]) == {"rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"} | (
+            {"mcap_recorder"} if i == 0 else set())
         assert all(code == 0 for code in out["exit_codes"].values()), out["exit_codes"]
         assert not any(alive(pid) for pid in out["pids"].values())
         runs.append(out)
@@ -132,13 +135,25 @@ def test_launcher_reports_a_node_that_fails_to_start(tmp_path: Path) -> None:
     data["grasp_quality"]["ros__parameters"]["rate_hz"] = -5.0
     bad = tmp_path / "bad.yaml"
     bad.write_text(yaml.safe_dump(data))
-    proc = launch("--json", "--params", str(bad), "--timeout", "120")
+    proc = launch("--json", "--params", str(bad), "--timeout", "120", "--no-record")
     assert proc.returncode == 2, proc.stderr[-2000:]
     out = json.loads(proc.stdout)
     assert "grasp_quality" in out["error"] and "code 2" in out["error"]
     assert out["exit_codes"]["grasp_quality"] == 2
     assert "rate_hz" in proc.stderr
     assert not any(alive(pid) for pid in out["pids"].values())
+
+
+def test_launcher_keeps_running_when_the_recorder_cannot_write(tmp_path: Path) -> None:
+    """An unwritable recording path: the recorder exits 1 with the reason, the run itself
+    completes, and the launcher reports the recorder's failure (non-zero exit)."""
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    proc = launch("--json", "--params", str(small_params(tmp_path)), "--bag", str(blocker / "bag"))
+    out = json.loads(proc.stdout)
+    assert proc.returncode == 1 and out["exit_codes"]["mcap_recorder"] == 1
+    assert out["steps"] > 0 and "error" not in out
+    assert "cannot record" in proc.stderr and "error" in out["bag"]
 
 
 def test_launcher_rejects_bad_usage() -> None:

@@ -67,6 +67,32 @@ class Observation:
     max_speed: float
 
 
+@dataclass
+class SettleDetector:
+    """Settled: every node slower than ``settle_speed`` for ``settle_hold`` seconds, not before
+    ``min_time``. Fed the observed states in time order (the closed loop, or a recording)."""
+
+    settle_speed: float
+    settle_hold: float
+    min_time: float
+    quiet_since: float | None = None
+    settled: bool = False
+
+    def update(self, t: float, max_speed: float) -> bool:
+        """Account for the state at time ``t`` with the given largest node speed; returns settled."""
+        if max_speed < self.settle_speed:
+            self.quiet_since = t if self.quiet_since is None else self.quiet_since
+            if t >= self.min_time and t - self.quiet_since >= self.settle_hold:
+                self.settled = True
+        else:
+            self.quiet_since = None
+        return self.settled
+
+    @property
+    def settle_time(self) -> float | None:
+        return self.quiet_since if self.settled else None
+
+
 class LoopSession:
     """Steps a :class:`RodSystem` in control periods and decides when the run is over.
 
@@ -86,16 +112,19 @@ class LoopSession:
         self.k = 0
         self.n_control = int(np.ceil(config.duration / config.control_period - 1e-9))
         self.dt = config.control_period / config.substeps
-        self.quiet_since: float | None = None
-        self.settled = False
+        self.settle = SettleDetector(config.settle_speed, config.settle_hold, config.min_time)
         self.finished = False
         self.iterations = 0
         self.max_penetration = 0.0
         self._observed: Observation | None = None
 
     @property
+    def settled(self) -> bool:
+        return self.settle.settled
+
+    @property
     def settle_time(self) -> float | None:
-        return self.quiet_since if self.settled else None
+        return self.settle.settle_time
 
     def observe(self) -> Observation:
         """Arrays of the current state; updates the settle/finish status (idempotent per step)."""
@@ -125,13 +154,7 @@ class LoopSession:
             penetration=pen,
             max_speed=speed,
         )
-        cfg = self.config
-        if speed < cfg.settle_speed:
-            self.quiet_since = st.t if self.quiet_since is None else self.quiet_since
-            if st.t >= cfg.min_time and st.t - self.quiet_since >= cfg.settle_hold:
-                self.settled = True
-        else:
-            self.quiet_since = None
+        self.settle.update(float(st.t), speed)
         self.finished = self.settled or self.k >= self.n_control
         self._observed = obs
         return obs

@@ -1,20 +1,18 @@
 """boundary_sensor: rod state + object boundary -> contact state (rho, alpha, delta, s_o, contact set).
 
-Thin wrapper of :func:`contgrasp_core.contact.sense` (paper eqs. rho_alpha_definition, delta,
-Definition 1). Malformed rod states or objects are dropped with a throttled warning and counted.
+Thin wrapper of :func:`contgrasp_ros.evaluate.sense_rod_state` (:func:`contgrasp_core.contact.sense`,
+paper eqs. rho_alpha_definition, delta, Definition 1). Malformed rod states or objects are dropped with a throttled warning and counted.
 """
 
 from __future__ import annotations
 
-import numpy as np
 from rclpy.node import Node
 
-from contgrasp_core.arm import ArmShape
-from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError
 from contgrasp_msgs.msg import ContactState, RodState
 from contgrasp_ros import qos
 from contgrasp_ros.convert import contact_to_msg, rod_state_arrays
+from contgrasp_ros.evaluate import sense_rod_state
 from contgrasp_ros.runtime import DropCounter, ObjectTracker, declare, run_node
 
 
@@ -40,10 +38,8 @@ class BoundarySensor(Node):
             self.waiting = msg
             return
         try:
-            rod = rod_state_arrays(msg)
-            shape = ArmShape(s=rod.s, r=np.stack([rod.x, rod.y], -1), theta=rod.theta)
             tol = self.get_parameter("contact_tolerance").value
-            state = sense(shape, boundary, rod.radius, tol=tol)
+            state = sense_rod_state(rod_state_arrays(msg), boundary, tol)
         except ContgraspError as exc:
             self.drops.drop(qos.TOPIC_ROD_STATE, str(exc))
             return

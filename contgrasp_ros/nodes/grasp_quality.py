@@ -1,6 +1,6 @@
 """grasp_quality: contact state -> continuum grasp quality (W, Q1..Q3) at a configurable rate.
 
-Thin wrapper of :func:`contgrasp_core.quality.grasp_quality` (paper Sec. IV, Prop. 2).
+Thin wrapper of :func:`contgrasp_ros.evaluate.contact_quality` (paper Sec. IV, Prop. 2).
 """
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ from __future__ import annotations
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
-from contgrasp_core.quality import grasp_quality
 from contgrasp_msgs.msg import ContactState, GraspQuality
 from contgrasp_ros import qos
 from contgrasp_ros.convert import contact_arrays, quality_to_msg
+from contgrasp_ros.evaluate import contact_quality
 from contgrasp_ros.runtime import DropCounter, ObjectTracker, declare, run_node
 
 
@@ -45,15 +45,13 @@ class GraspQualityNode(Node):
             return
         self.last_t = c.t
         tol = self.get_parameter("contact_tolerance").value
-        tol = c.tol if tol < 0 else tol
         ref = (self.get_parameter("reference_x").value, self.get_parameter("reference_y").value)
         try:
-            phi = boundary.tangent_angle(c.s_o)
-            q = grasp_quality(c.s, c.shadow, phi, c.delta, tol=tol, ref=ref)
+            q = contact_quality(c, boundary, tol, ref)
         except ContgraspError as exc:
             self.drops.drop(qos.TOPIC_CONTACT, str(exc))
             return
-        self.pub.publish(quality_to_msg(q, msg.header, msg.step, tol))
+        self.pub.publish(quality_to_msg(q, msg.header, msg.step, c.tol if tol < 0 else tol))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,0 +1,255 @@
+"""mcap_recorder: records the graph's topics to MCAP the way rosbag2's MCAP storage does.
+
+Subscribes with raw (serialized) subscriptions to every topic (or a list / regular expression),
+discovering topics that appear mid-run, and writes them with :class:`contgrasp_ros.bag.writer.BagWriter`
+(profile ``ros2``, ``ros2msg`` schemas from the installed ``.msg`` files, ``cdr``, channel
+metadata ``offered_qos_profiles`` and ``topic_type_hash``, zstd chunks, a bag folder with
+``metadata.yaml`` or a single ``.mcap``). The subscription QoS adapts to the publishers' offers
+like rosbag2 (reliable / transient-local only if every publisher offers it) with a deep queue.
+Every ``flush_period`` wall seconds the open chunk is finished and handed to the OS, so a
+SIGKILL loses at most that much; SIGINT/SIGTERM finalise the file. Received and written
+message counts are published on ``/diagnostics`` and stored in the file (metadata record
+``contgrasp_recorder``). A file that cannot be created or written ends the node with code 1.
+
+Optional decimation (to keep shipped sample recordings small): topics in ``decimate_topics``
+keep one message per ``decimate_period`` seconds of their header stamp (the quality node's
+rule: skip while ``0 <= t - t_kept < period``) plus the last message received; the skipped
+ones are counted as ``decimated`` (received = written + decimated).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import re
+import struct
+import time
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_ros import qos
+from contgrasp_ros.bag.definitions import full_text
+from contgrasp_ros.bag.errors import BagError
+from contgrasp_ros.bag.rosbag2 import qos_profile_dict
+from contgrasp_ros.bag.writer import COMPRESSIONS, LAYOUTS, RECORDER_RECORD, RUN_RECORD, BagWriter
+from contgrasp_ros.runtime import FatalNodeError, declare, run_node
+
+
+
+def default_output() -> str:
+    """``bags/run_YYYYmmdd_HHMMSS`` in the working directory."""
+    return str(Path("bags") / datetime.now().strftime("run_%Y%m%d_%H%M%S"))
+
+
+def _starts_with_stamp(type_name: str) -> bool:
+    """The type's first field is a std_msgs/Header or a builtin_interfaces/Time (e.g. /clock)."""
+    for line in full_text(type_name).splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            return line.split()[0] in ("std_msgs/Header", "builtin_interfaces/Time", "Header")
+    return False
+
+
+def cdr_stamp(data: bytes) -> float:
+    """Seconds of the leading stamp of a CDR message (4-byte encapsulation, int32 sec, uint32 nanosec)."""
+    if len(data) < 12:
+        raise ValueError("message shorter than a stamp")
+    fmt = "<iI" if data[1] == 1 else ">iI"
+    sec, nsec = struct.unpack_from(fmt, data, 4)
+    return sec + 1e-9 * nsec
+
+
+def _message_class(type_name: str) -> Any:
+    pkg, _, name = type_name.rpartition("/")
+    return getattr(importlib.import_module(pkg.replace("/", ".")), name)
+
+
+class McapRecorder(Node):
+    """Records raw messages of the selected topics; see the module docstring."""
+
+    def __init__(self, **node_kwargs: object) -> None:
+        super().__init__("mcap_recorder", **node_kwargs)  # type: ignore[arg-type]
+        out = declare(self, "output", "", "bag folder, or .mcap file with layout 'file' ('' = bags/run_<time>)", read_only=True)
+        layout = declare(self, "layout", "folder", f"one of {LAYOUTS}", read_only=True)
+        compression = declare(self, "compression", "zstd", f"chunk compression, one of {tuple(COMPRESSIONS)}", read_only=True)
+        chunk_size = declare(self, "chunk_size", 262144, "chunk size [bytes]", lo=1024, hi=1 << 30, read_only=True)
+        self.topics = list(declare(self, "topics", [""], "topics to record ([''] = all)", read_only=True))
+        regex = declare(self, "regex", "", "also record topics matching this regular expression", read_only=True)
+        exclude = declare(self, "exclude_regex", "", "never record topics matching this", read_only=True)
+        self.depth = declare(self, "qos_depth", 1000, "subscription queue depth", lo=1, hi=1_000_000, read_only=True)
+        flush = declare(self, "flush_period", 0.5, "finish the open chunk at least this often [wall s]", lo=0.01, hi=3600.0, read_only=True)
+        discovery = declare(self, "discovery_period", 0.2, "look for new topics this often [wall s]", lo=0.01, hi=3600.0, read_only=True)
+        run_info = declare(self, "run_info", "", "JSON object stored in the recording (metadata record contgrasp_run)", read_only=True)
+        decimate = [t for t in declare(self, "decimate_topics", [""], "topics to decimate ([''] = none)", read_only=True) if t]
+        self.decimate_period = declare(self, "decimate_period", 0.0, "keep one message per this many stamp seconds [s]",
+                                       lo=0.0, hi=1e6, read_only=True)
+        self._decimate: dict[str, list[Any]] = {}  # topic -> [last kept stamp, held (data, info) or None]
+        self._decimate_wanted = set(decimate) if self.decimate_period > 0 else set()
+        self.decimated = 0
+        self.topics = [t for t in self.topics if t]
+        try:
+            self.regex = re.compile(regex) if regex else None
+            self.exclude = re.compile(exclude) if exclude else None
+        except re.error as exc:
+            raise InvalidParameterError(f"invalid regular expression: {exc}") from exc
+        try:
+            info = json.loads(run_info) if run_info else {}
+            if not isinstance(info, dict):
+                raise ValueError("not a JSON object")
+        except ValueError as exc:
+            raise InvalidParameterError(f"run_info must be a JSON object: {exc}") from exc
+        if layout not in LAYOUTS or compression not in COMPRESSIONS:
+            raise InvalidParameterError(f"layout must be one of {LAYOUTS} and compression one of {tuple(COMPRESSIONS)}")
+        try:
+            self.writer = BagWriter(Path(out or default_output()), layout=layout, compression=compression, chunk_size=chunk_size)
+        except BagError as exc:
+            raise FatalNodeError(str(exc)) from exc
+        self.writer.records[RUN_RECORD] = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in info.items()}
+        self.received: dict[str, int] = {}
+        self.exit_code = 0
+        self._subs: dict[str, Any] = {}
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.STREAM)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(discovery, self.discover, clock=steady)
+        self.create_timer(flush, self.flush, clock=steady)
+        self.get_logger().info(f"recording to {self.writer.path}")
+        self.discover()
+
+    # ------------------------------------------------------------------ topics
+    def selected(self, topic: str) -> bool:
+        if self.exclude is not None and self.exclude.fullmatch(topic):
+            return False
+        if not self.topics and self.regex is None:
+            return True
+        return topic in self.topics or (self.regex is not None and self.regex.fullmatch(topic) is not None)
+
+    def _request_qos(self, offers: list[Any]) -> QoSProfile:
+        reliable = all(int(o.qos_profile.reliability) == int(ReliabilityPolicy.RELIABLE) for o in offers)
+        latched = all(int(o.qos_profile.durability) == int(DurabilityPolicy.TRANSIENT_LOCAL) for o in offers)
+        return QoSProfile(
+            history=HistoryPolicy.KEEP_LAST,
+            depth=self.depth,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+        )
+
+    def discover(self) -> None:
+        """Subscribe to selected topics that have publishers and are not recorded yet."""
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._subs or not self.selected(topic) or len(types) != 1:
+                continue
+            offers = self.get_publishers_info_by_topic(topic)
+            if not offers:
+                continue  # the publishers' QoS are needed (offered_qos_profiles); wait for one
+            try:
+                cls = _message_class(types[0])
+            except (ImportError, AttributeError, ValueError):
+                self.get_logger().warn(f"not recording {topic}: type {types[0]} is not installed", once=True)
+                continue
+            try:
+                self.writer.add_topic(topic, types[0], [qos_profile_dict(o.qos_profile) for o in offers], str(offers[0].topic_type_hash))
+            except BagError as exc:
+                raise FatalNodeError(str(exc)) from exc
+            self.received[topic] = 0
+            if topic in self._decimate_wanted:
+                if _starts_with_stamp(types[0]):
+                    self._decimate[topic] = [None, None]
+                else:
+                    self.get_logger().warn(f"not decimating {topic}: {types[0]} does not start with a stamp")
+            self._subs[topic] = self.create_subscription(
+                cls, topic, lambda data, info, t=topic: self.on_message(t, data, info), self._request_qos(offers), raw=True
+            )
+            self.get_logger().info(f"recording {topic} [{types[0]}]")
+
+    # ------------------------------------------------------------------ messages
+    def on_message(self, topic: str, data: bytes, info: dict[str, Any]) -> None:
+        self.received[topic] += 1
+        log_ns = time.time_ns()
+        dec = self._decimate.get(topic)
+        if dec is not None:
+            try:
+                t = cdr_stamp(data)
+            except ValueError:
+                t = None
+            if t is not None and dec[0] is not None and 0.0 <= t - dec[0] < self.decimate_period - 1e-12:
+                if dec[1] is not None:
+                    self.decimated += 1
+                dec[1] = (data, info, log_ns)  # held: written at the end if it stays the last one
+                return
+            if dec[1] is not None:
+                self.decimated += 1
+            dec[0], dec[1] = t, None
+        self._write(topic, data, info, log_ns)
+
+    def _write(self, topic: str, data: bytes, info: dict[str, Any], log_ns: int) -> None:
+        try:
+            self.writer.write(topic, data, log_ns, info.get("source_timestamp") or None, info.get("publication_sequence_number") or 0)
+        except BagError as exc:
+            raise FatalNodeError(str(exc)) from exc
+
+    def counts(self) -> dict[str, Any]:
+        """Received and written messages, in total and per topic."""
+        written = {t: v.record.message_count for t, v in self.writer.topics.items()}
+        return {
+            "received": sum(self.received.values()),
+            "written": sum(written.values()),
+            "decimated": self.decimated,
+            "held": sum(d[1] is not None for d in self._decimate.values()),
+            "bytes": self.writer.bytes,
+            "received_per_topic": dict(self.received),
+            "written_per_topic": written,
+        }
+
+    def flush(self) -> None:
+        try:
+            self.writer.flush()
+        except BagError as exc:
+            raise FatalNodeError(str(exc)) from exc
+        c = self.counts()
+        values = {"path": str(self.writer.path), "received": str(c["received"]), "written": str(c["written"]),
+                  "bytes": str(c["bytes"]), "topics": str(len(self._subs))}
+        lost = c["received"] - c["written"] - c["decimated"] - c["held"]
+        level = DiagnosticStatus.OK if lost == 0 else DiagnosticStatus.WARN
+        st = DiagnosticStatus(level=level, name="mcap_recorder", message="recording", hardware_id="contgrasp",
+                              values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        self._pub_diag.publish(DiagnosticArray(status=[st]))
+
+    def destroy_node(self) -> None:
+        """Finalise the recording (summary, indexes, metadata.yaml) before the node goes."""
+        if not self.writer.closed:
+            for topic, dec in self._decimate.items():
+                if dec[1] is not None:
+                    data, info, log_ns = dec[1]
+                    dec[1] = None
+                    try:
+                        self._write(topic, data, info, log_ns)
+                    except FatalNodeError as exc:
+                        self.get_logger().error(str(exc))
+            c = self.counts()
+            self.writer.records[RECORDER_RECORD] = {k: json.dumps(v) for k, v in c.items()}
+            try:
+                self.writer.close()
+                self.get_logger().info(
+                    f"closed {self.writer.path}: {c['written']} messages written, {c['received']} received, "
+                    f"{len(self.writer.topics)} topics"
+                )
+            except BagError as exc:
+                self.get_logger().error(f"could not finalise the recording: {exc}")
+                self.exit_code = 1
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """``ros2 run contgrasp_ros mcap_recorder``."""
+    return run_node(McapRecorder, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
