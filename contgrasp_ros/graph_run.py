@@ -37,6 +37,7 @@ __all__ = ["Monitor", "run_graph"]
 
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
 RECORDER = "mcap_recorder"
+DECIMATED_STREAMS = (qos.TOPIC_ROD_STATE, qos.TOPIC_CONTACT, qos.TOPIC_COUPLE)  # the bulky per-step topics
 RECORDED_STREAMS = (qos.TOPIC_OBJECT, qos.TOPIC_ROD_STATE, qos.TOPIC_CONTACT, qos.TOPIC_COUPLE, qos.TOPIC_QUALITY, "/clock")
 
 
@@ -197,7 +198,13 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float) -> str 
 
 def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
     """The recorder's parameters for a launcher run: output, layout, run_info (a JSON string)."""
-    return {"output": str(record["output"]), "layout": record.get("layout", "folder"), "run_info": json.dumps(record.get("run_info", {}))}
+    out = {"output": str(record["output"]), "layout": record.get("layout", "folder"), "run_info": json.dumps(record.get("run_info", {}))}
+    if record.get("exclude_regex"):
+        out["exclude_regex"] = record["exclude_regex"]
+    if record.get("decimate_period"):
+        out["decimate_topics"] = list(DECIMATED_STREAMS)
+        out["decimate_period"] = float(record["decimate_period"])
+    return out
 
 
 def bag_summary(path: Path) -> dict[str, Any]:
@@ -219,6 +226,7 @@ def bag_summary(path: Path) -> dict[str, Any]:
         "messages": meta["message_count"],
         "received": json.loads(counts.get("received", "null")),
         "written": json.loads(counts.get("written", "null")),
+        "decimated": json.loads(counts.get("decimated", "0")),
         "topics": {t["name"]: t["count"] for t in meta["topics"]},
     }
 

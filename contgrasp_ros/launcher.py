@@ -70,6 +70,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--bag-layout", choices=("folder", "file"), default=None,
                    help="a rosbag2 bag folder with metadata.yaml (default) or one .mcap file (default when --bag ends in .mcap)")
     p.add_argument("--no-record", action="store_true", help="do not record the run")
+    p.add_argument("--bag-exclude", default="", metavar="REGEX", help="do not record topics matching this regular expression")
+    p.add_argument("--bag-decimate", type=float, default=0.0, metavar="SECONDS",
+                   help="record rod state, contact and couple only every SECONDS of simulated time (plus the last "
+                        "message); for small sample recordings (default 0: every message)")
     return p
 
 
@@ -106,7 +110,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"contgrasp-launch: --bag {out} already exists", file=sys.stderr)
             return 2
         run_info = {"params": params, "params_file": str(params_file), "argv": list(sys.argv[1:] if argv is None else argv)}
-        record = {"output": out, "layout": layout, "run_info": run_info}
+        if not (np.isfinite(args.bag_decimate) and args.bag_decimate >= 0):
+            print("contgrasp-launch: --bag-decimate must be >= 0", file=sys.stderr)
+            return 2
+        record = {"output": out, "layout": layout, "run_info": run_info, "exclude_regex": args.bag_exclude,
+                  "decimate_period": args.bag_decimate}
     wall0 = time.perf_counter()
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record)
     summary["wall_time_s"] = time.perf_counter() - wall0
