@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -22,8 +22,12 @@ from .errors import ContgraspError
 __all__ = ["build_parser", "main"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every subcommand registered."""
+Registrar = Callable[[Any, list[argparse.ArgumentParser]], None]
+
+
+def build_parser(extra: Sequence[Registrar] = ()) -> argparse.ArgumentParser:
+    """The argument parser with every subcommand registered; ``extra`` registrars add more
+    (the recording commands of :mod:`contgrasp_ros.cli`, which keeps this package free of ROS)."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--json", action="store_true", help="print one JSON object with the results on stdout")
     common.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
@@ -37,6 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     cli_quality.add_parser(sub, [common])
     cli_grasp.add_parsers(sub, [common])
     cli_simulate.add_parser(sub, [common])
+    for register in extra:
+        register(sub, [common])
     return parser
 
 
@@ -63,9 +69,9 @@ def _summary(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``contgrasp`` console script; returns the process exit code."""
-    parser = build_parser()
+def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> int:
+    """Entry point of the ``contgrasp`` command; returns the process exit code."""
+    parser = build_parser(extra)
     args = parser.parse_args(argv)
     try:
         result = args.func(args)
@@ -82,7 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.json:
         print(json.dumps(_to_jsonable(result), allow_nan=False))
     else:
-        print(_summary(result))
+        print(getattr(args, "format_text", _summary)(result))
     return 0
 
 

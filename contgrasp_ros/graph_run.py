@@ -19,11 +19,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import rclpy
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.executors import Executor
+from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool
@@ -31,6 +30,7 @@ from std_srvs.srv import SetBool
 from contgrasp_core.errors import ContgraspError
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos
+from contgrasp_ros.analysis import contact_stats
 from contgrasp_ros.runtime import make_executor
 
 __all__ = ["Monitor", "run_graph"]
@@ -60,6 +60,8 @@ class Monitor(Node):
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, qos.STREAM)
         self.pause = self.create_client(SetBool, "/rod_simulator/pause")
         self.loop_wall_time: float | None = None
+        self.restarts: dict[str, int] = {}
+        self.faults: list[dict[str, Any]] = []
 
     def _on_rod(self, msg: RodState) -> None:
         self.rod = msg
@@ -113,20 +115,6 @@ def _overrides(values: dict[str, Any]) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-def _contact_stats(msg: ContactState | None) -> dict[str, float | None]:
-    if msg is None:
-        return {"mean_abs_rho_ratio_minus_1_contact": None, "mean_abs_alpha_minus_half_pi_contact": None}
-    rho = np.asarray(msg.rho)
-    radius = np.asarray(msg.delta) + rho
-    mask = np.asarray(msg.in_contact, dtype=bool)
-    if not mask.any():
-        return {"mean_abs_rho_ratio_minus_1_contact": None, "mean_abs_alpha_minus_half_pi_contact": None}
-    return {
-        "mean_abs_rho_ratio_minus_1_contact": float(np.mean(np.abs(rho[mask] / radius[mask] - 1.0))),
-        "mean_abs_alpha_minus_half_pi_contact": float(np.mean(np.abs(np.asarray(msg.alpha)[mask] - np.pi / 2))),
-    }
-
-
 def _summary(mon: Monitor) -> dict[str, Any]:
     st = mon.status
 
@@ -150,25 +138,53 @@ def _summary(mon: Monitor) -> dict[str, Any]:
     out["final"] = None if rod is None else {"s": list(rod.s), "x": list(rod.x), "y": list(rod.y), "theta": list(rod.theta)}
     q = mon.quality
     out["final_quality"] = None if q is None else {"Q1": q.q1, "Q2": q.q2, "Q3": q.q3, "valid": q.valid, "contact_length": q.contact_length}
-    out.update(_contact_stats(mon.contact))
+    out.update(contact_stats(mon.contact))
+    out["restarts"] = dict(mon.restarts)
+    out["faults"] = list(mon.faults)
     out["history"] = mon.history
     return out
 
 
-def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float) -> str | None:
-    """Connect, resume, wait for the end. Returns an error text or None."""
+def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn: int = 0) -> str | None:
+    """Connect, resume, wait for the end. Returns an error text or None.
+
+    A node process that exits is restarted up to ``respawn`` times (a restarted simulator starts
+    again from the initial state and is resumed here); otherwise its exit ends the run. The
+    recorder is never restarted (its file would exist): the run goes on unrecorded.
+    """
     end = time.monotonic() + timeout
+    resume: dict[str, Any] = {"pending": False, "future": None, "sent": 0.0}
 
     def dead() -> str | None:
         if group is None:
             return None
         for c in group.exited():
-            if c.name != RECORDER:
-                return f"node '{c.name}' exited with code {c.proc.returncode}"
-            if mon.recording:  # a failed recorder is reported, but the run goes on without it
-                mon.recording = False
-                mon.get_logger().error(f"the recorder exited with code {c.proc.returncode}; the run continues unrecorded")
+            code = c.proc.returncode
+            if c.name == RECORDER:
+                if mon.recording:  # a failed recorder is reported, but the run goes on without it
+                    mon.recording = False
+                    mon.faults.append({"node": RECORDER, "exit_code": code, "action": "continued unrecorded"})
+                    mon.get_logger().error(f"the recorder exited with code {code}; the run continues unrecorded")
+                continue
+            n = mon.restarts.get(c.name, 0)
+            if n >= respawn:
+                return f"node '{c.name}' exited with code {code}"
+            mon.restarts[c.name] = n + 1
+            mon.faults.append({"node": c.name, "exit_code": code, "action": "restarted"})
+            mon.get_logger().error(f"node '{c.name}' exited with code {code}; restarting it ({n + 1}/{respawn})")
+            group.restart(c)
+            if c.name == "rod_simulator":
+                resume["pending"] = True
         return None
+
+    def resume_restarted_simulator() -> None:
+        # the dead simulator's service may still be listed: resend until the new one answers
+        fut = resume["future"]
+        if fut is not None and fut.done():
+            resume["pending"], resume["future"] = False, None
+            return
+        if mon.pause.service_is_ready() and time.monotonic() - resume["sent"] > 2.0:
+            resume["future"], resume["sent"] = mon.pause.call_async(SetBool.Request(data=False)), time.monotonic()
 
     while not mon.connected():
         executor.spin_once(timeout_sec=0.05)
@@ -180,10 +196,12 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float) -> str 
         executor.spin_once(timeout_sec=0.05)
         if (err := dead()) or time.monotonic() > end:
             return err or "timed out resuming the simulator"
-    while mon.status.get("state") not in ("finished", "failed"):
+    while mon.status.get("state") not in ("finished", "failed") or resume["pending"]:
         executor.spin_once(timeout_sec=0.05)
         if err := dead():
             return err
+        if resume["pending"]:
+            resume_restarted_simulator()
         if time.monotonic() > end:
             return "wall-clock timeout"
     mon.loop_wall_time = time.perf_counter() - loop_start
@@ -232,9 +250,17 @@ def bag_summary(path: Path) -> dict[str, Any]:
 
 
 def run_graph(
-    params: dict[str, dict[str, Any]], *, in_process: bool, params_file: Path, timeout: float, record: dict[str, Any] | None = None
+    params: dict[str, dict[str, Any]],
+    *,
+    in_process: bool,
+    params_file: Path,
+    timeout: float,
+    record: dict[str, Any] | None = None,
+    respawn: int = 0,
 ) -> tuple[dict[str, Any], int]:
-    """Run the graph once (recording it when ``record`` gives an ``output``); returns (summary, exit code)."""
+    """Run the graph once (recording it when ``record`` gives an ``output``, restarting crashed
+    node processes up to ``respawn`` times each); returns (summary, exit code). SIGINT/SIGTERM
+    end the run early with exit code 130, everything stopped and the recording finalised."""
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
     from contgrasp_ros.nodes.grasp_controller import GraspController
     from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
@@ -288,11 +314,14 @@ def run_graph(
                                    "--params-file", str(params_file), "--params-file", str(override_file)])
         for n in nodes:
             executor.add_node(n)
-        error = _drive(mon, executor, group, timeout)
+        try:
+            error = _drive(mon, executor, group, timeout, respawn)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            error, code = "interrupted", 130
         summary = _summary(mon)
         if error:
             summary["error"] = error
-            code = 1
+            code = code or 1
     finally:
         summary_codes: dict[str, int] = {}
         if group is not None:
@@ -311,6 +340,6 @@ def run_graph(
     summary["pids"] = {c.name: c.proc.pid for c in group.children} if group is not None else {}
     # a child's own non-zero exit code wins (negative codes are the signals we stopped it with)
     failing = [c for c in summary_codes.values() if c > 0]
-    if failing:
+    if failing and code != 130:
         code = failing[0]
     return summary, code

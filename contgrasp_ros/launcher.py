@@ -26,6 +26,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from contgrasp_core.errors import InvalidParameterError
+
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
 
 __all__ = ["main", "default_params_file", "load_params"]
@@ -41,14 +43,17 @@ def load_params(path: Path) -> dict[str, dict[str, Any]]:
     try:
         data = yaml.safe_load(path.read_text()) or {}
     except (OSError, yaml.YAMLError) as exc:
-        raise SystemExit(f"contgrasp-launch: cannot read parameter file {path}: {exc}") from exc
+        raise InvalidParameterError(f"cannot read parameter file {path}: {exc}") from exc
     if not isinstance(data, dict):
-        raise SystemExit(f"contgrasp-launch: {path} is not a ROS 2 parameter file (expected a mapping)")
-    common = (data.get("/**") or {}).get("ros__parameters", {})
-    out = {}
-    for node in NODES:
-        section = data.get(node) or data.get(f"/{node}") or {}
-        out[node] = {**common, **section.get("ros__parameters", {})}
+        raise InvalidParameterError(f"{path} is not a ROS 2 parameter file (expected a mapping)")
+    try:
+        common = (data.get("/**") or {}).get("ros__parameters", {})
+        out = {}
+        for node in NODES:
+            section = data.get(node) or data.get(f"/{node}") or {}
+            out[node] = {**common, **section.get("ros__parameters", {})}
+    except AttributeError as exc:
+        raise InvalidParameterError(f"{path} is not a ROS 2 parameter file (node sections need 'ros__parameters' mappings)") from exc
     return out
 
 
@@ -70,6 +75,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--bag-layout", choices=("folder", "file"), default=None,
                    help="a rosbag2 bag folder with metadata.yaml (default) or one .mcap file (default when --bag ends in .mcap)")
     p.add_argument("--no-record", action="store_true", help="do not record the run")
+    p.add_argument("--respawn", type=int, nargs="?", const=3, default=0, metavar="N",
+                   help="restart a node process that dies, up to N times per node (N = 3 if omitted); "
+                        "a restarted simulator starts the run again from the initial state")
     p.add_argument("--bag-exclude", default="", metavar="REGEX", help="do not record topics matching this regular expression")
     p.add_argument("--bag-decimate", type=float, default=0.0, metavar="SECONDS",
                    help="record rod state, contact and couple only every SECONDS of simulated time (plus the last "
@@ -81,7 +89,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``contgrasp-launch``; returns the exit code (a failing node's code propagates)."""
     args = _parser().parse_args(argv)
     params_file = args.params or default_params_file()
-    params = load_params(params_file)
+    try:
+        params = load_params(params_file)
+    except InvalidParameterError as exc:
+        print(f"contgrasp-launch: {exc}", file=sys.stderr)
+        return 2
     if args.duration is not None:
         if not (np.isfinite(args.duration) and args.duration > 0):
             print("contgrasp-launch: --duration must be > 0", file=sys.stderr)
@@ -115,8 +127,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         record = {"output": out, "layout": layout, "run_info": run_info, "exclude_regex": args.bag_exclude,
                   "decimate_period": args.bag_decimate}
+    if args.respawn < 0 or (args.respawn and args.in_process):
+        print("contgrasp-launch: --respawn takes N >= 0 and applies to separate node processes only", file=sys.stderr)
+        return 2
     wall0 = time.perf_counter()
-    summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record)
+    summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
+                              respawn=args.respawn)
     summary["wall_time_s"] = time.perf_counter() - wall0
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
@@ -134,7 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         for key in ("mode", "settled", "settle_time_s", "sim_time_s", "wall_time_s", "missed_deadlines",
                     "mean_abs_rho_ratio_minus_1_contact", "mean_abs_alpha_minus_half_pi_contact",
-                    "final_quality", "bag", "exit_codes", "error"):
+                    "final_quality", "bag", "restarts", "faults", "exit_codes", "error"):
             if key in summary:
                 print(f"{key}: {summary[key]}")
     return code

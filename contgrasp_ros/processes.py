@@ -60,6 +60,17 @@ class ProcessGroup:
             with self._lock:
                 print(prefix + line, file=self.sink, flush=True)
 
+    def restart(self, child: Child) -> Child:
+        """Start an exited child again with the same command (it keeps its place and colour)."""
+        i = self.children.index(child)
+        child.pump.join(timeout=2.0)
+        proc = subprocess.Popen(child.cmd, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+        colour = _COLOURS[i % len(_COLOURS)] if self._colour else ""
+        pump = threading.Thread(target=self._pump, args=(proc, f"{colour}[{child.name}]{_RESET if colour else ''} "), daemon=True)
+        pump.start()
+        self.children[i] = Child(child.name, child.cmd, proc, pump)
+        return self.children[i]
+
     def exited(self) -> list[Child]:
         """Children that have exited."""
         return [c for c in self.children if c.proc.poll() is not None]

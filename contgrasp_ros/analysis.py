@@ -1,0 +1,695 @@
+"""Offline analysis of a recorded graph run (``contgrasp analyze BAG``), without ROS.
+
+A recording made by the launcher (``contgrasp-launch --bag``) holds the simulator's rod states,
+the sensor's contact states, the quality node's Q1..Q3, ``/diagnostics`` and, as MCAP metadata,
+the run's parameters. :func:`load_run` decodes it (``mcap_ros2``, no message packages) into
+numpy arrays; :func:`recompute` repeats the sensing (paper eqs. rho_alpha_definition and
+delta, Definition 1) and the grasp quality (Sec. IV: W = int_S G G^T ds, Q1 = lambda_min(W),
+Q2 = det W, Q3 = lambda_min / lambda_max) from the recorded rod states with exactly the
+functions the nodes call (:mod:`contgrasp_ros.evaluate`), so on a genuine recording the
+recomputation agrees with the recorded topics to rounding (in practice bitwise);
+:func:`summarize` builds the launcher's summary (:func:`contact_stats` is its contact
+statistics) plus the recomputation errors. :func:`write_csv` and :func:`write_plots` export
+the run.
+
+Recordings may be decimated (the recorder keeps rod state/contact/couple only every so many
+seconds of sim time, plus the last message of each topic): messages are paired by their
+``step``, never by position, and the settle time is recomputed (with the simulator's
+:class:`~contgrasp_core.rod.session.SettleDetector`) only when the rod states are complete.
+
+Nothing here imports rclpy or generated message packages.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from contgrasp_core.boundary import Boundary
+from contgrasp_core.errors import ContgraspError
+from contgrasp_core.rod.session import SettleDetector
+from contgrasp_ros.bag import BagError
+from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
+from contgrasp_ros.convert import ContactArrays, RodArrays, boundary_from_msg, contact_arrays, rod_state_arrays, stamp_seconds
+from contgrasp_ros.evaluate import contact_quality, sense_rod_state
+
+__all__ = [
+    "RodSeries",
+    "ContactSeries",
+    "QualitySeries",
+    "RunData",
+    "Recomputation",
+    "load_run",
+    "contact_stats",
+    "recompute",
+    "summarize",
+    "write_csv",
+    "write_plots",
+    "analyze",
+]
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+# topic names as in contgrasp_ros.qos (not imported: that module imports rclpy)
+TOPIC_OBJECT = "/contgrasp/object"
+TOPIC_ROD_STATE = "/contgrasp/rod_state"
+TOPIC_CONTACT = "/contgrasp/contact"
+TOPIC_QUALITY = "/contgrasp/quality"
+TOPIC_DIAGNOSTICS = "/diagnostics"
+RUN_RECORD = "contgrasp_run"  # = contgrasp_ros.bag.writer.RUN_RECORD
+RECORDER_RECORD = "contgrasp_recorder"  # = contgrasp_ros.bag.writer.RECORDER_RECORD
+SIMULATOR = "rod_simulator"
+
+# node defaults (declared in contgrasp_ros/nodes/*.py) for parameters a run's file may omit
+_SIM_DEFAULTS = {"settle_speed": 2e-4, "settle_hold": 0.5, "min_time": 1.0}
+_QUALITY_DEFAULTS = {"contact_tolerance": -1.0, "reference_x": 0.0, "reference_y": 0.0}
+_SENSOR_DEFAULTS = {"contact_tolerance": 0.0}
+
+
+@dataclass
+class RodSeries:
+    """Recorded rod states: ``step``/``t`` (K,), per-node arrays (K, n), ``max_penetration`` (K,)."""
+
+    step: IntArray
+    t: Array
+    s: Array
+    x: Array
+    y: Array
+    theta: Array
+    radius: Array
+    vx: Array
+    vy: Array
+    max_penetration: Array
+
+    def arrays(self, k: int) -> RodArrays:
+        """The k-th state as the sensor node reads it (:func:`contgrasp_ros.convert.rod_state_arrays`)."""
+        return RodArrays(int(self.step[k]), float(self.t[k]), self.s[k], self.x[k], self.y[k], self.theta[k],
+                         np.zeros(0), self.radius[k])
+
+    @property
+    def max_speed(self) -> Array:
+        """Largest node speed hypot(vx, vy) of each state (what the settle rule watches)."""
+        return np.hypot(self.vx, self.vy).max(axis=1)
+
+
+@dataclass
+class ContactSeries:
+    """Recorded contact states (K, n) with their ``step``/``t`` and tolerance (K,)."""
+
+    step: IntArray
+    t: Array
+    s: Array
+    rho: Array
+    alpha: Array
+    delta: Array
+    s_o: Array
+    shadow_x: Array
+    shadow_y: Array
+    in_contact: NDArray[np.bool_]
+    tol: Array
+
+
+@dataclass
+class QualitySeries:
+    """Recorded grasp quality: ``w`` (K, 9) row-major, Q1..Q3, contact length, tolerance, valid."""
+
+    step: IntArray
+    t: Array
+    w: Array
+    q1: Array
+    q2: Array
+    q3: Array
+    contact_length: Array
+    contact_tolerance: Array
+    valid: NDArray[np.bool_]
+
+
+@dataclass
+class RunData:
+    """Everything :func:`summarize` needs from a recording, as arrays."""
+
+    path: Path
+    topics: list[dict[str, Any]]
+    rod: RodSeries
+    contact: ContactSeries | None
+    quality: QualitySeries | None
+    boundary: Boundary
+    params: dict[str, dict[str, Any]] | None
+    run_info: dict[str, Any]
+    status: dict[str, str]
+    sim_time: dict[int, float] = field(default_factory=dict)
+    recorder: dict[str, Any] | None = None
+
+
+def _stack(rows: list[Any], what: str) -> Array:
+    try:
+        return np.stack([np.asarray(r, dtype=float) for r in rows])
+    except ValueError as exc:
+        raise BagError(f"{what}: the recorded messages differ in their number of nodes ({exc})") from exc
+
+
+def _json_values(record: dict[str, str]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, text in record.items():
+        try:
+            out[key] = json.loads(text)
+        except (TypeError, ValueError):
+            out[key] = text
+    return out
+
+
+def _rod_series(msgs: list[Any]) -> RodSeries:
+    cols: dict[str, list[Any]] = {k: [] for k in ("s", "x", "y", "theta", "radius", "vx", "vy")}
+    steps, ts, pens = [], [], []
+    for i, msg in enumerate(msgs):
+        try:
+            a = rod_state_arrays(msg)
+            vx, vy = np.asarray(msg.vx, dtype=float), np.asarray(msg.vy, dtype=float)
+            if vx.shape != a.s.shape or vy.shape != a.s.shape or not (np.all(np.isfinite(vx)) and np.all(np.isfinite(vy))):
+                raise ContgraspError("RodState: 'vx'/'vy' must be finite with one value per node")
+        except ContgraspError as exc:
+            raise BagError(f"{TOPIC_ROD_STATE} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
+        steps.append(a.step)
+        ts.append(a.t)
+        pens.append(float(msg.max_penetration))
+        for key, val in (("s", a.s), ("x", a.x), ("y", a.y), ("theta", a.theta), ("radius", a.radius), ("vx", vx), ("vy", vy)):
+            cols[key].append(val)
+    st = {k: _stack(v, TOPIC_ROD_STATE) for k, v in cols.items()}
+    return RodSeries(np.asarray(steps, dtype=np.int64), np.asarray(ts), max_penetration=np.asarray(pens), **st)
+
+
+def _contact_series(msgs: list[Any]) -> ContactSeries | None:
+    if not msgs:
+        return None
+    rows: list[ContactArrays] = []
+    for i, msg in enumerate(msgs):
+        try:
+            rows.append(contact_arrays(msg))
+        except ContgraspError as exc:
+            raise BagError(f"{TOPIC_CONTACT} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
+    return ContactSeries(
+        np.asarray([c.step for c in rows], dtype=np.int64),
+        np.asarray([c.t for c in rows]),
+        *(_stack([getattr(c, k) for c in rows], TOPIC_CONTACT) for k in ("s", "rho", "alpha", "delta", "s_o")),
+        _stack([c.shadow[:, 0] for c in rows], TOPIC_CONTACT),
+        _stack([c.shadow[:, 1] for c in rows], TOPIC_CONTACT),
+        np.stack([c.in_contact for c in rows]),
+        np.asarray([c.tol for c in rows]),
+    )
+
+
+def _quality_series(msgs: list[Any]) -> QualitySeries | None:
+    if not msgs:
+        return None
+    w = [np.asarray(m.w, dtype=float) for m in msgs]
+    if any(v.shape != (9,) for v in w):
+        raise BagError(f"{TOPIC_QUALITY}: a message's W does not have 9 entries")
+    return QualitySeries(
+        np.asarray([int(m.step) for m in msgs], dtype=np.int64),
+        np.asarray([stamp_seconds(m.header) for m in msgs]),
+        np.stack(w),
+        *(np.asarray([float(getattr(m, k)) for m in msgs]) for k in ("q1", "q2", "q3", "contact_length", "contact_tolerance")),
+        np.asarray([bool(m.valid) for m in msgs]),
+    )
+
+
+def load_run(path: str | Path) -> RunData:
+    """Decode a recording (bag folder or ``.mcap``) into arrays; :class:`BagError` for a
+    missing/corrupt file or one without rod states or object boundary."""
+    rec = open_recording(path)
+    meta = info(rec)
+    topics = [{"name": t["name"], "type": t["type"], "count": t["count"]} for t in meta["topics"]]
+    counts = {t["name"]: t["count"] for t in topics}
+    if not counts.get(TOPIC_ROD_STATE):
+        have = ", ".join(f"{n} ({c})" for n, c in counts.items()) or "none"
+        raise BagError(f"{path}: no {TOPIC_ROD_STATE} messages to analyse (recorded topics: {have})")
+    if not counts.get(TOPIC_OBJECT):
+        raise BagError(f"{path}: no {TOPIC_OBJECT} message (the object boundary is needed to recompute contact and quality)")
+    records = rec.metadata_records()
+    run_info = _json_values(records.get(RUN_RECORD, {}))
+    params = run_info.pop("params", None)
+    if params is not None and not (isinstance(params, dict) and all(isinstance(v, dict) for v in params.values())):
+        raise BagError(f"{path}: the {RUN_RECORD!r} metadata record's params are not per-node parameter mappings")
+    recorder = _json_values(records[RECORDER_RECORD]) if RECORDER_RECORD in records else None
+
+    by_topic: dict[str, list[Any]] = {TOPIC_ROD_STATE: [], TOPIC_CONTACT: [], TOPIC_QUALITY: [], TOPIC_OBJECT: []}
+    status: dict[str, str] = {}
+    sim_time: dict[int, float] = {}
+    for raw, msg in iter_decoded(rec, [*by_topic, TOPIC_DIAGNOSTICS]):
+        if raw.topic != TOPIC_DIAGNOSTICS:
+            by_topic[raw.topic].append(msg)
+            continue
+        for st in msg.status:
+            if st.name != SIMULATOR:
+                continue
+            status = {kv.key: kv.value for kv in st.values}
+            try:  # the simulator's exact float time of each step (stamps are rounded to ns)
+                sim_time[int(status["step"])] = float(status["sim_time_s"])
+            except (KeyError, ValueError):
+                pass
+    try:
+        boundary = boundary_from_msg(by_topic[TOPIC_OBJECT][-1])
+    except ContgraspError as exc:
+        raise BagError(f"{path}: the recorded object boundary is unusable: {exc}") from exc
+    return RunData(
+        path=Path(path),
+        topics=topics,
+        rod=_rod_series(by_topic[TOPIC_ROD_STATE]),
+        contact=_contact_series(by_topic[TOPIC_CONTACT]),
+        quality=_quality_series(by_topic[TOPIC_QUALITY]),
+        boundary=boundary,
+        params=params,
+        run_info=run_info,
+        status=status,
+        sim_time=sim_time,
+        recorder=recorder,
+    )
+
+
+def contact_stats(msg: Any | None) -> dict[str, float | None]:
+    """Contact statistics of one contact state (a ContactState message, decoded or not, or
+    :class:`~contgrasp_ros.convert.ContactArrays`): over the nodes in contact, the mean of
+    |rho / rho_d - 1| with rho_d = r = delta + rho (eq. delta: delta = r - rho) and the mean of
+    |alpha - pi/2| (eq. rho_alpha_definition); None without a message or contact."""
+    none: dict[str, float | None] = {"mean_abs_rho_ratio_minus_1_contact": None, "mean_abs_alpha_minus_half_pi_contact": None}
+    if msg is None:
+        return none
+    rho = np.asarray(msg.rho)
+    radius = np.asarray(msg.delta) + rho
+    mask = np.asarray(msg.in_contact, dtype=bool)
+    if not mask.any():
+        return none
+    return {
+        "mean_abs_rho_ratio_minus_1_contact": float(np.mean(np.abs(rho[mask] / radius[mask] - 1.0))),
+        "mean_abs_alpha_minus_half_pi_contact": float(np.mean(np.abs(np.asarray(msg.alpha)[mask] - np.pi / 2))),
+    }
+
+
+@dataclass
+class Recomputation:
+    """Recomputed contact and quality and their differences from the recorded topics."""
+
+    parameters: dict[str, Any]
+    errors: dict[str, float | None]
+    contact_pairs: int
+    quality_pairs: int
+    in_contact_mismatches: int
+    valid_mismatches: int
+    failures: list[str]
+    quality_index: IntArray  # indices into the QualitySeries that were recomputed
+    quality: Array  # (len(quality_index), 3): recomputed Q1, Q2, Q3
+
+    @property
+    def max_error(self) -> float | None:
+        vals = [v for k, v in self.errors.items() if v is not None and not k.endswith("_relative")]
+        return max(vals) if vals else None
+
+
+def _param(params: dict[str, dict[str, Any]] | None, node: str, key: str, default: float) -> float:
+    if params is None:
+        return default
+    return float(params.get(node, {}).get(key, default))
+
+
+def recompute_parameters(run: RunData) -> dict[str, Any]:
+    """Sensor/quality tolerances and wrench reference the nodes ran with: the run's parameters
+    (MCAP metadata) or, without them, what the recorded messages carry and the node defaults."""
+    if run.params is not None:
+        return {
+            "source": "run parameters",
+            "sensor_contact_tolerance": _param(run.params, "boundary_sensor", "contact_tolerance", _SENSOR_DEFAULTS["contact_tolerance"]),
+            "quality_contact_tolerance": _param(run.params, "grasp_quality", "contact_tolerance", _QUALITY_DEFAULTS["contact_tolerance"]),
+            "reference": [_param(run.params, "grasp_quality", k, _QUALITY_DEFAULTS[k]) for k in ("reference_x", "reference_y")],
+        }
+    return {
+        "source": "recorded messages and node defaults (no run parameters in the recording)",
+        "sensor_contact_tolerance": float(run.contact.tol[0]) if run.contact is not None else _SENSOR_DEFAULTS["contact_tolerance"],
+        "quality_contact_tolerance": float(run.quality.contact_tolerance[0]) if run.quality is not None else -1.0,
+        "reference": [_QUALITY_DEFAULTS["reference_x"], _QUALITY_DEFAULTS["reference_y"]],
+    }
+
+
+def _to_contact_arrays(step: int, t: float, state: Any) -> ContactArrays:
+    """What the quality node reads from the sensor's message of ``state`` (float64 round trip)."""
+    return ContactArrays(step, t, state.s, state.rho, state.alpha, state.delta, state.s_o, state.foot,
+                         np.asarray(state.in_contact, dtype=bool), float(state.tol))
+
+
+_CONTACT_KEYS = ("rho", "alpha", "delta", "s_o", "shadow")
+_QUALITY_KEYS = ("W", "Q1", "Q2", "Q3", "contact_length")
+
+
+def recompute(
+    run: RunData,
+    *,
+    sensor_tolerance: float | None = None,
+    quality_tolerance: float | None = None,
+    reference: tuple[float, float] | None = None,
+) -> Recomputation:
+    """Recompute the contact state of every recorded rod state that has a recorded contact state
+    of the same step (:func:`~contgrasp_ros.evaluate.sense_rod_state`, eqs. rho_alpha_definition
+    and delta), and the quality of every recorded quality step whose rod state was recorded
+    (rod state -> sensing -> :func:`~contgrasp_ros.evaluate.contact_quality`, Sec. IV,
+    W = int_S G G^T ds); return the largest absolute differences per quantity.
+
+    The keyword arguments override the run's parameters (e.g. to check that a wrong tolerance
+    is noticed); ``quality_tolerance < 0`` means the sensor's tolerance, as in the node.
+    """
+    par = recompute_parameters(run)
+    if sensor_tolerance is not None:
+        par["sensor_contact_tolerance"] = float(sensor_tolerance)
+    if quality_tolerance is not None:
+        par["quality_contact_tolerance"] = float(quality_tolerance)
+    if reference is not None:
+        par["reference"] = [float(reference[0]), float(reference[1])]
+    s_tol, q_tol, ref = par["sensor_contact_tolerance"], par["quality_contact_tolerance"], tuple(par["reference"])
+    rod_at = {int(k): i for i, k in enumerate(run.rod.step)}
+    err: dict[str, float] = {}
+    failures: list[str] = []
+    sensed: dict[int, Any] = {}
+
+    def sense(i: int) -> Any:
+        if i not in sensed:
+            sensed[i] = sense_rod_state(run.rod.arrays(i), run.boundary, s_tol)
+        return sensed[i]
+
+    def bump(key: str, value: float) -> None:
+        err[key] = max(err.get(key, 0.0), float(value))
+
+    n_contact = in_contact_bad = 0
+    c = run.contact
+    if c is not None:
+        for j, k in enumerate(c.step):
+            i = rod_at.get(int(k))
+            if i is None:
+                continue
+            try:
+                st = sense(i)
+            except ContgraspError as exc:
+                failures.append(f"contact at step {k}: {exc}")
+                continue
+            n_contact += 1
+            if st.rho.shape != c.rho[j].shape:
+                failures.append(f"contact at step {k}: {len(st.rho)} nodes recomputed, {len(c.rho[j])} recorded")
+                continue
+            bump("rho", np.max(np.abs(st.rho - c.rho[j])))
+            bump("alpha", np.max(np.abs(st.alpha - c.alpha[j])))
+            bump("delta", np.max(np.abs(st.delta - c.delta[j])))
+            bump("s_o", np.max(np.abs(st.s_o - c.s_o[j])))
+            bump("shadow", max(np.max(np.abs(st.foot[:, 0] - c.shadow_x[j])), np.max(np.abs(st.foot[:, 1] - c.shadow_y[j]))))
+            in_contact_bad += int(np.count_nonzero(st.in_contact != c.in_contact[j]))
+
+    q_idx: list[int] = []
+    q_vals: list[tuple[float, float, float]] = []
+    valid_bad = 0
+    q = run.quality
+    if q is not None:
+        for j, k in enumerate(q.step):
+            i = rod_at.get(int(k))
+            if i is None:
+                continue
+            try:
+                st = sense(i)
+                qq = contact_quality(_to_contact_arrays(int(k), float(run.rod.t[i]), st), run.boundary, q_tol, ref)
+            except ContgraspError as exc:
+                failures.append(f"quality at step {k}: {exc}")
+                continue
+            q_idx.append(j)
+            q_vals.append((qq.Q1, qq.Q2, qq.Q3))
+            bump("W", np.max(np.abs(np.asarray(qq.W, dtype=float).ravel() - q.w[j])))
+            bump("Q1", abs(qq.Q1 - q.q1[j]))
+            bump("Q2", abs(qq.Q2 - q.q2[j]))
+            bump("Q3", abs(qq.Q3 - q.q3[j]))
+            bump("contact_length", abs(qq.contact_length - q.contact_length[j]))
+            scale = max(abs(q.q2[j]), abs(qq.Q2))
+            bump("Q2_relative", abs(qq.Q2 - q.q2[j]) / scale if scale > 0 else 0.0)
+            valid_bad += int(bool(qq.has_contact) != bool(q.valid[j]))
+
+    errors: dict[str, float | None] = {k: err.get(k) for k in (*_CONTACT_KEYS, *_QUALITY_KEYS, "Q2_relative")}
+    return Recomputation(
+        parameters=par,
+        errors=errors,
+        contact_pairs=n_contact,
+        quality_pairs=len(q_idx),
+        in_contact_mismatches=in_contact_bad,
+        valid_mismatches=valid_bad,
+        failures=failures,
+        quality_index=np.asarray(q_idx, dtype=np.int64),
+        quality=np.asarray(q_vals, dtype=float).reshape(-1, 3),
+    )
+
+
+def step_gaps(run: RunData) -> dict[str, Any]:
+    """Whether the recorded rod states are every step (a decimated recording is not)."""
+    steps = run.rod.step
+    d = np.diff(steps)
+    return {
+        "contiguous": bool(np.all(d == 1)),
+        "first_step": int(steps[0]),
+        "last_step": int(steps[-1]),
+        "rod_states": len(steps),
+        "missing_steps": max(int(steps[-1] - steps[0] + 1) - len(np.unique(steps)), 0),
+        "max_step_gap": int(d.max()) if len(d) else 0,
+        "monotonic": bool(np.all(d > 0)),
+    }
+
+
+def settle_recomputed(run: RunData) -> tuple[bool | None, float | None]:
+    """(settled, settle time) by the simulator's rule fed every recorded state from step 0, with
+    the simulator's exact times from /diagnostics (the stamps are rounded to ns); (None, None)
+    when the rod states are not complete or the run's parameters are not recorded."""
+    gaps = step_gaps(run)
+    if run.params is None or not gaps["contiguous"] or gaps["first_step"] != 0:
+        return None, None
+    sim = run.params.get(SIMULATOR, {})
+    det = SettleDetector(*(float(sim.get(k, _SIM_DEFAULTS[k])) for k in ("settle_speed", "settle_hold", "min_time")))
+    for k, t, v in zip(run.rod.step, run.rod.t, run.rod.max_speed, strict=True):
+        det.update(run.sim_time.get(int(k), float(t)), float(v))
+    return det.settled, det.settle_time
+
+
+def history(run: RunData, period: float = 0.01) -> list[dict[str, Any]]:
+    """Snapshots for :func:`contgrasp_ros.figure.run_figure`, picked like the launcher's monitor
+    (a rod state and contact state of the same step, at least ``period`` s of sim time apart)."""
+    c = run.contact
+    if c is None:
+        return []
+    rod_at = {int(k): i for i, k in enumerate(run.rod.step)}
+    out: list[dict[str, Any]] = []
+    next_t = 0.0
+    for j, k in enumerate(c.step):
+        i = rod_at.get(int(k))
+        t = float(c.t[j])
+        if i is None or t + 1e-12 < next_t:
+            continue
+        next_t = t + period
+        r = run.rod
+        out.append({"t": t, "x": r.x[i].tolist(), "y": r.y[i].tolist(), "theta": r.theta[i].tolist(),
+                    "radius": r.radius[i].tolist(), "s": c.s[j].tolist(), "rho": c.rho[j].tolist(), "alpha": c.alpha[j].tolist()})
+    return out
+
+
+def _last_contact(c: ContactSeries | None) -> Any:
+    if c is None:
+        return None
+    return ContactArrays(int(c.step[-1]), float(c.t[-1]), c.s[-1], c.rho[-1], c.alpha[-1], c.delta[-1], c.s_o[-1],
+                         np.stack([c.shadow_x[-1], c.shadow_y[-1]], -1), c.in_contact[-1], float(c.tol[-1]))
+
+
+def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
+    """The JSON result: the launcher's summary rebuilt from the recording (last rod state,
+    contact, quality and simulator status) plus the recomputation and recording checks."""
+    st = run.status
+
+    def num(key: str) -> float | None:
+        try:
+            return float(st[key])
+        except (KeyError, ValueError):
+            return None
+
+    rod, q = run.rod, run.quality
+    settled_re, settle_re = settle_recomputed(run)
+    gaps = step_gaps(run)
+    out: dict[str, Any] = {
+        "path": str(run.path),
+        "topics": run.topics,
+        "duration_s": float(rod.t[-1] - rod.t[0]),
+        "settled": st.get("settled") == "true",
+        "settle_time_s": num("settle_time_s"),
+        "settled_recomputed": settled_re,
+        "settle_time_recomputed_s": settle_re,
+        "sim_time_s": num("sim_time_s"),
+        "steps": int(num("step") or 0),
+        "simulator_state": st.get("state", "unknown"),
+        "missed_deadlines": int(num("missed_deadlines") or 0),
+        "max_penetration": num("max_penetration"),
+        "max_penetration_recomputed": float(rod.max_penetration.max()) if gaps["contiguous"] and gaps["first_step"] == 0 else None,
+        "final": {"step": int(rod.step[-1]), "t": float(rod.t[-1]), "s": rod.s[-1].tolist(), "x": rod.x[-1].tolist(),
+                  "y": rod.y[-1].tolist(), "theta": rod.theta[-1].tolist()},
+        "final_quality": None if q is None else {"Q1": float(q.q1[-1]), "Q2": float(q.q2[-1]), "Q3": float(q.q3[-1]),
+                                                  "valid": bool(q.valid[-1]), "contact_length": float(q.contact_length[-1])},
+        **contact_stats(_last_contact(run.contact)),
+        "max_recompute_error": rc.max_error,
+        "recompute_errors": rc.errors,
+        "recomputed_pairs": {"contact": rc.contact_pairs, "quality": rc.quality_pairs},
+        "recompute_mismatches": {"in_contact": rc.in_contact_mismatches, "valid": rc.valid_mismatches},
+        "recompute_failures": rc.failures[:20],
+        "recompute_parameters": rc.parameters,
+        "step_gaps": gaps,
+        "messages": {"rod_state": len(rod.step), "contact": 0 if run.contact is None else len(run.contact.step),
+                     "quality": 0 if q is None else len(q.step)},
+        "recorder": run.recorder,
+        "run": run.run_info or None,
+    }
+    return out
+
+
+def _write_rows(path: Path, header: list[str], rows: Any) -> int:
+    n = 0
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(header)
+        for row in rows:
+            w.writerow(row)
+            n += 1
+    return n
+
+
+def _long_rows(t: Array, steps: IntArray, cols: list[Any], extra: list[Any] = ()) -> Iterator[list[Any]]:
+    """One row per state and node: t, step, i, the node's values of ``cols``, then ``extra``
+    columns (per-node arrays or per-state scalars)."""
+    n = cols[0].shape[1]
+    for k in range(len(steps)):
+        lists = [c[k].tolist() for c in cols]
+        more = [e[k].tolist() if np.ndim(e[k]) else [e[k].item()] * n for e in extra]
+        tk, sk = float(t[k]), int(steps[k])
+        for i in range(n):
+            yield [tk, sk, i, *(v[i] for v in lists), *(v[i] for v in more)]
+
+
+def _write_rows(path: Path, header: list[str], rows: Iterable[list[Any]]) -> int:
+    n = 0
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(header)
+        for row in rows:
+            w.writerow(row)
+            n += 1
+    return n
+
+
+def write_csv(run: RunData, rc: Recomputation, out_dir: str | Path) -> dict[str, dict[str, Any]]:
+    """``rod_state.csv`` (t, step, i, s, x, y, theta, radius, vx, vy) and ``contact.csv`` (t, step,
+    i, s, rho, alpha, delta, s_o, shadow_x, shadow_y, in_contact, contact_tolerance) in long format,
+    one row per recorded state and node; ``quality.csv`` (t, step, q1, q2, q3, contact_length,
+    valid, recomputed_q1..3) one row per quality message, the recomputed values empty where the
+    rod state of that step was not recorded. Floats are written round-trip exact."""
+    d = Path(out_dir)
+    r, c, q = run.rod, run.contact, run.quality
+    files: dict[str, dict[str, Any]] = {}
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        rows = _write_rows(d / "rod_state.csv", ["t", "step", "i", "s", "x", "y", "theta", "radius", "vx", "vy"],
+                           _long_rows(r.t, r.step, [r.s, r.x, r.y, r.theta, r.radius, r.vx, r.vy]))
+        files["rod_state"] = {"path": str(d / "rod_state.csv"), "rows": rows}
+        if c is not None:
+            rows = _write_rows(
+                d / "contact.csv",
+                ["t", "step", "i", "s", "rho", "alpha", "delta", "s_o", "shadow_x", "shadow_y", "in_contact", "contact_tolerance"],
+                _long_rows(c.t, c.step, [c.s, c.rho, c.alpha, c.delta, c.s_o, c.shadow_x, c.shadow_y],
+                           [c.in_contact.astype(np.int64), c.tol]),
+            )
+            files["contact"] = {"path": str(d / "contact.csv"), "rows": rows}
+        if q is not None:
+            again = {int(j): rc.quality[n].tolist() for n, j in enumerate(rc.quality_index)}
+            rows = _write_rows(
+                d / "quality.csv",
+                ["t", "step", "q1", "q2", "q3", "contact_length", "valid", "recomputed_q1", "recomputed_q2", "recomputed_q3"],
+                ([float(q.t[j]), int(q.step[j]), float(q.q1[j]), float(q.q2[j]), float(q.q3[j]), float(q.contact_length[j]),
+                  int(q.valid[j]), *again.get(j, ["", "", ""])] for j in range(len(q.step))),
+            )
+            files["quality"] = {"path": str(d / "quality.csv"), "rows": rows}
+    except OSError as exc:
+        raise ContgraspError(f"cannot write CSV files to {d}: {exc.strerror or exc}") from exc
+    return files
+
+
+def quality_plot_path(path: str | Path) -> Path:
+    """Where :func:`write_plots` puts the quality figure: ``FILE`` with ``_quality`` before the suffix."""
+    p = Path(path)
+    return p.with_name(f"{p.stem}_quality{p.suffix or '.png'}")
+
+
+def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: float | None = None) -> dict[str, Any]:
+    """Two figures: ``path``, the Fig. 4-style figure (:func:`contgrasp_ros.figure.run_figure`,
+    needs the run's parameters and paired rod/contact states), and :func:`quality_plot_path`,
+    Q1, Q2, Q3 over sim time as recorded (line) and recomputed from the rod states (crosses)."""
+    from contgrasp_core.plots import plt, save  # Agg backend, set by contgrasp_core.plots
+
+    out: dict[str, Any] = {"figure": None, "quality": None}
+    hist = history(run)
+    try:
+        if run.params is None:
+            out["figure_skipped"] = "the recording holds no run parameters (contgrasp_run metadata)"
+        elif not hist:
+            out["figure_skipped"] = "no rod state and contact state of the same step were recorded"
+        else:
+            from contgrasp_ros.figure import run_figure
+
+            run_figure({"history": hist}, run.params, str(path))
+            out["figure"] = str(path)
+        q = run.quality
+        if q is None:
+            out["quality_skipped"] = f"no {TOPIC_QUALITY} messages were recorded"
+            return out
+        qpath = quality_plot_path(path)
+        fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+        labels = ("Q1 = lambda_min(W)", "Q2 = det W", "Q3 = lambda_min / lambda_max")
+        for n, (ax, rec_vals, label) in enumerate(zip(axes, (q.q1, q.q2, q.q3), labels, strict=True)):
+            ax.plot(q.t, rec_vals, "-", color="tab:blue", lw=1.2, label="recorded")
+            if len(rc.quality_index):
+                ax.plot(q.t[rc.quality_index], rc.quality[:, n], "x", color="tab:red", ms=5, label="recomputed")
+            if settle_time is not None:
+                ax.axvline(settle_time, color="0.5", ls=":", lw=1.0, label="settled")
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        axes[0].legend(fontsize=8)
+        axes[0].set_title("continuum grasp quality (Sec. IV) over the run")
+        axes[-1].set_xlabel("sim time t [s]")
+        fig.tight_layout()
+        save(fig, str(qpath))
+        out["quality"] = str(qpath)
+    except (OSError, ValueError) as exc:
+        if isinstance(exc, ContgraspError):
+            raise
+        raise ContgraspError(f"cannot write the plot {path}: {exc}") from exc
+    return out
+
+
+def analyze(
+    path: str | Path,
+    *,
+    csv_dir: str | Path | None = None,
+    plot: str | Path | None = None,
+    sensor_tolerance: float | None = None,
+    quality_tolerance: float | None = None,
+) -> dict[str, Any]:
+    """Analyse a recording: :func:`load_run`, :func:`recompute`, :func:`summarize`, and with
+    ``csv_dir``/``plot`` :func:`write_csv`/:func:`write_plots`. Raises :class:`BagError` /
+    :class:`ContgraspError` for bad input."""
+    run = load_run(path)
+    rc = recompute(run, sensor_tolerance=sensor_tolerance, quality_tolerance=quality_tolerance)
+    out = summarize(run, rc)
+    if csv_dir is not None:
+        out["csv"] = write_csv(run, rc, csv_dir)
+    if plot is not None:
+        out["plot"] = write_plots(run, rc, plot, out["settle_time_s"])
+    return out

@@ -1,0 +1,94 @@
+"""The ``contgrasp`` command: the core subcommands plus the recording ones.
+
+``contgrasp bag info BAG``, ``contgrasp bag recover IN OUT``, ``contgrasp replay BAG`` and
+``contgrasp analyze BAG`` are registered here so :mod:`contgrasp_core` stays free of ROS; only
+``replay`` needs rclpy (imported when it runs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from contgrasp_core import cli as core_cli
+
+__all__ = ["main"]
+
+
+def _info_text(result: dict[str, Any]) -> str:
+    lines = [
+        f"Files:             {', '.join(result['files'])}",
+        f"Bag size:          {result['size_bytes'] / 1e6:.3f} MB",
+        "Storage id:        mcap",
+        f"Duration:          {result['duration_s']:.6f} s",
+        f"Start:             {result['start_ns'] * 1e-9:.9f}",
+        f"End:               {result['end_ns'] * 1e-9:.9f}",
+        f"Messages:          {result['message_count']}",
+        f"Chunks:            {result['chunk_count']} ({', '.join(result['compression']) or 'none'})",
+        "Topic information:",
+    ]
+    for t in result["topics"]:
+        qos = t["offered_qos_profiles"]
+        q = qos[0] if isinstance(qos, list) and qos else {}
+        lines.append(
+            f"  Topic: {t['name']} | Type: {t['type']} | Count: {t['count']} | Serialization Format: {t['serialization_format']}"
+            + (f" | QoS: {q.get('reliability')}, {q.get('durability')}, {q.get('history')} {q.get('depth')}" if q else "")
+        )
+    return "\n".join(lines)
+
+
+def _bag_info(args: argparse.Namespace) -> dict[str, Any]:
+    from contgrasp_ros.bag.reader import info, open_recording
+
+    return info(open_recording(args.bag))
+
+
+def _bag_recover(args: argparse.Namespace) -> dict[str, Any]:
+    from contgrasp_ros.bag.reader import recover
+
+    out = recover(args.input, args.output)
+    out.pop("metadata", None)
+    return out
+
+
+def _replay(args: argparse.Namespace) -> dict[str, Any]:
+    from contgrasp_ros.replay import replay
+
+    return replay(args.bag, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start, end=args.end, delay=args.delay)
+
+
+def add_bag_parsers(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
+    """``bag info``, ``bag recover`` and ``replay``."""
+    bag = sub.add_parser("bag", help="inspect or repair recordings (MCAP, rosbag2 layout)")
+    bag_sub = bag.add_subparsers(dest="bag_command", metavar="BAG_COMMAND", required=True)
+    p = bag_sub.add_parser("info", parents=parents, help="topics, types, counts, duration, QoS (like ros2 bag info)")
+    p.add_argument("bag", type=Path, help="bag folder or .mcap file")
+    p.set_defaults(func=_bag_info, format_text=_info_text)
+    p = bag_sub.add_parser("recover", parents=parents,
+                           help="copy every intact chunk of a truncated/damaged recording into a new, finished one")
+    p.add_argument("input", type=Path, help="damaged bag folder or .mcap file")
+    p.add_argument("output", type=Path, help="new recording: a folder, or a .mcap file")
+    p.set_defaults(func=_bag_recover)
+    p = sub.add_parser("replay", parents=parents, help="republish a recording with its original timing (needs ROS)")
+    p.add_argument("bag", type=Path, help="bag folder or .mcap file")
+    p.add_argument("--rate", type=float, default=1.0, help="speed factor (2 = twice as fast)")
+    p.add_argument("--topics", nargs="+", default=None, help="only these topics")
+    p.add_argument("--loop", action="store_true", help="start over at the end (stop with Ctrl-C)")
+    p.add_argument("--start", type=float, default=None, help="seconds after the first message to start at")
+    p.add_argument("--end", type=float, default=None, help="seconds after the first message to stop at")
+    p.add_argument("--delay", type=float, default=1.0, help="wall seconds to let subscribers connect first")
+    p.set_defaults(func=_replay)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``contgrasp`` console script."""
+    from contgrasp_ros import cli_analyze
+
+    return core_cli.main(argv, extra=[add_bag_parsers, cli_analyze.add_parser])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

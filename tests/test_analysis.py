@@ -1,0 +1,250 @@
+"""``contgrasp analyze``: a recorded run analysed offline reproduces the launcher's summary and,
+recomputed from the rod states with the nodes' own functions, the recorded contact and quality."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import fresh_domain_id
+
+from contgrasp_core.cli import main
+from contgrasp_ros import cli_analyze
+from contgrasp_ros.analysis import analyze, contact_stats, load_run, recompute
+from contgrasp_ros.bag.reader import iter_decoded, iter_raw, open_recording
+from contgrasp_ros.bag.writer import BagWriter
+
+BIN = Path(sys.executable).parent
+ROOT = Path(__file__).resolve().parents[1]
+ROD, CONTACT, COUPLE, QUALITY = "/contgrasp/rod_state", "/contgrasp/contact", "/contgrasp/couple", "/contgrasp/quality"
+
+
+def cli(*argv: str) -> int:
+    return main(["analyze", *argv], extra=[cli_analyze.add_parser])
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    """One short real run of the graph (separate processes), recorded, with the launcher's summary.
+
+    The scenario is the packaged one with a looser settle rule so the arm is judged settled
+    after ~0.4 s of sim time (~220 lock-step steps). The duration is set in the parameter file:
+    ``--duration`` does not reach a separate-process simulator whose section of the file sets it.
+    """
+    pytest.importorskip("rclpy")
+    from contgrasp_ros.launcher import default_params_file
+
+    d = tmp_path_factory.mktemp("analysis")
+    data = yaml.safe_load(default_params_file().read_text())
+    data["rod_simulator"]["ros__parameters"].update(duration=0.6, settle_speed=0.05, settle_hold=0.04, min_time=0.2)
+    params = d / "params.yaml"
+    params.write_text(yaml.safe_dump(data))
+    bag, summary_file = d / "run", d / "summary.json"
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+    proc = subprocess.run(
+        [str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--params", str(params),
+         "--bag", str(bag), "--summary-file", str(summary_file), "--json"],
+        capture_output=True, text=True, timeout=300, env=env,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads(summary_file.read_text())
+    assert summary["settled"] and summary["steps"] > 100
+    return bag, summary
+
+
+def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -> None:
+    bag, summary = recording
+    r = analyze(bag)
+    for key in ("settled", "settle_time_s", "sim_time_s", "steps", "missed_deadlines", "max_penetration",
+                "mean_abs_rho_ratio_minus_1_contact", "mean_abs_alpha_minus_half_pi_contact"):
+        assert r[key] == summary[key], key
+    for key in ("s", "x", "y", "theta"):
+        np.testing.assert_allclose(r["final"][key], summary["final"][key], rtol=0, atol=1e-12)
+    fq, sq = r["final_quality"], summary["final_quality"]
+    assert fq["valid"] == sq["valid"] is True
+    for key in ("Q1", "Q2", "Q3", "contact_length"):
+        np.testing.assert_allclose(fq[key], sq[key], rtol=1e-12, atol=0)
+    # the settle rule replayed on the complete rod states gives the simulator's answer
+    assert r["step_gaps"]["contiguous"] and r["step_gaps"]["first_step"] == 0
+    assert r["settled_recomputed"] is True and r["settle_time_recomputed_s"] == summary["settle_time_s"]
+    assert r["max_penetration_recomputed"] == summary["max_penetration"]
+    # recomputation from the rod states matches the recorded contact and quality topics
+    assert r["max_recompute_error"] is not None and r["max_recompute_error"] <= 1e-9
+    assert r["recompute_errors"]["Q2_relative"] <= 1e-9
+    assert r["recomputed_pairs"]["contact"] == summary["steps"] + 1
+    assert r["recomputed_pairs"]["quality"] == r["messages"]["quality"] > 0
+    assert r["recompute_mismatches"] == {"in_contact": 0, "valid": 0} and r["recompute_failures"] == []
+    assert r["recompute_parameters"]["source"] == "run parameters"
+    assert r["recompute_parameters"]["quality_contact_tolerance"] == 0.0005
+    topics = {t["name"]: t for t in r["topics"]}
+    assert topics[ROD]["count"] == summary["steps"] + 1 and topics[ROD]["type"] == "contgrasp_msgs/msg/RodState"
+    assert r["recorder"]["received"] == r["recorder"]["written"] == summary["bag"]["messages"]
+    assert r["duration_s"] == pytest.approx(summary["sim_time_s"], abs=1e-9)
+
+
+def test_cli_writes_csv_and_plots(recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag, summary = recording
+    out, plot = tmp_path / "csv", tmp_path / "run.png"
+    assert cli(str(bag), "--json", "--csv", str(out), "--plot", str(plot)) == 0
+    r = json.loads(capsys.readouterr().out)
+    n_nodes, n_states, n_quality = len(summary["final"]["s"]), summary["steps"] + 1, r["messages"]["quality"]
+    tables = {}
+    for name in ("rod_state", "contact", "quality"):
+        with open(out / f"{name}.csv", newline="") as f:
+            tables[name] = list(csv.DictReader(f))
+        assert r["csv"][name]["rows"] == len(tables[name])
+    assert len(tables["rod_state"]) == len(tables["contact"]) == n_states * n_nodes
+    assert len(tables["quality"]) == n_quality
+    assert list(tables["rod_state"][0]) == ["t", "step", "i", "s", "x", "y", "theta", "radius", "vx", "vy"]
+    last = [row for row in tables["rod_state"] if int(row["step"]) == summary["steps"]]
+    assert [float(row["x"]) for row in last] == summary["final"]["x"]  # round-trip exact
+    q = tables["quality"][-1]
+    assert float(q["q1"]) == summary["final_quality"]["Q1"] and float(q["recomputed_q1"]) == pytest.approx(float(q["q1"]), rel=1e-9)
+    assert r["plot"] == {"figure": str(plot), "quality": str(tmp_path / "run_quality.png")}
+    for p in (plot, tmp_path / "run_quality.png"):
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 10_000
+
+
+BLOCKED = ("rclpy", "rosidl_runtime_py", "rosidl_parser", "rosidl_pycommon", "contgrasp_msgs", "std_msgs",
+           "builtin_interfaces", "diagnostic_msgs", "rosgraph_msgs", "visualization_msgs", "rcl_interfaces",
+           "ament_index_python")
+
+
+def test_analyze_runs_without_ros(recording: tuple[Path, dict], tmp_path: Path) -> None:
+    """With every ROS package made unimportable, the CLI still analyses the recording."""
+    bag, summary = recording
+    code = (
+        "import json, sys\n"
+        f"for name in {BLOCKED!r}:\n"
+        "    sys.modules[name] = None\n"
+        "from contgrasp_core.cli import main\n"
+        "from contgrasp_ros import cli_analyze\n"
+        f"rc = main(['analyze', {str(bag)!r}, '--json', '--plot', {str(tmp_path / 'p.png')!r}], extra=[cli_analyze.add_parser])\n"
+        "leaked = sorted(m for m in sys.modules if m.split('.')[0] in " + repr(BLOCKED) + " and sys.modules[m] is not None)\n"
+        "print(json.dumps({'leaked': leaked}))\n"
+        "sys.exit(rc)\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("AMENT_PREFIX_PATH", "PYTHONPATH")}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result_line, leaked_line = proc.stdout.strip().splitlines()
+    r = json.loads(result_line)
+    assert json.loads(leaked_line) == {"leaked": []}
+    assert r["settle_time_s"] == summary["settle_time_s"] and r["max_recompute_error"] <= 1e-9
+    assert r["plot"]["figure"] and r["plot"]["quality"]
+
+
+def decimate(src: Path, dst: Path, period: float = 0.05) -> list[int]:
+    """A copy keeping rod state/contact/couple once per ``period`` of stamp time plus each
+    topic's last message (like the recorder's decimation); returns the kept rod-state steps."""
+    rec = open_recording(src)
+    stamps = {}
+    for raw, msg in iter_decoded(rec, [ROD, CONTACT, COUPLE]):
+        stamps[(raw.topic, raw.log_time_ns, raw.sequence)] = (msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec, int(msg.step))
+    last_of = {}
+    for key in stamps:
+        last_of[key[0]] = key
+    out = BagWriter(dst)
+    kept_at: dict[str, float] = {}
+    kept_steps = []
+    for m in iter_raw(rec):
+        key = (m.topic, m.log_time_ns, m.sequence)
+        if key in stamps:
+            t, step = stamps[key]
+            if key != last_of[m.topic] and m.topic in kept_at and t - kept_at[m.topic] < period - 1e-12:
+                continue
+            kept_at[m.topic] = t
+            if m.topic == ROD:
+                kept_steps.append(step)
+        out.add_topic(m.topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""), m.channel.metadata.get("topic_type_hash", ""),
+                      definition=m.schema.data.decode())
+        out.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns, m.sequence)
+    out.records.update({k: v for k, v in rec.metadata_records().items() if k != "rosbag2"})
+    out.close()
+    return kept_steps
+
+
+def test_decimated_recording_pairs_by_step(recording: tuple[Path, dict], tmp_path: Path) -> None:
+    bag, summary = recording
+    kept = decimate(bag, tmp_path / "dec")
+    assert 5 < len(kept) < summary["steps"] // 5
+    r = analyze(tmp_path / "dec")
+    full = analyze(bag)
+    for key in ("settled", "settle_time_s", "steps", "final", "final_quality", "mean_abs_rho_ratio_minus_1_contact"):
+        assert r[key] == full[key], key
+    gaps = r["step_gaps"]
+    assert not gaps["contiguous"] and gaps["rod_states"] == len(kept) and gaps["missing_steps"] == summary["steps"] + 1 - len(kept)
+    assert r["settle_time_recomputed_s"] is None and r["settled_recomputed"] is None
+    assert r["max_penetration_recomputed"] is None
+    assert r["recomputed_pairs"]["contact"] == len(kept)
+    assert 0 < r["recomputed_pairs"]["quality"] <= r["messages"]["quality"] == full["messages"]["quality"]
+    assert r["max_recompute_error"] <= 1e-9
+
+
+def test_recomputation_is_not_vacuous(recording: tuple[Path, dict]) -> None:
+    """A perturbed rod state, a wrong sensor tolerance or a wrong quality tolerance shows up."""
+    bag, _ = recording
+    run = load_run(bag)
+    assert recompute(run).max_error <= 1e-9
+    # the state of the last quality evaluation (the arm wraps the object by then)
+    k = int(np.flatnonzero(run.rod.step == run.quality.step[-1])[0])
+    run.rod.x[k] += 1e-4
+    rc = recompute(run)
+    assert rc.errors["rho"] > 1e-5 and rc.errors["Q1"] > 0.0
+    run = load_run(bag)
+    assert recompute(run, sensor_tolerance=2e-3).in_contact_mismatches > 0
+    assert recompute(run, quality_tolerance=0.0).errors["Q1"] > 1e-9
+
+
+def test_contact_stats() -> None:
+    class Msg:
+        rho = [0.02, 0.011, 0.05]
+        delta = [-0.01, -0.001, -0.04]
+        alpha = [1.0, 1.5, 2.0]
+        in_contact = [False, True, False]
+
+    stats = contact_stats(Msg())
+    assert stats["mean_abs_rho_ratio_minus_1_contact"] == pytest.approx(0.1)
+    assert stats["mean_abs_alpha_minus_half_pi_contact"] == pytest.approx(np.pi / 2 - 1.5)
+    Msg.in_contact = [False] * 3
+    assert set(contact_stats(Msg()).values()) == {None} and set(contact_stats(None).values()) == {None}
+
+
+def test_bad_input_is_one_line_and_exit_code_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli(str(tmp_path / "missing")) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("contgrasp analyze: error: no recording at")
+
+    w = BagWriter(tmp_path / "strings")
+    w.add_topic("/chatter", "std_msgs/msg/String", definition="string data\n")
+    cdr = b"\x00\x01\x00\x00" + (3).to_bytes(4, "little") + b"hi\x00"
+    for i in range(3):
+        w.write("/chatter", cdr, 1000 + i)
+    w.close()
+    assert cli(str(tmp_path / "strings")) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no /contgrasp/rod_state messages" in err and "/chatter (3)" in err
+
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"not an mcap file at all")
+    assert cli(str(junk)) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is not an MCAP file" in err
+
+
+def test_truncated_recording_is_reported(recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bag, _ = recording
+    data = (bag / "run_0.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    assert cli(str(cut)) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "incomplete" in err
