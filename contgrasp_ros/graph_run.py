@@ -61,6 +61,7 @@ class Monitor(Node):
         self.pause = self.create_client(SetBool, "/rod_simulator/pause")
         self.loop_wall_time: float | None = None
         self.restarts: dict[str, int] = {}
+        self.lost: set[str] = set()
         self.faults: list[dict[str, Any]] = []
 
     def _on_rod(self, msg: RodState) -> None:
@@ -149,11 +150,13 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
     """Connect, resume, wait for the end. Returns an error text or None.
 
     A node process that exits is restarted up to ``respawn`` times (a restarted simulator starts
-    again from the initial state and is resumed here); otherwise its exit ends the run. The
-    recorder is never restarted (its file would exist): the run goes on unrecorded.
+    again from the initial state and is resumed here). Beyond that, the simulator's exit ends
+    the run; a sensor, controller or quality node that stays dead is reported and the run goes
+    on (the lock-step simulator applies its timeout fallback). The recorder is never restarted
+    (its file would exist): the run goes on unrecorded.
     """
     end = time.monotonic() + timeout
-    resume: dict[str, Any] = {"pending": False, "future": None, "sent": 0.0}
+    resume: dict[str, Any] = {"pending": False, "future": None, "sent": 0.0, "started": False}
 
     def dead() -> str | None:
         if group is None:
@@ -166,9 +169,18 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
                     mon.faults.append({"node": RECORDER, "exit_code": code, "action": "continued unrecorded"})
                     mon.get_logger().error(f"the recorder exited with code {code}; the run continues unrecorded")
                 continue
+            if c.name in mon.lost:
+                continue
             n = mon.restarts.get(c.name, 0)
             if n >= respawn:
-                return f"node '{c.name}' exited with code {code}"
+                if c.name == "rod_simulator" or not resume["started"]:  # (before the start the graph cannot connect)
+                    return f"node '{c.name}' exited with code {code}"
+                # the simulator's lock-step timeout applies its fallback couple from now on
+                mon.lost.add(c.name)
+                mon.faults.append({"node": c.name, "exit_code": code, "action": "continued without it"})
+                mon.get_logger().error(f"node '{c.name}' exited with code {code}; the run continues without it "
+                                       "(the simulator applies its timeout fallback)")
+                continue
             mon.restarts[c.name] = n + 1
             mon.faults.append({"node": c.name, "exit_code": code, "action": "restarted"})
             mon.get_logger().error(f"node '{c.name}' exited with code {code}; restarting it ({n + 1}/{respawn})")
@@ -196,6 +208,8 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
         executor.spin_once(timeout_sec=0.05)
         if (err := dead()) or time.monotonic() > end:
             return err or "timed out resuming the simulator"
+    resume["started"] = True
+    mon.get_logger().info("graph connected; the simulator is running")
     while mon.status.get("state") not in ("finished", "failed") or resume["pending"]:
         executor.spin_once(timeout_sec=0.05)
         if err := dead():
@@ -245,6 +259,7 @@ def bag_summary(path: Path) -> dict[str, Any]:
         "received": json.loads(counts.get("received", "null")),
         "written": json.loads(counts.get("written", "null")),
         "decimated": json.loads(counts.get("decimated", "0")),
+        "lost_in_transport": json.loads(counts.get("lost_in_transport", "0")),
         "topics": {t["name"]: t["count"] for t in meta["topics"]},
     }
 

@@ -51,7 +51,12 @@ class ProcessGroup:
         pump.start()
         child = Child(name, cmd, proc, pump)
         self.children.append(child)
+        self._announce(child)
         return child
+
+    def _announce(self, child: Child) -> None:
+        with self._lock:
+            print(f"[launcher] started {child.name} (pid {child.proc.pid})", file=self.sink, flush=True)
 
     def _pump(self, proc: subprocess.Popen[bytes], prefix: str) -> None:
         assert proc.stdout is not None
@@ -69,6 +74,7 @@ class ProcessGroup:
         pump = threading.Thread(target=self._pump, args=(proc, f"{colour}[{child.name}]{_RESET if colour else ''} "), daemon=True)
         pump.start()
         self.children[i] = Child(child.name, child.cmd, proc, pump)
+        self._announce(self.children[i])
         return self.children[i]
 
     def exited(self) -> list[Child]:

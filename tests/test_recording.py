@@ -391,3 +391,28 @@ def test_shipped_sample_analysis_reproduces_its_summary() -> None:
     assert got["max_recompute_error"] <= 1e-9
     assert got["recomputed_pairs"]["quality"] == made["bag"]["topics"]["/contgrasp/quality"]
     assert {t["name"]: t["count"] for t in got["topics"]} == made["bag"]["topics"]
+
+
+def test_recorder_counts_messages_lost_before_it_from_sequence_gaps(ros_context, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Gaps in a single publisher's sequence numbers are reported as lost in transport; a
+    restarted publisher (numbers start over) or several publishers are not counted as loss."""
+    from rclpy.parameter import Parameter
+
+    from contgrasp_ros.nodes.mcap_recorder import McapRecorder
+
+    node = McapRecorder(context=ros_context, parameter_overrides=[Parameter("output", value=str(tmp_path / "bag"))])
+    try:
+        node.writer.add_topic("/t", "std_msgs/msg/String")
+        node.received["/t"], node.lost_in_transport["/t"], node._single_publisher["/t"] = 0, 0, True
+        payload = b"\x00\x01\x00\x00\x01\x00\x00\x00\x00\x00\x00\x00"
+        for seq in (1, 2, 5, 6, 1, 2, 4):  # 3, 4 lost; restart; 3 lost
+            node.on_message("/t", payload, {"publication_sequence_number": seq, "source_timestamp": 1})
+        assert node.counts()["lost_in_transport"] == 3
+        node._single_publisher["/t"] = False
+        for seq in (10, 20):
+            node.on_message("/t", payload, {"publication_sequence_number": seq, "source_timestamp": 1})
+        c = node.counts()
+        assert c["lost_in_transport"] == 3 and c["received"] == c["written"] == 9
+    finally:
+        node.destroy_node()
+    assert json.loads(open_recording(tmp_path / "bag").metadata_records()[RECORDER_RECORD]["lost_in_transport"]) == 3

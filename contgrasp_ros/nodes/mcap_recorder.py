@@ -11,6 +11,10 @@ SIGKILL loses at most that much; SIGINT/SIGTERM finalise the file. Received and 
 message counts are published on ``/diagnostics`` and stored in the file (metadata record
 ``contgrasp_recorder``). A file that cannot be created or written ends the node with code 1.
 
+Messages lost before they reach the recorder (in the middleware, e.g. a publisher's keep-last
+queue overrun at very high rates) are detected from gaps in the publishers' sequence numbers
+on topics with a single publisher and reported as ``lost_in_transport`` (diagnostics WARN).
+
 Optional decimation (to keep shipped sample recordings small): topics in ``decimate_topics``
 keep one message per ``decimate_period`` seconds of their header stamp (the quality node's
 rule: skip while ``0 <= t - t_kept < period``) plus the last message received; the skipped
@@ -93,6 +97,9 @@ class McapRecorder(Node):
         self._decimate: dict[str, list[Any]] = {}  # topic -> [last kept stamp, held (data, info) or None]
         self._decimate_wanted = set(decimate) if self.decimate_period > 0 else set()
         self.decimated = 0
+        self._last_seq: dict[str, int | None] = {}
+        self._single_publisher: dict[str, bool] = {}
+        self.lost_in_transport: dict[str, int] = {}
         self.topics = [t for t in self.topics if t]
         try:
             self.regex = re.compile(regex) if regex else None
@@ -158,6 +165,8 @@ class McapRecorder(Node):
             except BagError as exc:
                 raise FatalNodeError(str(exc)) from exc
             self.received[topic] = 0
+            self.lost_in_transport[topic] = 0
+            self._single_publisher[topic] = len(offers) == 1
             if topic in self._decimate_wanted:
                 if _starts_with_stamp(types[0]):
                     self._decimate[topic] = [None, None]
@@ -169,8 +178,19 @@ class McapRecorder(Node):
             self.get_logger().info(f"recording {topic} [{types[0]}]")
 
     # ------------------------------------------------------------------ messages
+    def _track_sequence(self, topic: str, seq: int | None) -> None:
+        """Count gaps in a single publisher's sequence numbers (a restarted publisher starts over)."""
+        last = self._last_seq.get(topic)
+        if not seq or not self._single_publisher.get(topic):
+            self._last_seq[topic] = None
+            return
+        if last is not None and seq > last + 1:
+            self.lost_in_transport[topic] += seq - last - 1
+        self._last_seq[topic] = seq
+
     def on_message(self, topic: str, data: bytes, info: dict[str, Any]) -> None:
         self.received[topic] += 1
+        self._track_sequence(topic, info.get("publication_sequence_number"))
         log_ns = time.time_ns()
         dec = self._decimate.get(topic)
         if dec is not None:
@@ -202,21 +222,26 @@ class McapRecorder(Node):
             "written": sum(written.values()),
             "decimated": self.decimated,
             "held": sum(d[1] is not None for d in self._decimate.values()),
+            "lost_in_transport": sum(self.lost_in_transport.values()),
             "bytes": self.writer.bytes,
             "received_per_topic": dict(self.received),
             "written_per_topic": written,
+            "lost_in_transport_per_topic": {t: n for t, n in self.lost_in_transport.items() if n},
         }
 
     def flush(self) -> None:
+        for topic in self._subs:
+            self._single_publisher[topic] = self.count_publishers(topic) == 1
         try:
             self.writer.flush()
         except BagError as exc:
             raise FatalNodeError(str(exc)) from exc
         c = self.counts()
         values = {"path": str(self.writer.path), "received": str(c["received"]), "written": str(c["written"]),
+                  "decimated": str(c["decimated"]), "lost_in_transport": str(c["lost_in_transport"]),
                   "bytes": str(c["bytes"]), "topics": str(len(self._subs))}
-        lost = c["received"] - c["written"] - c["decimated"] - c["held"]
-        level = DiagnosticStatus.OK if lost == 0 else DiagnosticStatus.WARN
+        unwritten = c["received"] - c["written"] - c["decimated"] - c["held"]
+        level = DiagnosticStatus.OK if unwritten == 0 and c["lost_in_transport"] == 0 else DiagnosticStatus.WARN
         st = DiagnosticStatus(level=level, name="mcap_recorder", message="recording", hardware_id="contgrasp",
                               values=[KeyValue(key=k, value=v) for k, v in values.items()])
         self._pub_diag.publish(DiagnosticArray(status=[st]))
