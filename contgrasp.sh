@@ -76,8 +76,14 @@ setup() {
 run_main() {
     mkdir -p results
     echo "== closed-loop grasp through the ROS 2 graph (separate processes, lock-step sim time)"
-    "$venv/bin/contgrasp-launch" --plot results/closed_loop.png --summary-file results/closed_loop.json
-    echo "== figure: results/closed_loop.png, summary: results/closed_loop.json"
+    local bag
+    bag="bags/run_$(date +%Y%m%d_%H%M%S)"
+    "$venv/bin/contgrasp-launch" --bag "$bag" --plot results/closed_loop.png --summary-file results/closed_loop.json
+    echo "== figure: results/closed_loop.png, summary: results/closed_loop.json, recording: $bag/"
+    echo "== offline analysis of the recording (no ROS needed) -> results/closed_loop_analysis.json"
+    "$venv/bin/contgrasp" bag info "$bag"
+    "$venv/bin/contgrasp" analyze "$bag" --json --plot results/closed_loop_from_bag.png --csv results/closed_loop_csv \
+        >results/closed_loop_analysis.json
     for obj in circle ellipse deformed; do
         echo "== contact kinematics around the $obj -> results/kinematics_$obj.png"
         "$venv/bin/contgrasp" kinematics --object "$obj" --plot "results/kinematics_$obj.png" >/dev/null
