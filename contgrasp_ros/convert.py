@@ -1,11 +1,12 @@
 """Conversions between contgrasp_msgs messages and the core library's arrays.
 
-Every ``*_arrays`` function validates what it receives (array lengths, finiteness, a strictly
-increasing arclength grid) and raises :class:`MessageError` with the reason, so nodes can drop
-a malformed message, count it and keep running. The readers only use attribute access, so they
-work as well on messages decoded from a recording without ROS (``mcap_ros2`` / ``rosbags``
-objects); the message classes are imported only by the ``*_to_msg`` builders. This module
-therefore imports without a ROS installation (offline analysis, ``contgrasp analyze``).
+Every ``*_arrays`` function validates what it receives (array lengths, finiteness, magnitudes,
+sizes, a strictly increasing arclength grid) and raises :class:`MessageError` with the reason, so
+nodes can drop a malformed message, count it under ``MessageError.reason`` and keep running.
+The readers only use attribute access, so they work as well on messages decoded from a
+recording without ROS (``mcap_ros2`` / ``rosbags`` objects); the message classes are imported
+only by the ``*_to_msg`` builders. This module therefore imports without a ROS installation
+(offline analysis, ``contgrasp analyze``).
 """
 
 from __future__ import annotations
@@ -42,13 +43,31 @@ __all__ = [
     "boundary_to_msg",
     "boundary_from_msg",
     "stamp_seconds",
+    "require_finite",
+    "MAX_SAMPLES",
+    "MAX_ABS",
 ]
 
 Array = NDArray[np.float64]
 
 
+# Limits of what a message may carry. MAX_SAMPLES matches the largest rod the nodes accept
+# (n_elements <= 100000, see nodes/rod_params.py); MAX_ABS bounds geometric values (m, rad):
+# larger ones are absurd for an arm and overflow the sensing's squares.
+MAX_SAMPLES = 100_001
+MAX_ABS = 1e6
+
+
 class MessageError(ContgraspError):
-    """A received message is malformed (wrong lengths, NaN/Inf, empty, bad grid, bad object)."""
+    """A received message is malformed (wrong lengths, NaN/Inf, empty, bad grid, bad object).
+
+    ``reason`` is a short category (``"length mismatch"``, ``"NaN/Inf"``, ...) that nodes use as
+    the drop counter's key; the message text has the details.
+    """
+
+    def __init__(self, message: str, *, reason: str = "malformed") -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 def stamp_seconds(header: Header) -> float:
@@ -56,18 +75,33 @@ def stamp_seconds(header: Header) -> float:
     return header.stamp.sec + 1e-9 * header.stamp.nanosec
 
 
-def _arrays(msg: object, names: tuple[str, ...], *, min_len: int = 2) -> dict[str, Array]:
-    out = {name: np.asarray(getattr(msg, name), dtype=float) for name in names}
-    n = len(out[names[0]])
+def require_finite(what: str, *arrays: object) -> None:
+    """Raise :class:`MessageError` (reason ``"non-finite result"``) unless every value is finite:
+    a node checks what it computed from a valid but extreme message before publishing it."""
+    for a in arrays:
+        if not np.all(np.isfinite(np.asarray(a, dtype=float))):
+            raise MessageError(f"{what} is not finite (NaN/Inf)", reason="non-finite result")
+
+
+def _arrays(msg: object, names: tuple[str, ...], *, min_len: int = 2, max_abs: float | None = MAX_ABS) -> dict[str, Array]:
+    kind = type(msg).__name__
+    lengths = {name: len(getattr(msg, name)) for name in names}
+    n = lengths[names[0]]
     if n < min_len:
-        raise MessageError(f"{type(msg).__name__}: needs at least {min_len} samples, got {n}")
+        raise MessageError(f"{kind}: needs at least {min_len} samples, got {n}", reason="too few samples")
+    if n > MAX_SAMPLES:
+        raise MessageError(f"{kind}: {n} samples, at most {MAX_SAMPLES} accepted", reason="too many samples")
+    for name, m in lengths.items():
+        if m != n:
+            raise MessageError(f"{kind}: field '{name}' has {m} samples, '{names[0]}' has {n}", reason="length mismatch")
+    out = {name: np.asarray(getattr(msg, name), dtype=float) for name in names}
     for name, arr in out.items():
-        if len(arr) != n:
-            raise MessageError(f"{type(msg).__name__}: field '{name}' has {len(arr)} samples, '{names[0]}' has {n}")
         if not np.all(np.isfinite(arr)):
-            raise MessageError(f"{type(msg).__name__}: field '{name}' contains NaN or Inf")
+            raise MessageError(f"{kind}: field '{name}' contains NaN or Inf", reason="NaN/Inf")
+        if max_abs is not None and np.any(np.abs(arr) > max_abs):
+            raise MessageError(f"{kind}: field '{name}' has values beyond +-{max_abs:g}", reason="out of range")
     if "s" in out and np.any(np.diff(out["s"]) <= 0.0):
-        raise MessageError(f"{type(msg).__name__}: arclength 's' must increase strictly")
+        raise MessageError(f"{kind}: arclength 's' must increase strictly", reason="bad arclength grid")
     return out
 
 
@@ -88,11 +122,13 @@ class RodArrays:
 def rod_state_arrays(msg: RodStateMsg) -> RodArrays:
     """Validated arrays of a RodState message."""
     a = _arrays(msg, ("s", "x", "y", "theta", "radius"))
+    if len(msg.kappa) not in (0, len(a["s"])):
+        raise MessageError("RodState: field 'kappa' must be empty or have one value per node", reason="length mismatch")
     kappa = np.asarray(msg.kappa, dtype=float)
-    if len(kappa) not in (0, len(a["s"])) or not np.all(np.isfinite(kappa)):
-        raise MessageError("RodState: field 'kappa' must be empty or finite with one value per node")
+    if not np.all(np.isfinite(kappa)):
+        raise MessageError("RodState: field 'kappa' contains NaN or Inf", reason="NaN/Inf")
     if np.any(a["radius"] < 0.0):
-        raise MessageError("RodState: radius must be >= 0")
+        raise MessageError("RodState: radius must be >= 0", reason="out of range")
     return RodArrays(int(msg.step), stamp_seconds(msg.header), a["s"], a["x"], a["y"], a["theta"], kappa, a["radius"])
 
 
@@ -134,12 +170,13 @@ class ContactArrays:
 def contact_arrays(msg: ContactStateMsg) -> ContactArrays:
     """Validated arrays of a ContactState message."""
     a = _arrays(msg, ("s", "rho", "alpha", "delta", "s_o", "shadow_x", "shadow_y"))
+    if len(msg.in_contact) != len(a["s"]):
+        raise MessageError(f"ContactState: 'in_contact' has {len(msg.in_contact)} flags for {len(a['s'])} nodes",
+                           reason="length mismatch")
     flags = np.asarray(msg.in_contact, dtype=bool)
-    if len(flags) != len(a["s"]):
-        raise MessageError(f"ContactState: 'in_contact' has {len(flags)} flags for {len(a['s'])} nodes")
     tol = float(msg.contact_tolerance)
-    if not np.isfinite(tol) or tol < 0.0:
-        raise MessageError(f"ContactState: contact_tolerance must be finite and >= 0, got {tol}")
+    if not np.isfinite(tol) or not 0.0 <= tol <= MAX_ABS:
+        raise MessageError(f"ContactState: contact_tolerance must be finite and >= 0, got {tol}", reason="out of range")
     return ContactArrays(
         int(msg.step),
         stamp_seconds(msg.header),
@@ -172,10 +209,12 @@ def couple_to_msg(s: Array, couple: Array | FeedbackExpansion, header: Header, s
 def couple_arrays(msg: CoupleControl) -> tuple[int, Array, Array | FeedbackExpansion]:
     """Validated (step, s, couple) of a CoupleControl message; the couple is a
     :class:`FeedbackExpansion` when the message carries the expansion, else the array u."""
+    # The couple and the gains scale with the rod's stiffness: only finiteness is required of
+    # them (an absurd but finite couple is the simulator's divergence detection's business).
     if len(msg.rho_ref) == len(msg.alpha_ref) == len(msg.du_drho) == len(msg.du_dalpha) == 0:
-        a = _arrays(msg, ("s", "u"))
+        a = _arrays(msg, ("s", "u"), max_abs=None)
         return int(msg.step), a["s"], a["u"]
-    a = _arrays(msg, ("s", "u", "rho_ref", "alpha_ref", "du_drho", "du_dalpha"))
+    a = _arrays(msg, ("s", "u", "rho_ref", "alpha_ref", "du_drho", "du_dalpha"), max_abs=None)
     exp = FeedbackExpansion(u=a["u"], rho_ref=a["rho_ref"], alpha_ref=a["alpha_ref"], g_rho=a["du_drho"], g_alpha=a["du_dalpha"])
     return int(msg.step), a["s"], exp
 
@@ -232,19 +271,34 @@ def boundary_to_msg(boundary: Boundary, header: Header, samples: int = 256) -> O
 
 def boundary_from_msg(msg: ObjectBoundary) -> Boundary:
     """Rebuild the boundary: analytic kinds from their parameters, anything else (user outlines,
-    Fourier curves) from the samples as a closed spline."""
-    params = dict(zip(msg.parameter_names, msg.parameter_values, strict=False))
+    Fourier curves) from the samples as a closed spline.
+
+    Raises :class:`MessageError`: reason ``"length mismatch"`` / ``"too many samples"`` /
+    ``"out of range"`` for malformed fields, ``"bad object: <error>"`` when the core refuses the
+    object (e.g. ``bad object: SelfIntersectionError`` for an outline that crosses itself).
+    """
+    if len(msg.parameter_names) != len(msg.parameter_values):
+        raise MessageError(f"ObjectBoundary: {len(msg.parameter_names)} parameter names for "
+                           f"{len(msg.parameter_values)} values", reason="length mismatch")
+    values = np.asarray(msg.parameter_values, dtype=float)
+    if np.any(np.abs(values) > MAX_ABS):  # NaN/Inf are left to the core, which names the parameter
+        raise MessageError(f"ObjectBoundary: parameter values beyond +-{MAX_ABS:g}", reason="out of range")
+    params = dict(zip(msg.parameter_names, values.tolist(), strict=True))
     try:
         if msg.kind in _PARAM_ORDER:
             missing = [k for k in _PARAM_ORDER[msg.kind] if k not in params]
             if missing:
-                raise MessageError(f"ObjectBoundary '{msg.kind}' lacks parameters {missing}")
+                raise MessageError(f"ObjectBoundary '{msg.kind}' lacks parameters {missing}", reason="bad object: missing parameters")
             return boundary_from_spec(msg.kind, [params[k] for k in _PARAM_ORDER[msg.kind]])
         if len(msg.x) != len(msg.y):
-            raise MessageError("ObjectBoundary: x and y differ in length")
+            raise MessageError("ObjectBoundary: x and y differ in length", reason="length mismatch")
+        if len(msg.x) > MAX_SAMPLES:
+            raise MessageError(f"ObjectBoundary: {len(msg.x)} points, at most {MAX_SAMPLES} accepted", reason="too many samples")
         pts = np.stack([np.asarray(msg.x, dtype=float), np.asarray(msg.y, dtype=float)], -1)
+        if np.any(np.abs(pts) > MAX_ABS):
+            raise MessageError(f"ObjectBoundary: outline points beyond +-{MAX_ABS:g}", reason="out of range")
         return from_points(pts, closed=True)
     except MessageError:
         raise
     except ContgraspError as exc:
-        raise MessageError(f"ObjectBoundary rejected: {exc}") from exc
+        raise MessageError(f"ObjectBoundary rejected: {exc}", reason=f"bad object: {type(exc).__name__}") from exc

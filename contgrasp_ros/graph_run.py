@@ -298,7 +298,7 @@ def run_graph(
                 values = sim_params if name == "rod_simulator" else params[name]
                 try:
                     nodes.append(cls(parameter_overrides=_overrides({**values, "use_sim_time": True})))
-                except (rclpy.exceptions.InvalidParameterValueException, ContgraspError, TypeError) as exc:
+                except (rclpy.exceptions.ParameterException, ContgraspError, TypeError) as exc:
                     return {"error": f"{name}: invalid parameter: {exc}", "exit_codes": {}, "pids": {}}, 2
             if record is not None:
                 from contgrasp_ros.nodes.mcap_recorder import McapRecorder

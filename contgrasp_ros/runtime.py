@@ -1,26 +1,67 @@
-"""Shared node plumbing: parameter declaration with ranges, throttled drop counting, main()."""
+"""Shared node plumbing: parameters with validation, drop counting, the last-resort callback
+guard, the stamp rule, the /diagnostics status and main().
+
+Every contgrasp node uses these, so they degrade the same way (see docs/ros.md, Reliability):
+
+* :func:`declare` - a parameter with a descriptor and its validation (range, choices, or a
+  check function): an invalid value stops the node at start-up (exit code 2 through
+  :func:`run_node`) and an invalid ``ros2 param set`` is refused with the reason;
+* :class:`DropCounter` - counts dropped messages per ``<topic>: <reason>``, warns at most once
+  per period per reason, and counts unexpected exceptions as ``internal error: <ExcType>``;
+* :func:`guarded` / :meth:`DropCounter.guard` - wrap every subscription, service, timer and
+  parameter callback so that no exception leaves it (except :class:`FatalNodeError`);
+* :class:`StampGate` - the stamp rule (invalid, from the past, from the future);
+* :class:`Diagnostics` - the node's DiagnosticStatus on ``/diagnostics``: every second of wall
+  time and at once on the first drop.
+"""
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
+import time
+import traceback
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, TypeVar
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import Header
 
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import ContgraspError
 
-__all__ = ["declare", "DropCounter", "FatalNodeError", "ObjectTracker", "make_executor", "run_node"]
+__all__ = [
+    "declare",
+    "add_parameter_check",
+    "DropCounter",
+    "guarded",
+    "service_failure",
+    "StampGate",
+    "stamp_problem",
+    "Diagnostics",
+    "FatalNodeError",
+    "ObjectTracker",
+    "make_executor",
+    "run_node",
+]
+
+F = TypeVar("F", bound=Callable[..., Any])
+Check = Callable[[Any], str | None]
+JointCheck = Callable[[dict[str, Any]], str | None]
 
 
 class FatalNodeError(ContgraspError):
     """Raised from a callback when the node cannot go on (e.g. the recorder's disk is full):
-    :func:`run_node` cleans up and exits with code 1 and the message."""
+    :func:`run_node` cleans up and exits with code 1 and the message. The callback guard lets
+    it through."""
 
 
 def make_executor(context: object | None = None) -> Executor:
@@ -37,6 +78,50 @@ def make_executor(context: object | None = None) -> Executor:
     return SingleThreadedExecutor(context=context)
 
 
+# ---------------------------------------------------------------------------- parameters
+class _ParameterChecks:
+    """The node's one on-set-parameters callback: per-parameter checks (choices) and joint
+    checks over all values. rclpy also calls it while a parameter is declared, so a bad
+    start-up value raises InvalidParameterValueException (exit code 2 in :func:`run_node`)."""
+
+    ATTR = "_contgrasp_parameter_checks"
+
+    def __init__(self, node: Node) -> None:
+        self._node = node
+        self.single: dict[str, Check] = {}
+        self.joint: list[JointCheck] = []
+        node.add_on_set_parameters_callback(self)
+
+    @classmethod
+    def of(cls, node: Node) -> _ParameterChecks:
+        checks = getattr(node, cls.ATTR, None)
+        if checks is None:
+            checks = cls(node)
+            setattr(node, cls.ATTR, checks)
+        return checks
+
+    def __call__(self, params: list[Parameter]) -> SetParametersResult:
+        try:
+            for p in params:
+                check = self.single.get(p.name)
+                reason = check(p.value) if check is not None else None
+                if reason:
+                    return SetParametersResult(successful=False, reason=f"{p.name}: {reason}")
+            if self.joint:
+                values = {name: p.value for name, p in self._node.get_parameters_by_prefix("").items()}
+                values.update({p.name: p.value for p in params})
+                for joint in self.joint:
+                    if reason := joint(values):
+                        return SetParametersResult(successful=False, reason=reason)
+        except Exception as exc:  # a check must never take the parameter service down
+            return SetParametersResult(successful=False, reason=f"internal error checking parameters: {type(exc).__name__}: {exc}")
+        return SetParametersResult(successful=True)
+
+
+def _choice_check(choices: Sequence[str]) -> Check:
+    return lambda v: None if v in choices else f"must be one of {', '.join(map(repr, choices))}, got {v!r}"
+
+
 def declare(
     node: Node,
     name: str,
@@ -46,12 +131,16 @@ def declare(
     lo: float | None = None,
     hi: float | None = None,
     read_only: bool = False,
+    choices: Sequence[str] | None = None,
 ) -> Any:
-    """Declare a parameter with a descriptor (and a range for numbers); return its value.
+    """Declare a parameter with a descriptor and its validation; return its value.
 
-    rclpy enforces the range both for the start-up value (params file / overrides: the node
-    refuses to start) and for ``ros2 param set`` at run time (the set is refused, the old value
-    stays).
+    The type is fixed by ``default`` (rclpy refuses other types), numbers get the range
+    ``[lo, hi]`` (NaN/Inf are out of range) and strings may be restricted to ``choices``
+    (checks over several parameters: :func:`add_parameter_check`). rclpy enforces all of it
+    both for the start-up value (params file / overrides: the node refuses to start) and for
+    ``ros2 param set`` at run time (refused with the reason, the old value stays);
+    ``read_only`` parameters cannot be changed at run time at all.
     """
     desc = ParameterDescriptor(description=description, read_only=read_only)
     if lo is not None and hi is not None:
@@ -61,57 +150,269 @@ def declare(
             desc.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
         elif isinstance(default, float):
             desc.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    if choices:
+        desc.additional_constraints = f"one of: {', '.join(choices)}"
+        _ParameterChecks.of(node).single[name] = _choice_check(choices)
     return node.declare_parameter(name, default, desc).value
 
 
+def add_parameter_check(node: Node, check: JointCheck) -> None:
+    """Add a check over several parameters: ``check(values)`` gets every declared parameter's
+    value with the proposed changes applied and returns the reason to refuse them (or None).
+    Register it after the parameters it reads are declared."""
+    _ParameterChecks.of(node).joint.append(check)
+
+
+# ---------------------------------------------------------------------------- drops and the guard
 class DropCounter:
-    """Counts dropped messages by reason and warns at most once per ``period_s`` seconds (wall)."""
+    """Counts dropped messages per ``<topic>: <reason>`` and warns at most once per
+    ``period_s`` wall seconds per key (saying how many were not logged).
+
+    Unexpected exceptions caught by the callback guard are counted the same way under
+    ``<where>: internal error: <ExcType>``, logged with their traceback the first time.
+    ``on_first_drop`` is called after the first drop (the node's diagnostics publish at once).
+    """
 
     def __init__(self, node: Node, period_s: float = 2.0) -> None:
         self._node = node
         self._period = period_s
         self.counts: dict[str, int] = {}
+        self._last_log: dict[str, tuple[float, int]] = {}  # key -> (wall time, count then)
+        self.on_first_drop: Callable[[], None] | None = None
 
     @property
     def total(self) -> int:
         return sum(self.counts.values())
 
-    def drop(self, topic: str, reason: str) -> None:
-        key = f"{topic}: {reason.split(':')[0]}"
+    def drop(self, topic: str, reason: str, detail: str = "") -> None:
+        """Count a dropped message on ``topic`` under the short ``reason``; log ``detail`` (throttled)."""
+        key = f"{topic}: {reason}"
+        self._count(key)
+        self._log(key, f"dropped message on {topic}: {detail or reason}")
+
+    def drop_error(self, topic: str, exc: Exception) -> None:
+        """Count a drop for a validation/processing error: the reason is the error's ``reason``
+        (:class:`~contgrasp_ros.convert.MessageError`) or its class name."""
+        self.drop(topic, getattr(exc, "reason", None) or type(exc).__name__, str(exc))
+
+    def internal_error(self, where: str, exc: BaseException) -> None:
+        """Count an unexpected exception of a callback; log it, with the traceback the first time."""
+        key = f"{where}: internal error: {type(exc).__name__}"
+        first = key not in self.counts
+        self._count(key)
+        if first:
+            tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+            self._node.get_logger().error(f"internal error in {where} (the node keeps running):\n{tb}")
+            self._last_log[key] = (time.monotonic(), self.counts[key])
+        else:
+            self._log(key, f"internal error in {where}: {type(exc).__name__}: {exc}")
+
+    def guard(self, where: str, fn: F, on_error: Callable[[BaseException, tuple[Any, ...]], Any] | None = None) -> F:
+        """``fn`` wrapped so that an unexpected exception is counted (:meth:`internal_error`) and
+        ``on_error(exc, args)`` (or None) returned instead; FatalNodeError passes through."""
+
+        @functools.wraps(fn)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            return _call_guarded(self, where, fn, args, kwargs, on_error)
+
+        return wrapper  # type: ignore[return-value]
+
+    def key_values(self) -> dict[str, str]:
+        """``dropped_messages`` (total) and one ``dropped: <topic>: <reason>`` entry per key."""
+        out = {"dropped_messages": str(self.total)}
+        out.update({f"dropped: {key}": str(n) for key, n in sorted(self.counts.items())})
+        return out
+
+    def _count(self, key: str) -> None:
         self.counts[key] = self.counts.get(key, 0) + 1
-        self._node.get_logger().warn(
-            f"dropped message on {topic} ({self.total} dropped so far): {reason}",
-            throttle_duration_sec=self._period,
-        )
+        if self.total == 1 and self.on_first_drop is not None:
+            self.on_first_drop()
+
+    def _log(self, key: str, text: str) -> None:
+        now, n = time.monotonic(), self.counts[key]
+        last_t, last_n = self._last_log.get(key, (-float("inf"), 0))
+        if now - last_t < self._period:
+            return
+        unlogged = n - last_n - 1
+        more = f"; {unlogged} more since the last warning" if unlogged > 0 else ""
+        self._node.get_logger().warn(f"{text} ({n} dropped for this reason, {self.total} in total{more})")
+        self._last_log[key] = (now, n)
 
 
+def _call_guarded(drops: DropCounter, where: str, fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any],
+                  on_error: Callable[[BaseException, tuple[Any, ...]], Any] | None) -> Any:
+    try:
+        return fn(*args, **kwargs)
+    except FatalNodeError:
+        raise
+    except Exception as exc:
+        drops.internal_error(where, exc)
+        return None if on_error is None else on_error(exc, args)
+
+
+def guarded(where: str, on_error: Callable[[BaseException, tuple[Any, ...]], Any] | None = None) -> Callable[[F], F]:
+    """Method decorator: the last-resort guard of a callback method of an object with a
+    ``drops`` :class:`DropCounter` (a node, the object tracker). Direct calls are guarded too."""
+
+    def deco(method: F) -> F:
+        @functools.wraps(method)
+        def wrapper(self: Any, *args: Any, **kwargs: Any) -> Any:
+            return _call_guarded(self.drops, where, functools.partial(method, self), args, kwargs, on_error)
+
+        return wrapper  # type: ignore[return-value]
+
+    return deco
+
+
+def service_failure(exc: BaseException, args: tuple[Any, ...]) -> Any:
+    """``on_error`` for services with ``success``/``message`` responses (std_srvs): the response
+    (the callback's last argument) reports the internal error."""
+    resp = args[-1]
+    resp.success, resp.message = False, f"internal error: {type(exc).__name__}: {exc}"
+    return resp
+
+
+# ---------------------------------------------------------------------------- stamps
+_NS = 1_000_000_000
+
+
+def stamp_problem(sec: int, nanosec: int, step: int | None, newest_ns: int | None, now_ns: int, max_future_s: float,
+                  *, check_past: bool = True) -> str | None:
+    """The stamp rule; returns the drop reason or None.
+
+    * ``invalid stamp``: ``sec < 0`` or ``nanosec >= 1e9``;
+    * ``from the future``: more than ``max_future_s`` ahead of the node clock ``now_ns`` - only
+      when the clock is valid (``now_ns > 0``; with sim time it is 0 until the first /clock);
+    * ``from the past``: older than the newest accepted stamp on the topic (``newest_ns``),
+      except for step 0 (the simulator was reset: the tracking restarts).
+    """
+    if sec < 0 or not 0 <= nanosec < _NS:
+        return "invalid stamp"
+    t_ns = sec * _NS + nanosec
+    if now_ns > 0 and t_ns - now_ns > max_future_s * _NS:
+        return "from the future"
+    if check_past and step != 0 and newest_ns is not None and t_ns < newest_ns:
+        return "from the past"
+    return None
+
+
+class StampGate:
+    """Applies :func:`stamp_problem` to the messages a node receives, per topic; declares the
+    node's ``max_future_stamp`` parameter (seconds in the node's clock: sim time with
+    ``use_sim_time``)."""
+
+    def __init__(self, node: Node) -> None:
+        self._node = node
+        declare(node, "max_future_stamp", 1.0, "drop messages stamped more than this ahead of the node clock [s]",
+                lo=0.0, hi=1e9)
+        self.newest_ns: dict[str, int] = {}
+
+    def admit(self, topic: str, header: Any, step: int | None, *, check_past: bool = True) -> None:
+        """Accept the message's stamp (and track it as the newest on ``topic``) or raise
+        :class:`~contgrasp_ros.convert.MessageError` with the rule's reason. ``check_past=False``
+        for topics without an order (the latched object: the newest publication wins)."""
+        from contgrasp_ros.convert import MessageError
+
+        sec, nanosec = int(header.stamp.sec), int(header.stamp.nanosec)
+        now_ns = self._node.get_clock().now().nanoseconds
+        max_future = float(self._node.get_parameter("max_future_stamp").value)
+        newest = self.newest_ns.get(topic)
+        reason = stamp_problem(sec, nanosec, step, newest, now_ns, max_future, check_past=check_past)
+        if reason is not None:
+            raise MessageError(
+                f"stamp {sec}.{nanosec:09d} s (step {step}) {reason}: node clock {now_ns / _NS:.9f} s, "
+                f"newest accepted {'none' if newest is None else f'{newest / _NS:.9f} s'}",
+                reason=reason,
+            )
+        if check_past:
+            self.newest_ns[topic] = sec * _NS + nanosec
+
+    def reset(self) -> None:
+        """Forget the tracked stamps (the node's own reset)."""
+        self.newest_ns.clear()
+
+
+# ---------------------------------------------------------------------------- diagnostics
+Status = tuple[int, str, dict[str, str]]
+
+
+class Diagnostics:
+    """The node's status on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, one
+    DiagnosticStatus named after the node): every ``period_s`` of wall time (steady-clock timer)
+    and at once on the first drop. ``build()`` gives (level, message, key/values); the drop
+    counts (:meth:`DropCounter.key_values`) are added. Default: OK / WARN when messages were
+    dropped."""
+
+    def __init__(self, node: Node, drops: DropCounter, build: Callable[[], Status] | None = None, period_s: float = 1.0) -> None:
+        from contgrasp_ros import qos
+
+        self._node = node
+        self._drops = drops
+        self._build = build
+        self.pub = node.create_publisher(DiagnosticArray, "/diagnostics", qos.STREAM)
+        drops.on_first_drop = self.publish
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        node.create_timer(period_s, drops.guard("diagnostics timer", self.publish), clock=self._steady)
+
+    def status(self) -> DiagnosticStatus:
+        """The current DiagnosticStatus."""
+        if self._build is not None:
+            level, message, values = self._build()
+        else:
+            total = self._drops.total
+            level = DiagnosticStatus.WARN if total else DiagnosticStatus.OK
+            message, values = (f"{total} messages dropped" if total else "ok"), {}
+        values = {**values, **self._drops.key_values()}
+        if self._drops.total and level == DiagnosticStatus.OK:
+            level = DiagnosticStatus.WARN
+        return DiagnosticStatus(level=level, name=self._node.get_name(), message=message, hardware_id="contgrasp",
+                                values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+    def publish(self, stamp: Time | None = None) -> None:
+        """Publish the status now (stamped with ``stamp`` or the node clock)."""
+        header_stamp = stamp if stamp is not None else self._node.get_clock().now().to_msg()
+        self.pub.publish(DiagnosticArray(header=Header(stamp=header_stamp), status=[self.status()]))
+
+
+# ---------------------------------------------------------------------------- the object
 class ObjectTracker:
     """Keeps the latest valid object boundary from the transient-local object topic; invalid
-    boundaries are dropped and counted (the previous one stays in use). ``on_change`` is
-    called after a new boundary was accepted."""
+    boundaries (malformed, self-intersecting, degenerate, bad stamp) are dropped and counted
+    (the previous one stays in use). ``on_change`` is called after a new boundary was accepted.
 
-    def __init__(self, node: Node, drops: DropCounter, on_change: Callable[[], None] | None = None) -> None:
+    The object carries no step: its stamp must be valid and not from the future, but an older
+    stamp is accepted (a restarted simulator republishes the object; the newest publication wins).
+    """
+
+    def __init__(self, node: Node, drops: DropCounter, stamps: StampGate,
+                 on_change: Callable[[], None] | None = None) -> None:
         from contgrasp_msgs.msg import ObjectBoundary
         from contgrasp_ros import qos
 
         self.boundary: Boundary | None = None
-        self._drops = drops
+        self.drops = drops
+        self._stamps = stamps
         self._topic = qos.TOPIC_OBJECT
         self._on_change = on_change
-        node.create_subscription(ObjectBoundary, qos.TOPIC_OBJECT, self._on_object, qos.LATCHED)
+        node.create_subscription(ObjectBoundary, qos.TOPIC_OBJECT, self.on_object, qos.LATCHED)
 
-    def _on_object(self, msg: object) -> None:
+    @guarded("/contgrasp/object")
+    def on_object(self, msg: Any) -> None:
+        """Validate and keep the boundary of an ObjectBoundary message."""
         from contgrasp_ros.convert import boundary_from_msg
 
         try:
-            self.boundary = boundary_from_msg(msg)  # type: ignore[arg-type]
+            boundary = boundary_from_msg(msg)
+            self._stamps.admit(self._topic, msg.header, None, check_past=False)
         except ContgraspError as exc:
-            self._drops.drop(self._topic, str(exc))
+            self.drops.drop_error(self._topic, exc)
             return
+        self.boundary = boundary
         if self._on_change is not None:
             self._on_change()
 
 
+# ---------------------------------------------------------------------------- main
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
     """Init rclpy, build the node, spin until shutdown (SIGINT/SIGTERM), clean up.
 

@@ -156,6 +156,15 @@ def test_launcher_keeps_running_when_the_recorder_cannot_write(tmp_path: Path) -
     assert "cannot record" in proc.stderr and "error" in out["bag"]
 
 
-def test_launcher_rejects_bad_usage() -> None:
+def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
     assert launch("--duration", "-1").returncode == 2
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("- not a mapping\n")
+    assert launch("--params", str(bad)).returncode == 2
+    data = yaml.safe_load(small_params(tmp_path).read_text())
+    data["rod_simulator"]["ros__parameters"]["settle_hold"] = 1  # an int where a float is declared
+    bad.write_text(yaml.safe_dump(data))
+    proc = launch("--in-process", "--no-record", "--json", "--params", str(bad))
+    assert proc.returncode == 2 and "settle_hold" in json.loads(proc.stdout)["error"], proc.stderr[-2000:]
+    assert "Traceback" not in proc.stderr
     assert launch("--executor", "events").returncode == 2  # events executor: in-process only

@@ -1,7 +1,9 @@
 """boundary_sensor: rod state + object boundary -> contact state (rho, alpha, delta, s_o, contact set).
 
 Thin wrapper of :func:`contgrasp_ros.evaluate.sense_rod_state` (:func:`contgrasp_core.contact.sense`,
-paper eqs. rho_alpha_definition, delta, Definition 1). Malformed rod states or objects are dropped with a throttled warning and counted.
+paper eqs. rho_alpha_definition, delta, Definition 1). Malformed rod states or objects, bad
+stamps and states whose sensing fails are dropped with a throttled warning and counted per
+reason (``/diagnostics``); see :mod:`contgrasp_ros.runtime`.
 """
 
 from __future__ import annotations
@@ -11,9 +13,9 @@ from rclpy.node import Node
 from contgrasp_core.errors import ContgraspError
 from contgrasp_msgs.msg import ContactState, RodState
 from contgrasp_ros import qos
-from contgrasp_ros.convert import contact_to_msg, rod_state_arrays
+from contgrasp_ros.convert import RodArrays, contact_to_msg, require_finite, rod_state_arrays
 from contgrasp_ros.evaluate import sense_rod_state
-from contgrasp_ros.runtime import DropCounter, ObjectTracker, declare, run_node
+from contgrasp_ros.runtime import Diagnostics, DropCounter, ObjectTracker, StampGate, declare, guarded, run_node
 
 
 class BoundarySensor(Node):
@@ -23,33 +25,47 @@ class BoundarySensor(Node):
         super().__init__("boundary_sensor", **node_kwargs)  # type: ignore[arg-type]
         declare(self, "contact_tolerance", 0.0, "contact where delta >= -tolerance [m]", lo=0.0, hi=1.0)
         self.drops = DropCounter(self)
+        self.stamps = StampGate(self)
+        self.diagnostics = Diagnostics(self, self.drops)
         # The latched object and the first rod state race (e.g. on one executor): a state that
         # arrives first is kept and sensed as soon as the object is there, so the lock-step
         # simulator is not left waiting for its first couple.
-        self.waiting: RodState | None = None
-        self.object = ObjectTracker(self, self.drops, on_change=self._sense_waiting)
+        self.waiting: tuple[RodState, RodArrays] | None = None
+        self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._sense_waiting)
         self.sensed = 0
         self.pub = self.create_publisher(ContactState, qos.TOPIC_CONTACT, qos.STREAM)
         self.create_subscription(RodState, qos.TOPIC_ROD_STATE, self.on_rod_state, qos.STREAM)
 
+    @guarded(qos.TOPIC_ROD_STATE)
     def on_rod_state(self, msg: RodState) -> None:
-        boundary = self.object.boundary
-        if boundary is None:
-            self.waiting = msg
-            return
+        """Validate a rod state and sense it (or keep it until the object is known)."""
         try:
-            tol = self.get_parameter("contact_tolerance").value
-            state = sense_rod_state(rod_state_arrays(msg), boundary, tol)
+            rod = rod_state_arrays(msg)
+            self.stamps.admit(qos.TOPIC_ROD_STATE, msg.header, rod.step)
         except ContgraspError as exc:
-            self.drops.drop(qos.TOPIC_ROD_STATE, str(exc))
+            self.drops.drop_error(qos.TOPIC_ROD_STATE, exc)
+            return
+        if self.object.boundary is None:
+            if self.waiting is not None:
+                self.drops.drop(qos.TOPIC_ROD_STATE, "no object yet", "a newer rod state arrived before the object")
+            self.waiting = (msg, rod)
+            return
+        self._sense(msg, rod)
+
+    def _sense(self, msg: RodState, rod: RodArrays) -> None:
+        try:
+            state = sense_rod_state(rod, self.object.boundary, self.get_parameter("contact_tolerance").value)  # type: ignore[arg-type]
+            require_finite("the sensed contact state", state.rho, state.alpha, state.delta, state.s_o, state.foot)
+        except ContgraspError as exc:
+            self.drops.drop_error(qos.TOPIC_ROD_STATE, exc)
             return
         self.pub.publish(contact_to_msg(state, msg.header, msg.step))
         self.sensed += 1
 
     def _sense_waiting(self) -> None:
-        msg, self.waiting = self.waiting, None
-        if msg is not None:
-            self.on_rod_state(msg)
+        waiting, self.waiting = self.waiting, None
+        if waiting is not None:
+            self._sense(*waiting)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -3,11 +3,16 @@
 Thin wrapper of :func:`contgrasp_core.rod.session.feedback_at_joints`: the same function the
 core-only closed loop calls, so a lock-step ROS run reproduces it exactly. Gains (mu1, mu2 or
 the adaptive mu2 of the appendix, the law's length unit) are parameters; a change takes effect
-at the next contact message. The rod geometry parameters must match the simulator's.
+at the next contact message (a set that gives unusable gains is refused). The rod geometry
+parameters (read-only) must match the simulator's. Malformed contact states, bad stamps and
+states of another rod size are dropped and counted (``/diagnostics``).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
+import numpy as np
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
@@ -16,9 +21,12 @@ from contgrasp_core.rod.closed_loop import FeedbackGains, paper_gains
 from contgrasp_core.rod.session import feedback_at_joints
 from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros import qos
-from contgrasp_ros.convert import MessageError, contact_arrays, couple_to_msg
+from contgrasp_ros.convert import MessageError, contact_arrays, couple_to_msg, require_finite
 from contgrasp_ros.nodes.rod_params import declare_rod_model
-from contgrasp_ros.runtime import DropCounter, declare, run_node
+from contgrasp_ros.runtime import Diagnostics, DropCounter, StampGate, add_parameter_check, declare, guarded, run_node
+
+GAIN_PARAMETERS = ("mu1", "mu2", "adaptive_mu2", "object_radius", "length_unit")
+MU2_LIMIT = 1e6  # |mu2| in law units, given or adaptive
 
 
 class GraspController(Node):
@@ -28,35 +36,54 @@ class GraspController(Node):
         super().__init__("grasp_controller", **node_kwargs)  # type: ignore[arg-type]
         self.model = declare_rod_model(self)
         declare(self, "mu1", 1.0, "gain mu1 > 0 of eq. dynamic_feedback", lo=1e-9, hi=1e6)
-        declare(self, "mu2", 0.0, "gain mu2 in law length units (used when adaptive_mu2 is false)", lo=-1e6, hi=1e6)
+        declare(self, "mu2", 0.0, "gain mu2 in law length units (used when adaptive_mu2 is false)", lo=-MU2_LIMIT, hi=MU2_LIMIT)
         declare(self, "adaptive_mu2", True, "use mu2(s) = r(s) - 1/(r_obj + r(s)) (paper appendix)")
         declare(self, "object_radius", 0.025, "object radius r_obj for the adaptive mu2 [m]", lo=1e-9, hi=1e3)
         declare(self, "length_unit", CENTIMETRE, "metres per length unit of the law (paper: cm)", lo=1e-9, hi=1e3)
         self.drops = DropCounter(self)
-        self.gains = self._gains()
-        self.add_post_set_parameters_callback(lambda _params: self._refresh())
+        self.stamps = StampGate(self)
+        self.diagnostics = Diagnostics(self, self.drops)
+        self.gains = self._gains({n: self.get_parameter(n).value for n in GAIN_PARAMETERS})
+        add_parameter_check(self, self._check_gains)
+        self.add_post_set_parameters_callback(self.drops.guard("parameters", self._refresh))
         self.pub = self.create_publisher(CoupleControl, qos.TOPIC_COUPLE, qos.STREAM)
         self.create_subscription(ContactState, qos.TOPIC_CONTACT, self.on_contact, qos.STREAM)
 
-    def _gains(self) -> FeedbackGains:
-        p = {n: self.get_parameter(n).value for n in ("mu1", "mu2", "adaptive_mu2", "object_radius", "length_unit")}
+    def _gains(self, p: dict[str, Any]) -> FeedbackGains:
         if p["adaptive_mu2"]:
-            return paper_gains(self.model, p["object_radius"], mu1=p["mu1"], length_unit=p["length_unit"])
-        return FeedbackGains(mu1=p["mu1"], mu2=p["mu2"], length_unit=p["length_unit"])
+            gains = paper_gains(self.model, p["object_radius"], mu1=p["mu1"], length_unit=p["length_unit"])
+        else:
+            gains = FeedbackGains(mu1=p["mu1"], mu2=p["mu2"], length_unit=p["length_unit"])
+        if not np.all(np.abs(gains.mu2) <= MU2_LIMIT):
+            raise ContgraspError(f"mu2 beyond +-{MU2_LIMIT:g} law units (adaptive with object_radius "
+                                 f"{p['object_radius']} m, length_unit {p['length_unit']} m?)")
+        return gains
 
-    def _refresh(self) -> None:
-        self.gains = self._gains()
+    def _check_gains(self, values: dict[str, Any]) -> str | None:
+        try:
+            self._gains(values)
+        except ContgraspError as exc:
+            return f"unusable gains: {exc}"
+        return None
 
+    def _refresh(self, _params: object) -> None:
+        self.gains = self._gains({n: self.get_parameter(n).value for n in GAIN_PARAMETERS})
+
+    @guarded(qos.TOPIC_CONTACT)
     def on_contact(self, msg: ContactState) -> None:
+        """Validate a contact state and answer it with the couple (echoing its stamp and step)."""
         try:
             c = contact_arrays(msg)
             if len(c.s) != self.model.n_elements + 1:
                 raise MessageError(
-                    f"contact state has {len(c.s)} nodes; the controller's rod has {self.model.n_elements + 1}"
+                    f"contact state has {len(c.s)} nodes; the controller's rod has {self.model.n_elements + 1}",
+                    reason="wrong node count",
                 )
+            self.stamps.admit(qos.TOPIC_CONTACT, msg.header, c.step)
             u = feedback_at_joints(self.model, self.gains, c.rho, c.alpha)
+            require_finite("the couple", u.u, u.g_rho, u.g_alpha)
         except ContgraspError as exc:
-            self.drops.drop(qos.TOPIC_CONTACT, str(exc))
+            self.drops.drop_error(qos.TOPIC_CONTACT, exc)
             return
         self.pub.publish(couple_to_msg(self.model.joint_s, u, msg.header, msg.step))
 

@@ -1,6 +1,8 @@
 """grasp_quality: contact state -> continuum grasp quality (W, Q1..Q3) at a configurable rate.
 
 Thin wrapper of :func:`contgrasp_ros.evaluate.contact_quality` (paper Sec. IV, Prop. 2).
+Malformed contact states or objects, bad stamps and states that arrive before the object are
+dropped and counted (``/diagnostics``).
 """
 
 from __future__ import annotations
@@ -10,9 +12,9 @@ from rclpy.node import Node
 from contgrasp_core.errors import ContgraspError
 from contgrasp_msgs.msg import ContactState, GraspQuality
 from contgrasp_ros import qos
-from contgrasp_ros.convert import contact_arrays, quality_to_msg
+from contgrasp_ros.convert import contact_arrays, quality_to_msg, require_finite
 from contgrasp_ros.evaluate import contact_quality
-from contgrasp_ros.runtime import DropCounter, ObjectTracker, declare, run_node
+from contgrasp_ros.runtime import Diagnostics, DropCounter, ObjectTracker, StampGate, declare, guarded, run_node
 
 
 class GraspQualityNode(Node):
@@ -25,20 +27,25 @@ class GraspQualityNode(Node):
         declare(self, "reference_x", 0.0, "wrench reference point x [m] (object frame origin)", lo=-1e6, hi=1e6)
         declare(self, "reference_y", 0.0, "wrench reference point y [m]", lo=-1e6, hi=1e6)
         self.drops = DropCounter(self)
-        self.object = ObjectTracker(self, self.drops)
+        self.stamps = StampGate(self)
+        self.diagnostics = Diagnostics(self, self.drops)
+        self.object = ObjectTracker(self, self.drops, self.stamps)
         self.last_t: float | None = None
         self.pub = self.create_publisher(GraspQuality, qos.TOPIC_QUALITY, qos.STREAM)
         self.create_subscription(ContactState, qos.TOPIC_CONTACT, self.on_contact, qos.STREAM)
 
+    @guarded(qos.TOPIC_CONTACT)
     def on_contact(self, msg: ContactState) -> None:
-        boundary = self.object.boundary
-        if boundary is None:
-            self.drops.drop(qos.TOPIC_CONTACT, "no object boundary received yet")
-            return
+        """Validate a contact state; evaluate and publish its quality when the rate allows."""
         try:
             c = contact_arrays(msg)
+            self.stamps.admit(qos.TOPIC_CONTACT, msg.header, c.step)
         except ContgraspError as exc:
-            self.drops.drop(qos.TOPIC_CONTACT, str(exc))
+            self.drops.drop_error(qos.TOPIC_CONTACT, exc)
+            return
+        boundary = self.object.boundary
+        if boundary is None:
+            self.drops.drop(qos.TOPIC_CONTACT, "no object yet", "no object boundary received yet")
             return
         rate = self.get_parameter("rate_hz").value
         if rate > 0 and self.last_t is not None and 0.0 <= c.t - self.last_t < 1.0 / rate - 1e-12:
@@ -48,8 +55,9 @@ class GraspQualityNode(Node):
         ref = (self.get_parameter("reference_x").value, self.get_parameter("reference_y").value)
         try:
             q = contact_quality(c, boundary, tol, ref)
+            require_finite("the grasp quality", q.W, q.Q1, q.Q2, q.Q3, q.contact_length)
         except ContgraspError as exc:
-            self.drops.drop(qos.TOPIC_CONTACT, str(exc))
+            self.drops.drop_error(qos.TOPIC_CONTACT, exc)
             return
         self.pub.publish(quality_to_msg(q, msg.header, msg.step, c.tol if tol < 0 else tol))
 

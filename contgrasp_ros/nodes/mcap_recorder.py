@@ -43,7 +43,7 @@ from contgrasp_ros.bag.definitions import full_text
 from contgrasp_ros.bag.errors import BagError
 from contgrasp_ros.bag.rosbag2 import qos_profile_dict
 from contgrasp_ros.bag.writer import COMPRESSIONS, LAYOUTS, RECORDER_RECORD, RUN_RECORD, BagWriter
-from contgrasp_ros.runtime import FatalNodeError, declare, run_node
+from contgrasp_ros.runtime import DropCounter, FatalNodeError, declare, guarded, run_node
 
 
 
@@ -120,6 +120,7 @@ class McapRecorder(Node):
             raise FatalNodeError(str(exc)) from exc
         self.writer.records[RUN_RECORD] = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in info.items()}
         self.received: dict[str, int] = {}
+        self.drops = DropCounter(self)  # (internal errors of the callbacks; nothing is dropped on purpose)
         self.exit_code = 0
         self._subs: dict[str, Any] = {}
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.STREAM)
@@ -147,6 +148,7 @@ class McapRecorder(Node):
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
         )
 
+    @guarded("discovery")
     def discover(self) -> None:
         """Subscribe to selected topics that have publishers and are not recorded yet."""
         for topic, types in self.get_topic_names_and_types():
@@ -188,6 +190,7 @@ class McapRecorder(Node):
             self.lost_in_transport[topic] += seq - last - 1
         self._last_seq[topic] = seq
 
+    @guarded("recording")
     def on_message(self, topic: str, data: bytes, info: dict[str, Any]) -> None:
         self.received[topic] += 1
         self._track_sequence(topic, info.get("publication_sequence_number"))
@@ -229,6 +232,7 @@ class McapRecorder(Node):
             "lost_in_transport_per_topic": {t: n for t, n in self.lost_in_transport.items() if n},
         }
 
+    @guarded("flush")
     def flush(self) -> None:
         for topic in self._subs:
             self._single_publisher[topic] = self.count_publishers(topic) == 1
@@ -239,9 +243,10 @@ class McapRecorder(Node):
         c = self.counts()
         values = {"path": str(self.writer.path), "received": str(c["received"]), "written": str(c["written"]),
                   "decimated": str(c["decimated"]), "lost_in_transport": str(c["lost_in_transport"]),
-                  "bytes": str(c["bytes"]), "topics": str(len(self._subs))}
+                  "bytes": str(c["bytes"]), "topics": str(len(self._subs)), **self.drops.key_values()}
         unwritten = c["received"] - c["written"] - c["decimated"] - c["held"]
-        level = DiagnosticStatus.OK if unwritten == 0 and c["lost_in_transport"] == 0 else DiagnosticStatus.WARN
+        ok = unwritten == 0 and c["lost_in_transport"] == 0 and self.drops.total == 0
+        level = DiagnosticStatus.OK if ok else DiagnosticStatus.WARN
         st = DiagnosticStatus(level=level, name="mcap_recorder", message="recording", hardware_id="contgrasp",
                               values=[KeyValue(key=k, value=v) for k, v in values.items()])
         self._pub_diag.publish(DiagnosticArray(status=[st]))

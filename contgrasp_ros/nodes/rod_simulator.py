@@ -8,6 +8,13 @@ seconds the configured fallback (``hold`` the last couple or apply ``zero``) is 
 is counted and a warning logged. Free-running mode advances every ``control_period`` of wall
 time with the latest couple. Services: ``~/pause`` (std_srvs/SetBool: true pauses, false
 resumes) and ``~/reset`` (std_srvs/Trigger).
+
+Couples are validated (lengths, NaN/Inf, joints, the stamp rule, the step in lock-step) and
+bad ones dropped and counted. A run that breaks - Newton fails, NaN/Inf in the state, the rod
+deeper inside the object than ``max_penetration_limit``, kinetic energy above
+``max_kinetic_energy`` - stops stepping: state ``failed``, the cause and simulated time in
+the status ``message``, logged once. The status (``/diagnostics``, name ``rod_simulator``)
+goes out after every state, every second of wall time and at once on the first drop.
 """
 
 from __future__ import annotations
@@ -16,28 +23,36 @@ import time
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import SetParametersResult
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import Header
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from contgrasp_core.errors import ContgraspError, InvalidParameterError
+from contgrasp_core.errors import ContgraspError
 from contgrasp_core.rod import Obstacle, RodSystem
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
-from contgrasp_core.rod.session import FeedbackExpansion, LoopSession, Observation, boundary_from_spec
+from contgrasp_core.rod.session import DivergenceLimits, FeedbackExpansion, LoopSession, boundary_from_spec
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_ros import qos
-from contgrasp_ros.convert import boundary_to_msg, couple_arrays
+from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
-from contgrasp_ros.runtime import DropCounter, declare, run_node
+from contgrasp_ros.runtime import (
+    Diagnostics,
+    DropCounter,
+    FatalNodeError,
+    StampGate,
+    declare,
+    guarded,
+    run_node,
+    service_failure,
+)
 
 FALLBACKS = ("hold", "zero")
+OBJECT_KINDS = ("circle", "ellipse", "deformed_circle")
 
 
 def _stamp(t: float) -> Time:
@@ -51,39 +66,43 @@ class RodSimulator(Node):
     def __init__(self, **node_kwargs: object) -> None:
         super().__init__("rod_simulator", **node_kwargs)  # type: ignore[arg-type]
         self.model = declare_rod_model(self)
-        kind = declare(self, "object_kind", "circle", "circle | ellipse | deformed_circle", read_only=True)
+        kind = declare(self, "object_kind", "circle", "circle | ellipse | deformed_circle", read_only=True, choices=OBJECT_KINDS)
         params = declare(
             self, "object_params", [0.025, 0.08, 0.08],
             "circle [R, cx, cy]; ellipse [a, b, cx, cy, angle]; deformed_circle [R, amplitude, lobes, phase, cx, cy] (m, rad)",
             read_only=True,
         )
+        # The run's settings shape the session when it starts: read-only (a change could only
+        # take effect at a reset, which would be surprising).
         self.config = ClosedLoopConfig(
-            duration=declare(self, "duration", 20.0, "simulated seconds at most [s]", lo=1e-6, hi=1e6),
+            duration=declare(self, "duration", 20.0, "simulated seconds at most [s]", lo=1e-6, hi=1e6, read_only=True),
             control_period=declare(self, "control_period", 0.01, "control period [s]", lo=1e-6, hi=10.0, read_only=True),
             dt=declare(self, "dt", 0.0, "integrator step [s]; 0 = the control period", lo=0.0, hi=10.0, read_only=True) or None,
-            settle_speed=declare(self, "settle_speed", 2e-4, "settled when every node is slower [m/s]", lo=1e-12, hi=1e3),
-            settle_hold=declare(self, "settle_hold", 0.5, "for this long [s]", lo=1e-9, hi=1e6),
-            min_time=declare(self, "min_time", 1.0, "never settled before [s]", lo=0.0, hi=1e6),
+            settle_speed=declare(self, "settle_speed", 2e-4, "settled when every node is slower [m/s]", lo=1e-12, hi=1e3, read_only=True),
+            settle_hold=declare(self, "settle_hold", 0.5, "for this long [s]", lo=1e-9, hi=1e6, read_only=True),
+            min_time=declare(self, "min_time", 1.0, "never settled before [s]", lo=0.0, hi=1e6, read_only=True),
         )
         self.lockstep = declare(self, "lockstep", True, "advance only when the couple for the current step arrived", read_only=True)
         declare(self, "couple_timeout", 10.0, "lock-step: wall seconds to wait for a couple", lo=1e-3, hi=3600.0)
-        declare(self, "timeout_fallback", "hold", "lock-step timeout: 'hold' the last couple or apply 'zero'")
-        self.start_paused = declare(self, "start_paused", False, "wait for ~/pause(false) before the first step")
+        declare(self, "timeout_fallback", "hold", "lock-step timeout: 'hold' the last couple or apply 'zero'", choices=FALLBACKS)
+        self.start_paused = declare(self, "start_paused", False, "wait for ~/pause(false) before the first step", read_only=True)
         declare(self, "marker_period", 0.05, "simulated seconds between RViz marker updates (0 = off)", lo=0.0, hi=1e6)
-        self.add_on_set_parameters_callback(self._check_params)
-        if self.get_parameter("timeout_fallback").value not in FALLBACKS:
-            raise InvalidParameterError(f"timeout_fallback must be one of {FALLBACKS}")
+        declare(self, "max_penetration_limit", 0.0,
+                "the run fails when the rod surface is deeper inside the object than this [m]; 0 = the tip radius",
+                lo=0.0, hi=100.0)
+        declare(self, "max_kinetic_energy", 10.0, "the run fails when the rod's kinetic energy exceeds this [J]", lo=1e-12, hi=1e12)
         self.boundary = boundary_from_spec(kind, params)
         self.system = RodSystem(self.model, Obstacle(self.boundary))
 
         self.drops = DropCounter(self)
+        self.stamps = StampGate(self)
+        self.diagnostics = Diagnostics(self, self.drops, self._status_values)
         self.missed = 0
         self.failure = ""
         self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos.STREAM)
         self.pub_state = self.create_publisher(RodState, qos.TOPIC_ROD_STATE, qos.STREAM)
         self.pub_object = self.create_publisher(ObjectBoundary, qos.TOPIC_OBJECT, qos.LATCHED)
         self.pub_markers = self.create_publisher(MarkerArray, qos.TOPIC_MARKERS, qos.STREAM)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.STREAM)
         self.create_subscription(CoupleControl, qos.TOPIC_COUPLE, self.on_couple, qos.STREAM)
         self.create_service(SetBool, "~/pause", self.on_pause)
         self.create_service(Trigger, "~/reset", self.on_reset)
@@ -96,13 +115,6 @@ class RodSimulator(Node):
         if not self.paused:
             self._publish_observation()
 
-    # ------------------------------------------------------------------ parameters
-    def _check_params(self, params: list[Parameter]) -> SetParametersResult:
-        for p in params:
-            if p.name == "timeout_fallback" and p.value not in FALLBACKS:
-                return SetParametersResult(successful=False, reason=f"timeout_fallback must be one of {FALLBACKS}")
-        return SetParametersResult(successful=True)
-
     # ------------------------------------------------------------------ loop
     def _reset_session(self) -> None:
         self.session = LoopSession(self.system, self.config)
@@ -112,9 +124,27 @@ class RodSimulator(Node):
         self.published = False
         self.next_marker_t = 0.0
         self.failure = ""
+        self.stamps.reset()
+
+    def limits(self) -> DivergenceLimits:
+        """The divergence limits from the parameters (``max_penetration_limit`` 0 = the tip radius)."""
+        pen = self.get_parameter("max_penetration_limit").value or self.model.radius_tip
+        return DivergenceLimits(max_penetration=pen, max_kinetic_energy=self.get_parameter("max_kinetic_energy").value)
+
+    def _fail(self, cause: str) -> None:
+        """Stop the run: state ``failed``, the cause with the simulated time in ``message``."""
+        self.failure = f"t = {float(self.session.state.t):.6g} s: {cause}"
+        self.get_logger().error(f"simulation stopped: {self.failure}")
+        self.waiting_since = None
+        self._publish_status()
 
     def _publish_observation(self) -> None:
-        obs = self.session.observe()
+        try:
+            with np.errstate(all="ignore"):  # a diverging state overflows; it is reported below, not warned about
+                obs = self.session.check_divergence(self.limits())
+        except ContgraspError as exc:
+            self._fail(str(exc))
+            return
         header = Header(stamp=_stamp(obs.t), frame_id="world")
         self.pub_clock.publish(ClockMsg(clock=header.stamp))
         self.pub_state.publish(
@@ -131,7 +161,7 @@ class RodSimulator(Node):
             self.pub_markers.publish(scene_markers(self.boundary, obs, header))
         self.published = True
         self.waiting_since = time.monotonic()
-        self._publish_status(obs)
+        self._publish_status()
 
     def _status(self) -> str:
         if self.failure:
@@ -140,7 +170,7 @@ class RodSimulator(Node):
             return "finished"
         return "paused" if self.paused else "running"
 
-    def _publish_status(self, obs: Observation | None = None) -> None:
+    def _status_values(self) -> tuple[int, str, dict[str, str]]:
         s = self.session
         values = {
             "state": self._status(),
@@ -154,22 +184,23 @@ class RodSimulator(Node):
             "message": self.failure,
         }
         level = DiagnosticStatus.ERROR if self.failure else (DiagnosticStatus.WARN if self.missed else DiagnosticStatus.OK)
-        st = DiagnosticStatus(level=level, name="rod_simulator", message=values["state"], hardware_id="contgrasp",
-                              values=[KeyValue(key=k, value=v) for k, v in values.items()])
-        self.pub_diag.publish(DiagnosticArray(header=Header(stamp=_stamp(float(s.state.t))), status=[st]))
+        return level, values["state"], values
+
+    def _publish_status(self) -> None:
+        self.diagnostics.publish(_stamp(float(self.session.state.t)))
 
     def _advance(self, couple: np.ndarray | FeedbackExpansion) -> None:
         try:
-            self.session.advance(couple)
-        except ContgraspError as exc:
-            self.failure = f"t = {self.session.state.t:.6g} s: {exc}"
-            self.get_logger().error(f"simulation stopped: {self.failure}")
-            self.waiting_since = None
-            self._publish_status()
+            with np.errstate(all="ignore"):  # (as in _publish_observation)
+                self.session.advance(couple)
+        except FatalNodeError:
+            raise
+        except Exception as exc:  # Newton failure, or anything else: the state can no longer be trusted
+            self._fail(str(exc) if isinstance(exc, ContgraspError) else f"{type(exc).__name__}: {exc}")
             return
         self.last_couple = couple
         self._publish_observation()
-        if self.session.finished:
+        if self.session.finished and not self.failure:
             self.waiting_since = None
             self.get_logger().info(
                 f"finished at t = {self.session.state.t:.4g} s (settled: {self.session.settled}, missed deadlines: {self.missed})"
@@ -178,25 +209,32 @@ class RodSimulator(Node):
     def _can_step(self) -> bool:
         return self.published and not self.paused and not self.session.finished and not self.failure
 
+    @guarded(qos.TOPIC_COUPLE)
     def on_couple(self, msg: CoupleControl) -> None:
+        """Validate a couple; in lock-step advance with the couple answering the current step."""
         try:
             step, s, u = couple_arrays(msg)
             n = len(u.u) if isinstance(u, FeedbackExpansion) else len(u)
             if n != self.model.n_elements or not np.allclose(s, self.model.joint_s, rtol=0, atol=1e-12):
-                raise ContgraspError(f"couple must be given at the {self.model.n_elements} joints s = k h")
+                raise MessageError(f"couple must be given at the {self.model.n_elements} joints s = k h", reason="wrong joints")
+            if self.session.finished or self.failure:
+                return  # the answer to the final state (or a failed run): nothing to do with it
+            if self.lockstep and step != self.session.k:
+                raise MessageError(f"couple for step {step} while waiting for step {self.session.k} "
+                                   "(a late answer to a step that timed out, or a stale one)", reason="step mismatch")
+            self.stamps.admit(qos.TOPIC_COUPLE, msg.header, step)
         except ContgraspError as exc:
-            self.drops.drop(qos.TOPIC_COUPLE, str(exc))
+            self.drops.drop_error(qos.TOPIC_COUPLE, exc)
             return
         if not self.lockstep:
             self.last_couple = u
             return
-        if step != self.session.k or self.session.finished:
-            return  # a late answer to a step that already timed out
         if self._can_step():
             self._advance(u)
         else:
             self.pending = u
 
+    @guarded("timer")
     def on_tick(self) -> None:
         if not self._can_step():
             return
@@ -214,6 +252,7 @@ class RodSimulator(Node):
             self._advance(self.last_couple if fallback == "hold" else np.zeros(self.model.n_elements))
 
     # ------------------------------------------------------------------ services
+    @guarded("~/pause", on_error=service_failure)
     def on_pause(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
         self.paused = bool(req.data)
         if not self.paused:
@@ -228,6 +267,7 @@ class RodSimulator(Node):
         resp.success, resp.message = True, self._status()
         return resp
 
+    @guarded("~/reset", on_error=service_failure)
     def on_reset(self, req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         self._reset_session()
         self.missed = 0
