@@ -160,3 +160,23 @@ def test_nodes_idle_without_a_simulator(tmp_path: Path) -> None:
 def cpu_seconds(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def test_killed_simulator_with_respawn_restarts_the_run(tmp_path: Path) -> None:
+    """With --respawn the simulator is restarted, starts again from the initial state, is resumed
+    by the launcher and the run completes; the recording holds both segments, each gap-free."""
+    bag = tmp_path / "bag"
+    launch = Launch("--params", str(fault_params(tmp_path, duration=0.3)), "--bag", str(bag), "--respawn", "1")
+    try:
+        running(launch)
+        launch.signal("rod_simulator", signal.SIGKILL)
+        launch.wait_for(r"'rod_simulator' exited with code -9; restarting it \(1/1\)")
+        code, out = launch.result()
+    finally:
+        launch.close()
+    assert code == 0, "".join(launch.lines[-40:])
+    assert out["restarts"] == {"rod_simulator": 1} and out["simulator_state"] == "finished"
+    assert out["sim_time_s"] == pytest.approx(0.3)
+    steps = recorded_steps(bag)
+    restart = steps.index(0, 1)  # the second run starts at step 0 again
+    assert steps[:restart] == list(range(restart)) and steps[restart:] == list(range(out["steps"] + 1))
