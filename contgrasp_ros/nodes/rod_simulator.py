@@ -98,6 +98,7 @@ class RodSimulator(Node):
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops, self._status_values)
         self.missed = 0
+        self.outage = 0  # consecutive missed deadlines (the current outage)
         self.failure = ""
         self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos.STREAM)
         self.pub_state = self.create_publisher(RodState, qos.TOPIC_ROD_STATE, qos.STREAM)
@@ -229,6 +230,10 @@ class RodSimulator(Node):
         if not self.lockstep:
             self.last_couple = u
             return
+        if self.outage:
+            self.get_logger().info(f"couples are back at step {step} after {self.outage} missed deadlines "
+                                   f"({self.missed} in total)")
+            self.outage = 0
         if self._can_step():
             self._advance(u)
         else:
@@ -243,12 +248,13 @@ class RodSimulator(Node):
             return
         if self.waiting_since is not None and time.monotonic() - self.waiting_since > self.get_parameter("couple_timeout").value:
             self.missed += 1
+            self.outage += 1
             fallback = self.get_parameter("timeout_fallback").value
-            self.get_logger().warn(
-                f"no couple for step {self.session.k} within the timeout: applying the '{fallback}' fallback "
-                f"({self.missed} missed deadlines so far)",
-                throttle_duration_sec=2.0,
-            )
+            if self.outage == 1:  # once per outage; its length is reported when couples return
+                self.get_logger().warn(
+                    f"no couple for step {self.session.k} within the timeout: applying the '{fallback}' fallback "
+                    f"until couples arrive again ({self.missed} missed deadlines so far)"
+                )
             self._advance(self.last_couple if fallback == "hold" else np.zeros(self.model.n_elements))
 
     # ------------------------------------------------------------------ services
@@ -271,6 +277,7 @@ class RodSimulator(Node):
     def on_reset(self, req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         self._reset_session()
         self.missed = 0
+        self.outage = 0
         if not self.paused:
             self._publish_observation()
         resp.success, resp.message = True, "reset to the initial state"
