@@ -416,3 +416,43 @@ def test_recorder_counts_messages_lost_before_it_from_sequence_gaps(ros_context,
     finally:
         node.destroy_node()
     assert json.loads(open_recording(tmp_path / "bag").metadata_records()[RECORDER_RECORD]["lost_in_transport"]) == 3
+
+
+def test_replay_window_and_loop(tmp_path: Path) -> None:
+    """--start/--end select a log-time window; --loop starts over until interrupted."""
+    path = tmp_path / "small.mcap"
+    _small_bag(path, n=300)  # one message per ms
+    env = ros_env(fresh_domain_id())
+    proc = subprocess.run([str(BIN / "contgrasp"), "replay", str(path), "--start", "0.1", "--end", "0.2", "--delay", "0",
+                           "--rate", "10", "--json"], capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["published"] == 101  # 100 ms .. 200 ms inclusive
+    loop = subprocess.Popen([str(BIN / "contgrasp"), "replay", str(path), "--loop", "--rate", "5", "--delay", "0", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    time.sleep(4.0)  # startup + more than one pass of 60 ms
+    loop.send_signal(signal.SIGINT)
+    out, err = loop.communicate(timeout=60)
+    assert loop.returncode == 0, err
+    assert json.loads(out)["published"] > 300
+    bad = subprocess.run([str(BIN / "contgrasp"), "replay", str(path), "--rate", "0"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "rate" in bad.stderr
+
+
+def test_recorder_finalises_on_sigterm(tmp_path: Path) -> None:
+    env = ros_env(fresh_domain_id())
+    rec = _recorder(tmp_path / "bag", env)
+    pub = subprocess.Popen([sys.executable, "-c", PUBLISHER, "300", "-1"], env=env, stdout=subprocess.PIPE, text=True)
+    try:
+        assert pub.stdout is not None
+        while int(pub.stdout.readline().split()[0]) < 299:
+            pass
+        time.sleep(0.5)
+        rec.send_signal(signal.SIGTERM)
+        assert rec.wait(timeout=30) == 0
+    finally:
+        for p in (pub, rec):
+            if p.poll() is None:
+                p.kill()
+                p.wait(timeout=30)
+    steps = [m.step for _, m in iter_decoded(open_recording(tmp_path / "bag"), ["/contgrasp/rod_state"])]
+    assert steps == list(range(300))
