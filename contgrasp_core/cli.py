@@ -65,7 +65,10 @@ def _summary(result: dict[str, Any]) -> str:
     for key, value in result.items():
         if isinstance(value, list) and len(value) > 6:
             continue
-        lines.append(f"{key}: {value}")
+        text = str(value)
+        if len(text) > 300:  # arrays along the arm and the like: only in --json
+            text = f"({type(value).__name__} of {len(value)} entries; see --json)" if hasattr(value, "__len__") else text[:300] + " ..."
+        lines.append(f"{key}: {text}")
     return "\n".join(lines)
 
 
