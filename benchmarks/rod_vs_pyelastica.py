@@ -4,18 +4,28 @@ Both simulate the same rod (L = 0.2 m, radius 1 cm -> 1 mm, density 1042, E = 10
 0.5, 100 elements), the same environment (mass-proportional damping zeta, quadratic drag
 5110 / 25.55 per unit projected area, the same penalty contact law on the element centres
 against the circle of radius 2.5 cm at (8, 8) cm) and the same feedback law (eq. dynamic_feedback
-with mu1 = 1 and the adaptive mu2, centimetre units). PyElastica (explicit PositionVerlet, the
-feedback re-evaluated every step) runs at the largest stable step found by a sweep; the project
-engine runs continuous implicit feedback with adaptive steps up to ``--dt``.
+with mu1 = 1 and the adaptive mu2, centimetre units), from the straight arm at rest.
 
-Reports wall seconds per simulated second for both, their ratio and the max distance between
-the two final centrelines at equal arclength. Needs the optional extra ``bench`` (pyelastica).
+PyElastica (explicit PositionVerlet, stepped with the stepper's own ``step(sim, t, dt)``) applies
+the feedback couple the way a muscle does, through the **rest curvature**: its internal moment is
+``B (kappa - kappa_rest)`` and the paper's total moment is ``EI kappa + u``, so before every step
+the law is evaluated on the sensed centreline (rho, alpha at the interior nodes) and
+``kappa_rest = -u / EI`` is written into ``rod.rest_kappa`` (no external torque; the director
+shear mode that external couples excite is not driven). The continuous loop still flutters at
+the element scale at zeta = 1 (see docs/rod.md), so PyElastica's ``LaplaceDissipationFilter``
+(order ``--filter-order``, default 1) is added; it damps only velocities, so equilibria are
+unchanged. PyElastica runs at the largest stable step of ``--pe-dts``; the project engine runs
+continuous implicit feedback with adaptive steps up to ``--dt``.
 
-Part 2 probes PyElastica on the closed loop; part 3 compares both engines open loop, under a
-held couple ``u = -EI(s) kappa`` (default kappa = 30 /m: the arm curls onto the object), same rod,
-drag, damping and contact law.
+Reports wall seconds per simulated second for both (same process, one BLAS thread), their ratio
+and the max distance between the two final centrelines at equal arclength. ``--also-unfiltered``
+also tries the closed loop without the filter and with external torques. Part 2 compares both
+engines open loop (``--open-duration``, default 8 s, no filter) under a held couple
+``u = -EI(s) kappa`` (default kappa = 30 /m: the arm curls onto the object), applied in
+PyElastica both as external torques on neighbouring elements and as rest curvature. Needs the
+optional extra ``bench`` (pyelastica).
 
-    python benchmarks/rod_vs_pyelastica.py --duration 3
+    python benchmarks/rod_vs_pyelastica.py --duration 3 --also-unfiltered --json
 """
 
 from __future__ import annotations
@@ -37,16 +47,26 @@ from contgrasp_core.rod.scenario import paper_model  # noqa: E402
 
 
 def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: float, *, check_only: bool = False,
-                   shear_ratio: float = 100.0, held_couple: np.ndarray | None = None, stretch_ratio: float = 100.0):
-    """Simulate the scenario in PyElastica; returns (node positions (N+1, 2), wall s, ok).
+                   via: str = "rest_curvature", held_couple: np.ndarray | None = None, filter_order: int = 1,
+                   shear_ratio: float = 100.0, stretch_ratio: float = 100.0):
+    """Simulate the scenario in PyElastica; returns (node positions (N+1, 2), wall s, ok, max node speed).
 
-    ``shear_ratio`` = G / E. The paper's rod is a Kirchhoff rod (inextensible, unshearable); with
-    the physical G = E/3 the centimetre feedback couples shear the soft rod's directors past
-    90 degrees and they spin up without bound (observed at every dt), so PyElastica is made
-    nearly unshearable with G = 100 E (default), which also lowers its stable step.
+    ``held_couple`` (N,) at the joints: open loop; None: the closed loop (eq. dynamic_feedback).
+    ``via``: how the couple enters, ``"rest_curvature"`` (``kappa_rest = -u/EI`` at the interior
+    nodes, the joint couple at the clamp acts on the clamped element and is dropped, as in
+    contgrasp's clamped base) or ``"torques"`` (equal and opposite external torques
+    ``u_{i+1} - u_i`` on element i; the closed loop diverges this way at every step tried).
+    ``filter_order``: PyElastica ``LaplaceDissipationFilter`` order (0 = none).
+    ``shear_ratio`` = G / E and ``stretch_ratio`` scale the shear/stretch stiffness: the paper's
+    rod is a Kirchhoff rod (inextensible, unshearable), so PyElastica is made nearly unshearable
+    and inextensible (default G = 100 E, stretch x100), which also sets its stable step.
+    ``ok``: finite, max node speed < 10 m/s and max element rate < 1e3 rad/s at the end (the
+    probe, ``check_only``, also stops at the first non-finite or > 1e4 rad/s state).
     """
     import elastica as ea
 
+    if via not in ("rest_curvature", "torques"):
+        raise ValueError(f"via must be 'rest_curvature' or 'torques', got {via!r}")
     n = model.n_elements
     gains = paper_gains(model, obstacle.boundary.params["R"])
 
@@ -63,12 +83,15 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
     sim.constrain(rod).using(ea.OneEndFixedBC, constrained_position_idx=(0,), constrained_director_idx=(0,))
     if model.damping > 0:
         sim.dampen(rod).using(ea.AnalyticalLinearDamper, uniform_damping_constant=model.damping, time_step=dt)
+    if filter_order > 0:
+        sim.dampen(rod).using(ea.LaplaceDissipationFilter, filter_order=int(filter_order))
     ei_joint = model.joint_ei
     h = model.h
     r_el = model.r_centres
+    torque_couple = held_couple if via == "torques" else None
 
     class Env(ea.NoForces):
-        """Drag, contact and the feedback couple, identical to contgrasp's loads."""
+        """Drag, contact (and, ``via="torques"``, the couple), identical to contgrasp's loads."""
 
         def apply_forces(self, system, time=0.0):
             x = system.position_collection[:2].T
@@ -93,35 +116,57 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
             system.external_forces[:2, 1:] += 0.5 * f.T
 
         def apply_torques(self, system, time=0.0):
-            if held_couple is not None:
-                system.external_torques[1, :] += np.append(held_couple[1:], 0.0) - held_couple
+            if via != "torques":
                 return
-            x = system.position_collection[:2].T
-            d3 = system.director_collection[2, :2, :].T  # material tangent director of each element
-            th = np.unwrap(np.arctan2(d3[:, 1], d3[:, 0]))
-            th_n = np.concatenate(([model.base_angle], 0.5 * (th[:-1] + th[1:])))
-            pr = obstacle.project(x[:-1])
-            alpha = pr.phi + 0.5 * np.pi - th_n
-            u = feedback_couple(pr.signed_distance, alpha, ei_joint, gains.mu1, gains.mu2,
-                                length_unit=gains.length_unit)
-            u_next = np.append(u[1:], 0.0)
+            if torque_couple is not None:
+                u = torque_couple
+            else:
+                x = system.position_collection[:2].T
+                d3 = system.director_collection[2, :2, :].T  # material tangent director of each element
+                th = np.unwrap(np.arctan2(d3[:, 1], d3[:, 0]))
+                th_n = np.concatenate(([model.base_angle], 0.5 * (th[:-1] + th[1:])))
+                pr = obstacle.project(x[:-1])
+                alpha = pr.phi + 0.5 * np.pi - th_n
+                u = feedback_couple(pr.signed_distance, alpha, ei_joint, gains.mu1, gains.mu2,
+                                    length_unit=gains.length_unit)
             # couple on element i: u_{i+1} - u_i about +z = local director d2 (index 1)
-            system.external_torques[1, :] += u_next - u
+            system.external_torques[1, :] += np.append(u[1:], 0.0) - u
 
     sim.add_forcing_to(rod).using(Env)
     sim.finalize()
+    # rest curvature about d2 (= +z, index 1) at the N-1 interior nodes = contgrasp joints 1..N-1
+    ei_in = ei_joint[1:]
+    mu2_in = gains.mu2[1:] if np.ndim(gains.mu2) else gains.mu2
+    closed_rk = via == "rest_curvature" and held_couple is None
+    if via == "rest_curvature" and held_couple is not None:
+        rod.rest_kappa[1, :] = -held_couple[1:] / ei_in
+
+    def control() -> None:
+        """Sense (rho, alpha) at the interior nodes from the centreline; kappa_rest = -u / EI."""
+        x = rod.position_collection[:2].T
+        e = np.diff(x, axis=0)
+        tn = e[:-1] + e[1:]  # node tangent: the mean of the adjacent edges (the angles' mean, up to O(h^2))
+        pr = obstacle.project(x[1:-1])
+        alpha = pr.phi + 0.5 * np.pi - np.arctan2(tn[:, 1], tn[:, 0])
+        u = feedback_couple(pr.signed_distance, alpha, ei_in, gains.mu1, mu2_in, length_unit=gains.length_unit)
+        rod.rest_kappa[1, :] = -u / ei_in
+
     stepper = ea.PositionVerlet()
     steps = int(round(duration / dt))
     tm = 0.0
     t0 = time.perf_counter()
-    for _ in range(steps):
+    for k in range(steps):
+        if closed_rk:
+            control()
         tm = stepper.step(sim, tm, dt)
-        if check_only and not np.all(np.isfinite(rod.position_collection)):
-            return None, time.perf_counter() - t0, False
+        if check_only and k % 100 == 0 and not (np.all(np.isfinite(rod.position_collection))
+                                                and float(np.abs(rod.omega_collection).max()) < 1e4):
+            return None, time.perf_counter() - t0, False, float("nan")
     wall = time.perf_counter() - t0
     x = rod.position_collection[:2].T.copy()
-    ok = bool(np.all(np.isfinite(x))) and float(np.abs(rod.velocity_collection).max()) < 10.0
-    return x, wall, ok
+    speed = float(np.linalg.norm(rod.velocity_collection, axis=0).max())
+    ok = (bool(np.all(np.isfinite(x))) and speed < 10.0 and float(np.abs(rod.omega_collection).max()) < 1e3)
+    return x, wall, ok, speed
 
 
 def contgrasp_held(model: RodModel, obstacle: Obstacle, couple: np.ndarray, duration: float, dt: float):
@@ -141,53 +186,104 @@ def contgrasp_held(model: RodModel, obstacle: Obstacle, couple: np.ndarray, dura
     return chain.nodes(model, st.theta), wall
 
 
+def _diff(model: RodModel, a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Max distance (m) between two centrelines at equal arclength (node by node) and its s (m)."""
+    d = np.hypot(*(a - b).T)
+    return float(d.max()), float(model.s_nodes[int(d.argmax())])
+
+
+def _probe(model, obstacle, dts, seconds, label, **kw) -> float | None:
+    """Largest stable PyElastica step of ``dts`` (tried largest first) over ``seconds``, or None."""
+    for dt in dts:
+        _, _, ok, _ = pyelastica_run(model, obstacle, dt, seconds, check_only=True, **kw)
+        print(f"{label}, pyelastica dt={dt:g}: {'stable' if ok else 'UNSTABLE'} over {seconds} s", flush=True)
+        if ok:
+            return dt
+    return None
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--duration", type=float, default=4.0, help="simulated seconds (default 4)")
+    ap.add_argument("--duration", type=float, default=3.0, help="simulated seconds (default 3)")
     ap.add_argument("--dt", type=float, default=0.05, help="largest contgrasp step (s)")
-    ap.add_argument("--probe", type=float, default=0.2, help="seconds simulated per stability probe")
-    ap.add_argument("--pe-dts", type=str, default="2e-4,1e-4,5e-5,2e-5,1e-5",
+    ap.add_argument("--probe", type=float, default=0.3, help="seconds simulated per stability probe")
+    ap.add_argument("--pe-dts", type=str, default="5e-5,4e-5,3e-5,2e-5",
                     help="PyElastica steps to try, largest first")
-    ap.add_argument("--shear-ratio", type=float, default=100.0, help="PyElastica G/E (default 100)")
+    ap.add_argument("--filter-order", type=int, default=1,
+                    help="PyElastica LaplaceDissipationFilter order in the closed loop (0 = none; default 1)")
+    ap.add_argument("--shear-ratio", type=float, default=100.0,
+                    help="PyElastica G/E, also the stretch-stiffness factor (default 100)")
+    ap.add_argument("--also-unfiltered", action="store_true",
+                    help="also probe the closed loop without the filter and with external torques")
     ap.add_argument("--held-kappa", type=float, default=30.0,
                     help="open-loop couple u = -EI(s) * kappa (1/m); 0 = the settled closed-loop couple")
+    ap.add_argument("--open-duration", type=float, default=8.0,
+                    help="simulated seconds of the open-loop check (default 8; the held curl settles slowly)")
+    ap.add_argument("--skip-open-loop", action="store_true")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
 
     model = paper_model()
     obstacle = Obstacle(circle(0.025, (0.08, 0.08)))
-    out: dict = {"duration_s": args.duration}
-    # --- 1. closed loop (continuous feedback) in contgrasp
+    dts = [float(s) for s in args.pe_dts.split(",")]
+    stiff = {"shear_ratio": args.shear_ratio, "stretch_ratio": args.shear_ratio}
+    out: dict = {"duration_s": args.duration, "pyelastica_shear_stretch_ratio": args.shear_ratio,
+                 "pyelastica_filter_order": args.filter_order}
+    # --- 1. closed loop (continuous implicit feedback) in contgrasp
     res = run_closed_loop(RodSystem(model, obstacle), paper_gains(model, 0.025),
                           ClosedLoopConfig(duration=args.duration, dt=args.dt, settle_speed=1e-12))
-    out.update({"closed_loop_contgrasp_wall_per_sim_s": res.wall_time / res.t[-1],
-                "closed_loop_contgrasp_final_max_speed": float(res.max_speed[-1])})
-    # --- 2. closed loop in PyElastica: probe for a stable step
-    out["closed_loop_pyelastica_stable_dt"] = None
-    for dt in [float(s) for s in args.pe_dts.split(",")]:
-        _, _, ok = pyelastica_run(model, obstacle, dt, args.probe, check_only=True, shear_ratio=args.shear_ratio)
-        print(f"closed loop, pyelastica dt={dt:g}: {'stable' if ok else 'UNSTABLE'} over {args.probe} s", flush=True)
-        if ok:
-            out["closed_loop_pyelastica_stable_dt"] = dt
-            break
-    # --- 3. open loop: both engines under a held couple profile
-    u = res.couple[-1] if args.held_kappa <= 0 else -model.joint_ei * args.held_kappa
-    out["open_loop_held_kappa_per_m"] = args.held_kappa if args.held_kappa > 0 else "closed-loop couple"
-    cg_x, cg_wall = contgrasp_held(model, obstacle, u, args.duration, args.dt)
-    out.update({"open_loop_contgrasp_wall_per_sim_s": cg_wall / args.duration})
-    for dt in [float(s) for s in args.pe_dts.split(",")]:
-        _, _, ok = pyelastica_run(model, obstacle, dt, args.probe, check_only=True, shear_ratio=args.shear_ratio,
-                                  held_couple=u)
-        print(f"open loop, pyelastica dt={dt:g}: {'stable' if ok else 'UNSTABLE'} over {args.probe} s", flush=True)
-        if ok:
-            pe_x, pe_wall, ok = pyelastica_run(model, obstacle, dt, args.duration, shear_ratio=args.shear_ratio,
-                                               held_couple=u)
-            out.update({"open_loop_pyelastica_dt": dt, "open_loop_pyelastica_stable_full_run": ok,
-                        "open_loop_pyelastica_wall_per_sim_s": pe_wall / args.duration,
-                        "open_loop_speedup": (pe_wall / args.duration) / (cg_wall / args.duration),
-                        "open_loop_centreline_max_diff_m": float(np.hypot(*(pe_x - cg_x).T).max()),
-                        "open_loop_contgrasp_vs_closed_loop_max_diff_m": float(np.hypot(*(cg_x - res.x[-1]).T).max())})
-            break
+    slow = np.nonzero(res.max_speed >= 2e-4)[0]
+    quiet_from = 0.0 if len(slow) == 0 else (float(res.t[slow[-1] + 1]) if slow[-1] + 1 < len(res.t) else None)
+    cg_wall = res.wall_time / res.t[-1]
+    out.update({"closed_loop_contgrasp_wall_per_sim_s": cg_wall,
+                "closed_loop_contgrasp_final_max_speed": float(res.max_speed[-1]),
+                "closed_loop_contgrasp_speed_below_2e-4_from_s": quiet_from})
+    # --- 2. closed loop in PyElastica (rest curvature + filter): largest stable step, full run
+    if args.also_unfiltered:  # the variants: probe, and a full run where stable
+        for via, fo in (("rest_curvature", 0), ("torques", 0), ("torques", args.filter_order)):
+            key = f"closed_loop_pyelastica_{via}_filter{fo}"
+            dt = out[f"{key}_stable_dt"] = _probe(model, obstacle, dts, args.probe, f"closed loop via {via}, filter {fo}",
+                                                  via=via, filter_order=fo, **stiff)
+            if dt is not None:
+                pe_x, pe_wall, ok, _ = pyelastica_run(model, obstacle, dt, args.duration, via=via, filter_order=fo,
+                                                      **stiff)
+                out.update({f"{key}_stable_full_run": ok, f"{key}_wall_per_sim_s": pe_wall / args.duration,
+                            f"{key}_centreline_max_diff_m": _diff(model, pe_x, res.x[-1])[0]})
+    dt = _probe(model, obstacle, dts, args.probe, f"closed loop via rest curvature, filter {args.filter_order}",
+                filter_order=args.filter_order, **stiff)
+    out["closed_loop_pyelastica_stable_dt"] = dt
+    if dt is not None:
+        pe_x, pe_wall, ok, speed = pyelastica_run(model, obstacle, dt, args.duration, filter_order=args.filter_order,
+                                                  **stiff)
+        dmax, s_at = _diff(model, pe_x, res.x[-1])
+        out.update({"closed_loop_pyelastica_stable_full_run": ok,
+                    "closed_loop_pyelastica_final_max_speed": speed,
+                    "closed_loop_pyelastica_wall_per_sim_s": pe_wall / args.duration,
+                    "closed_loop_speedup": (pe_wall / args.duration) / cg_wall,
+                    "closed_loop_centreline_max_diff_m": dmax, "closed_loop_centreline_max_diff_at_s_m": s_at,
+                    "closed_loop_tip_contgrasp_m": res.x[-1][-1].tolist(), "closed_loop_tip_pyelastica_m": pe_x[-1].tolist()})
+    # --- 3. open loop: both engines under a held couple profile (no filter)
+    if not args.skip_open_loop:
+        u = res.couple[-1] if args.held_kappa <= 0 else -model.joint_ei * args.held_kappa
+        out["open_loop_held_kappa_per_m"] = args.held_kappa if args.held_kappa > 0 else "closed-loop couple"
+        t_open = args.open_duration
+        out["open_loop_duration_s"] = t_open
+        cg_x, cg_wall_open = contgrasp_held(model, obstacle, u, t_open, args.dt)
+        out["open_loop_contgrasp_wall_per_sim_s"] = cg_wall_open / t_open
+        for via in ("torques", "rest_curvature"):
+            dt = _probe(model, obstacle, dts, args.probe, f"open loop via {via}", via=via, held_couple=u,
+                        filter_order=0, **stiff)
+            out[f"open_loop_{via}_pyelastica_dt"] = dt
+            if dt is None:
+                continue
+            pe_x, pe_wall, ok, speed = pyelastica_run(model, obstacle, dt, t_open, via=via, held_couple=u,
+                                                      filter_order=0, **stiff)
+            dmax, s_at = _diff(model, pe_x, cg_x)
+            out.update({f"open_loop_{via}_pyelastica_stable_full_run": ok,
+                        f"open_loop_{via}_pyelastica_wall_per_sim_s": pe_wall / t_open,
+                        f"open_loop_{via}_speedup": pe_wall / cg_wall_open,
+                        f"open_loop_{via}_centreline_max_diff_m": dmax,
+                        f"open_loop_{via}_centreline_max_diff_at_s_m": s_at})
     print(json.dumps(out, indent=2) if args.json else "\n".join(f"{k}: {v}" for k, v in out.items()))
 
 
