@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
+from ._validate import MAX_NODES, float_array, instance, integer, real
 from .errors import InvalidParameterError
 
 __all__ = ["BasePose", "Arm", "ArmShape", "arclength_grid", "curvature_spline", "shape_from_curvature"]
@@ -28,8 +29,8 @@ class BasePose:
     theta: float = 0.0
 
     def __post_init__(self) -> None:
-        if not all(np.isfinite([self.x, self.y, self.theta])):
-            raise InvalidParameterError(f"base pose must be finite, got {self}")
+        for name in ("x", "y", "theta"):
+            real(f"base pose {name}", getattr(self, name))
 
 
 @dataclass(frozen=True)
@@ -44,24 +45,28 @@ class Arm:
     radius_tip: float | None = None
 
     def __post_init__(self) -> None:
-        if not np.isfinite(self.length) or self.length <= 0.0:
-            raise InvalidParameterError(f"arm length must be > 0, got {self.length!r}")
-        if not np.isfinite(self.radius_base) or self.radius_base <= 0.0:
-            raise InvalidParameterError(f"base radius must be > 0, got {self.radius_base!r}")
-        tip = self.radius_tip
-        if tip is not None and (not np.isfinite(tip) or tip <= 0.0):
-            raise InvalidParameterError(f"tip radius must be > 0, got {tip!r}")
+        real("arm length", self.length, lo=0.0, lo_open=True)
+        real("base radius", self.radius_base, lo=0.0, lo_open=True)
+        if self.radius_tip is not None:
+            real("tip radius", self.radius_tip, lo=0.0, lo_open=True)
 
     @classmethod
     def paper_tapered(cls, length: float) -> Arm:
         """Paper Sec. III-B: radius L/20 at the base tapering linearly to L/200 at the tip."""
+        length = real("arm length", length, lo=0.0, lo_open=True)
         return cls(length, length / 20.0, length / 200.0)
 
     def radius(self, s: ArrayLike) -> NDArray[np.float64]:
         """Cross-section radius r(s), linear in s."""
-        ss = np.asarray(s, dtype=float)
+        ss = float_array("s", s)
+        if not np.all(np.isfinite(ss)):
+            raise InvalidParameterError("arclengths s must be finite")
         tip = self.radius_base if self.radius_tip is None else self.radius_tip
-        return self.radius_base + (tip - self.radius_base) * ss / self.length
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = self.radius_base + (tip - self.radius_base) * ss / self.length
+        if not np.all(np.isfinite(r)):
+            raise InvalidParameterError(f"arclengths s lie too far outside [0, L = {self.length:.6g}]: the radius overflows")
+        return r
 
     def grid(self, nodes: int) -> NDArray[np.float64]:
         """``nodes`` equally spaced arclengths from 0 to L."""
@@ -84,11 +89,9 @@ class ArmShape:
 
 def arclength_grid(length: float, nodes: int) -> NDArray[np.float64]:
     """Equally spaced grid of ``nodes`` >= 2 points on [0, length]."""
-    if int(nodes) != nodes or nodes < 2:
-        raise InvalidParameterError(f"nodes must be an integer >= 2, got {nodes!r}")
-    if not np.isfinite(length) or length <= 0.0:
-        raise InvalidParameterError(f"length must be > 0, got {length!r}")
-    return np.linspace(0.0, float(length), int(nodes))
+    n = integer("nodes", nodes, lo=2, hi=MAX_NODES)
+    length = real("length", length, lo=0.0, lo_open=True)
+    return np.linspace(0.0, length, n)
 
 
 def _check_grid(s: NDArray[np.float64]) -> None:
@@ -98,8 +101,8 @@ def _check_grid(s: NDArray[np.float64]) -> None:
 
 def curvature_spline(s: ArrayLike, kappa: ArrayLike) -> CubicSpline:
     """Cubic spline through curvature samples; the common interpolant of shape and ODE."""
-    ss = np.asarray(s, dtype=float)
-    kk = np.asarray(kappa, dtype=float)
+    ss = float_array("s", s)
+    kk = float_array("kappa", kappa)
     _check_grid(ss)
     if kk.shape != ss.shape or not np.all(np.isfinite(kk)):
         raise InvalidParameterError(
@@ -117,7 +120,8 @@ def shape_from_curvature(
     and ``r`` is integrated with 8-point Gauss-Legendre quadrature on every grid cell, so the
     shape is fourth-order accurate in the grid spacing (not Euler). ``s[0]`` is the base.
     """
-    ss = np.asarray(s, dtype=float)
+    instance("base", base, BasePose)
+    ss = float_array("s", s)
     spline = curvature_spline(ss, kappa)
     theta_fn = spline.antiderivative()
     offset = base.theta - theta_fn(ss[0])

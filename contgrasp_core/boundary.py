@@ -15,6 +15,8 @@ the derivatives of ``c``.
 
 from __future__ import annotations
 
+import os
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from math import comb
@@ -24,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline, splev, splprep
 from scipy.spatial import cKDTree
 
+from ._validate import float_array, integer, real
 from .errors import (
     DegenerateBoundaryError,
     InvalidParameterError,
@@ -47,6 +50,9 @@ CurveFn = Callable[[NDArray[np.float64], int], NDArray[np.float64]]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
 _N_TABLE = 4096  # samples of the curve used for inversion guesses and projection candidates
+_MAX_TURNS = 1e15  # |s_o| <= _MAX_TURNS L_o: beyond it s_o mod L_o has no significant digits left
+_MAX_COORD = 1e150  # query points farther out overflow squared distances
+_MAX_HARMONICS = 512  # the 4096-sample tables resolve at most 8 samples per wavelength
 
 
 @dataclass(frozen=True)
@@ -127,6 +133,16 @@ class Boundary:
         self._tree = cKDTree(self._tab_pts)
 
     # ------------------------------------------------------------------ arclength maps
+    def _arclengths(self, s_o: ArrayLike) -> NDArray[np.float64]:
+        """``s_o`` as a float array; every value finite with ``|s_o| <= 1e15 L_o``."""
+        s = float_array("s_o", s_o)
+        if not np.all(np.abs(s) <= _MAX_TURNS * self.length):
+            raise InvalidParameterError(
+                f"boundary arclengths s_o must be finite with |s_o| <= {_MAX_TURNS:.0e} L_o "
+                f"(L_o = {self.length:.6g}); got NaN, infinite or out-of-range values"
+            )
+        return s
+
     def _speed(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.hypot(*self._c(t, 1).T)
 
@@ -153,7 +169,7 @@ class Boundary:
     # ------------------------------------------------------------------ geometry at s_o
     def point(self, s_o: ArrayLike) -> NDArray[np.float64]:
         """gamma(s_o), shape ``s_o.shape + (2,)``."""
-        s = np.asarray(s_o, dtype=float)
+        s = self._arclengths(s_o)
         return self._c(self._t_of_s(s).ravel(), 0).reshape(s.shape + (2,))
 
     def _phi(self, t: NDArray[np.float64], s: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -171,7 +187,7 @@ class Boundary:
 
     def tangent_angle(self, s_o: ArrayLike) -> NDArray[np.float64]:
         """Continuous tangent angle phi(s_o) (eq. gamma), ``phi(s + L_o) = phi(s) + 2 pi``."""
-        s = np.asarray(s_o, dtype=float)
+        s = self._arclengths(s_o)
         return self._phi(self._t_of_s(s), s)
 
     def tangent(self, s_o: ArrayLike) -> NDArray[np.float64]:
@@ -186,7 +202,7 @@ class Boundary:
 
     def curvature(self, s_o: ArrayLike) -> NDArray[np.float64]:
         """kappa_o(s_o) = d phi / d s_o (eq. gamma); positive on convex parts."""
-        s = np.asarray(s_o, dtype=float)
+        s = self._arclengths(s_o)
         return self._kappa(self._t_of_s(s)).reshape(s.shape)
 
     def curvature_with_derivative(
@@ -197,7 +213,7 @@ class Boundary:
         The derivative is needed by exact gradients in which the control moves the shadow
         point s_o (and hence kappa_o(s_o)).
         """
-        s = np.asarray(s_o, dtype=float)
+        s = self._arclengths(s_o)
         t = self._t_of_s(s)
         d1, d2, d3 = self._c(t, 1), self._c(t, 2), self._c(t, 3)
         sp2 = np.sum(d1 * d1, axis=1)
@@ -213,7 +229,7 @@ class Boundary:
 
     def sample(self, n: int = 512) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``n`` points equally spaced in arclength: (s_o, gamma(s_o))."""
-        s = np.linspace(0.0, self.length, int(n), endpoint=False)
+        s = np.linspace(0.0, self.length, integer("n", n, lo=0, hi=10_000_000), endpoint=False)
         return s, self.point(s)
 
     # ------------------------------------------------------------------ closest point
@@ -224,10 +240,15 @@ class Boundary:
         ``(c(t) - q) . c'(t) = 0`` (steps limited to two sample spacings); the best refined
         candidate wins, so non-convex boundaries get the global closest point.
         """
-        q = np.asarray(points, dtype=float)
+        q = float_array("points", points)
         if q.ndim != 2 or q.shape[1] != 2 or not np.all(np.isfinite(q)):
             raise InvalidParameterError(f"points must be a finite (n, 2) array, got shape {q.shape}")
-        k = int(min(max(candidates, 1), len(self._tab_t)))
+        if np.any(np.abs(q) > _MAX_COORD):
+            raise InvalidParameterError(f"points must have coordinates within +-{_MAX_COORD:.0e}")
+        k = min(integer("candidates", candidates, lo=1, hi=1_000_000), len(self._tab_t))
+        if len(q) == 0:
+            e = np.zeros(0)
+            return Projection(np.zeros((0, 2)), e, e, e, np.zeros(0, dtype=int), e, e)
         _, idx = self._tree.query(q, k=k)
         idx = np.asarray(idx).reshape(len(q), k)
         h = TWO_PI / _N_TABLE
@@ -281,14 +302,11 @@ class Boundary:
 
 # ---------------------------------------------------------------------- constructors
 def _finite_positive(name: str, value: float) -> float:
-    v = float(value)
-    if not np.isfinite(v) or v <= 0.0:
-        raise InvalidParameterError(f"{name} must be a finite number > 0, got {value!r}")
-    return v
+    return real(name, value, lo=0.0, lo_open=True)
 
 
 def _center(center: ArrayLike) -> NDArray[np.float64]:
-    c = np.asarray(center, dtype=float)
+    c = float_array("center", center)
     if c.shape != (2,) or not np.all(np.isfinite(c)):
         raise InvalidParameterError(f"center must be two finite numbers (x, y), got {center!r}")
     return c
@@ -305,9 +323,7 @@ def ellipse(a: float, b: float, center: ArrayLike = (0.0, 0.0), angle: float = 0
     """
     a_, b_ = _finite_positive("a", a), _finite_positive("b", b)
     c0 = _center(center)
-    ang = float(angle)
-    if not np.isfinite(ang):
-        raise InvalidParameterError(f"angle must be finite, got {angle!r}")
+    ang = real("angle", angle)
     rot = np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])
     scale = np.array([a_, b_])
 
@@ -344,9 +360,13 @@ def fourier_polar(
     must stay positive (so the curve is simple); otherwise a DegenerateBoundaryError is raised.
     """
     r0 = _finite_positive("R", R)
-    a = np.atleast_1d(np.asarray(cos_coeffs, dtype=float))
-    b = np.atleast_1d(np.asarray(sin_coeffs, dtype=float))
+    a = np.atleast_1d(float_array("cos_coeffs", cos_coeffs))
+    b = np.atleast_1d(float_array("sin_coeffs", sin_coeffs))
+    if a.ndim != 1 or b.ndim != 1:
+        raise InvalidParameterError("Fourier coefficients must be 1-D sequences")
     n = max(a.size, b.size)
+    if n > _MAX_HARMONICS:
+        raise InvalidParameterError(f"at most {_MAX_HARMONICS} Fourier harmonics are supported, got {n}")
     a = np.pad(a, (0, n - a.size))
     b = np.pad(b, (0, n - b.size))
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
@@ -395,12 +415,10 @@ def deformed_circle(
     the default (R = 5, amplitude 0.15, 3 lobes) has minimum curvature about -0.138
     (concave radius about 7.2) between the lobes.
     """
-    m = int(lobes)
-    if m < 2 or m != lobes:
-        raise InvalidParameterError(f"lobes must be an integer >= 2, got {lobes!r}")
-    amp = float(amplitude)
-    if not (0.0 <= amp < 1.0):
-        raise InvalidParameterError(f"amplitude must be in [0, 1), got {amplitude!r}")
+    m = integer("lobes", lobes, lo=2, hi=_MAX_HARMONICS)
+    amp = real("amplitude", amplitude, lo=0.0, hi=1.0, hi_open=True)
+    phase = real("phase", phase)
+    R = _finite_positive("R", R)
     cos_c = np.zeros(m)
     sin_c = np.zeros(m)
     cos_c[m - 1] = amp * np.cos(m * phase)
@@ -455,11 +473,14 @@ def from_points(
     curve crosses itself) or DegenerateBoundaryError (fewer than 5 distinct points, zero area,
     non-finite values).
     """
-    p = np.asarray(points, dtype=float)
+    p = float_array("points", points, error=DegenerateBoundaryError)
     if p.ndim != 2 or p.shape[1] != 2:
         raise DegenerateBoundaryError(f"points must be an (n, 2) array, got shape {p.shape}")
     if not np.all(np.isfinite(p)):
         raise DegenerateBoundaryError("points contain NaN or infinite values")
+    if np.any(np.abs(p) > 1e100):
+        raise DegenerateBoundaryError("point coordinates must lie within +-1e100 (choose units)")
+    smoothing = real("smoothing", smoothing, lo=0.0)
     if len(p) < 5:
         raise DegenerateBoundaryError(f"need at least 5 distinct points, got {len(p)}")
     size = float(np.max(np.ptp(p, axis=0)))
@@ -485,13 +506,17 @@ def from_points(
         raise SelfIntersectionError("the polygon through the given points crosses itself")
     if area < 0.0:
         p = p[::-1]
-    smoothing = float(smoothing)
-    if not np.isfinite(smoothing) or smoothing < 0.0:
-        raise InvalidParameterError(f"smoothing must be >= 0, got {smoothing!r}")
     closed_pts = np.vstack([p, p[:1]])
     chord = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed_pts, axis=0).T))])
     u = chord / chord[-1]
-    tck, _ = splprep(closed_pts.T, u=u, per=1, k=5, s=smoothing * len(p) * size**2, quiet=2)
+    # below 1e-12 the smoothing is at rounding level (and FITPACK warns that it cannot reach it)
+    s_fit = smoothing * len(p) * size**2 if smoothing >= 1e-12 else 0.0
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        tck, _ = splprep(closed_pts.T, u=u, per=1, k=5, s=s_fit, quiet=2)
+    if s_fit > 0.0 and any(issubclass(w.category, RuntimeWarning) for w in caught):
+        # FITPACK cannot reach a smoothing this small ("s too small"): its limit is interpolation
+        tck, _ = splprep(closed_pts.T, u=u, per=1, k=5, s=0.0, quiet=2)
 
     def curve(t: NDArray[np.float64], k: int) -> NDArray[np.float64]:
         uu = np.mod(t, TWO_PI) / TWO_PI
@@ -511,21 +536,29 @@ def from_points(
 
 def load_points(path: str) -> NDArray[np.float64]:
     """Read an outline from a CSV/whitespace text file with two columns x, y (header allowed)."""
+    if not isinstance(path, str | os.PathLike):
+        raise InvalidParameterError(f"outline file must be a path, got {path!r}")
     try:
         with open(path, encoding="utf-8") as fh:
             text = fh.read()
     except OSError as exc:
-        raise InvalidParameterError(f"cannot read outline file {path!r}: {exc.strerror}") from exc
+        raise InvalidParameterError(f"cannot read outline file {path!r}: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise DegenerateBoundaryError(f"outline file {path!r} is not a text file: {exc}") from exc
     rows = []
     for line_no, line in enumerate(text.splitlines(), start=1):
         fields = [f for f in line.replace(",", " ").split() if f]
         if not fields or line.lstrip().startswith("#"):
             continue
         try:
-            rows.append([float(fields[0]), float(fields[1])])
+            row = [float(fields[0]), float(fields[1])]
         except (ValueError, IndexError) as exc:
             if rows:  # a header line before the data is fine; garbage after it is not
                 raise DegenerateBoundaryError(f"{path}:{line_no}: expected two numbers x, y, got {line!r}") from exc
+            continue
+        if not (np.isfinite(row[0]) and np.isfinite(row[1])):
+            raise DegenerateBoundaryError(f"{path}:{line_no}: x, y must be finite numbers, got {line!r}")
+        rows.append(row)
     if not rows:
         raise DegenerateBoundaryError(f"{path}: no x, y rows found")
     return np.asarray(rows)

@@ -54,7 +54,7 @@ def _to_jsonable(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         return _to_jsonable(obj.tolist())
     if isinstance(obj, np.generic):
-        return obj.item()
+        return _to_jsonable(obj.item())
     if isinstance(obj, float) and not np.isfinite(obj):
         return None
     return obj
@@ -72,26 +72,32 @@ def _summary(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _one_line(exc: BaseException) -> str:
+    """The exception's message on one line (a parser's multi-line message joined with ' | ')."""
+    return " | ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+
+
 def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> int:
     """Entry point of the ``contgrasp`` command; returns the process exit code."""
     parser = build_parser(extra)
     args = parser.parse_args(argv)
     try:
         result = args.func(args)
+        if args.json:
+            text = json.dumps(_to_jsonable(result), allow_nan=False)
+        else:
+            text = getattr(args, "format_text", _summary)(result)
     except ContgraspError as exc:
         if args.debug:
             raise
-        print(f"contgrasp {args.command}: error: {exc}", file=sys.stderr)
+        print(f"contgrasp {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except Exception as exc:  # noqa: BLE001 - the CLI turns every failure into one line
         if args.debug:
             raise
-        print(f"contgrasp {args.command}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        print(f"contgrasp {args.command}: failed: {type(exc).__name__}: {_one_line(exc)}", file=sys.stderr)
         return 1
-    if args.json:
-        print(json.dumps(_to_jsonable(result), allow_nan=False))
-    else:
-        print(getattr(args, "format_text", _summary)(result))
+    print(text)
     return 0
 
 

@@ -13,6 +13,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from ._validate import MAX_NODES
 from .errors import InvalidParameterError
 from .objects import PAPER_OBJECTS
 from .optimal import PAPER_SETTINGS, GraspResult, paper_problem, solve, sweep
@@ -58,6 +61,15 @@ def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()
 
 
 def _solve(args: argparse.Namespace) -> GraspResult:
+    # every option is checked, also those the chosen solver ignores (a typo is still an error)
+    if not (np.isfinite(args.eta) and args.eta > 0.0):
+        raise InvalidParameterError(f"--eta must be a finite number > 0, got {args.eta}")
+    if args.tol is not None and not (np.isfinite(args.tol) and args.tol > 0.0):
+        raise InvalidParameterError(f"--tol must be a finite number > 0, got {args.tol}")
+    if args.plot:
+        from .plots import check_figure_path
+
+        check_figure_path(args.plot)
     name = args.object
     rho0, alpha0 = PAPER_SETTINGS[name]
     problem = paper_problem(
@@ -100,8 +112,17 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
     """Solve the three Fig. 2 problems with the fast solver and save ``fig2_<object>.png``;
     compute the three Fig. 3 quality maps (process executor) and save ``fig3_<object>.png``."""
     from .plot_grasp import save_grasp_figure
+    from .sweep import MapSpec
 
     out_dir = Path(args.out)
+    for d in (out_dir, *out_dir.parents):
+        if d.exists():
+            if not d.is_dir():
+                raise InvalidParameterError(f"--out {out_dir}: {d} exists and is not a directory")
+            break
+    if not 3 <= args.nodes <= MAX_NODES:
+        raise InvalidParameterError(f"--nodes must be in [3, {MAX_NODES}], got {args.nodes}")
+    MapSpec("circle", psi_steps=args.psi_steps, d_steps=args.d_steps)  # checks both before any solve
     files, summary = [], {}
     for name in PAPER_OBJECTS:
         result = solve(paper_problem(name, nodes=args.nodes))

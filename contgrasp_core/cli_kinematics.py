@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import warnings
 from typing import Any
 
 import numpy as np
@@ -46,6 +47,8 @@ def curvature_profile(
             amp = float(amp_text) if amp_text else 0.0
         except ValueError as exc:
             raise InvalidParameterError(f"bad amplitude in profile {spec!r}; expected parallel:A") from exc
+        if not np.isfinite(amp):
+            raise InvalidParameterError(f"the amplitude must be finite, got {spec!r}")
         return offset_curvature(boundary, s, rho0, s_o0) + amp * np.sin(2.0 * np.pi * s / length)
     if spec.startswith("const:"):
         try:
@@ -57,9 +60,15 @@ def curvature_profile(
         return np.full_like(s, k)
     if os.path.exists(spec):
         try:
-            data = np.loadtxt(spec, delimiter=None if spec.endswith(".txt") else ",", comments="#", ndmin=2)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # an empty file is reported below, not warned about
+                data = np.loadtxt(spec, delimiter=None if spec.endswith(".txt") else ",", comments="#", ndmin=2)
         except ValueError as exc:
             raise InvalidParameterError(f"cannot parse curvature file {spec!r}: {exc}") from exc
+        except OSError as exc:
+            raise InvalidParameterError(f"cannot read curvature file {spec!r}: {exc.strerror or exc}") from exc
+        if data.size == 0:
+            raise InvalidParameterError(f"curvature file {spec!r} holds no values")
         if not np.all(np.isfinite(data)):
             raise InvalidParameterError(f"curvature file {spec!r} contains NaN or infinite values")
         if data.shape[1] >= 2:
@@ -108,6 +117,10 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Execute ``contgrasp kinematics``; returns the JSON result (keys in docs/cli.md)."""
+    if args.plot:
+        from .plots import check_figure_path
+
+        check_figure_path(args.plot)
     boundary = make_object(args.object, outline=args.outline, closed=args.closed)
     length = boundary.length / 2.0 if args.length is None else args.length
     arm = Arm.paper_tapered(length)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from .errors import InvalidParameterError
@@ -38,8 +39,27 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.set_defaults(func=run)
 
 
+def _check_out_path(path: str) -> None:
+    """``--out FILE``: FILE.npz and FILE.json must be creatable (checked before computing)."""
+    p = Path(path)
+    for f in (p.with_suffix(".npz"), p.with_suffix(".json")):
+        if f.is_dir():
+            raise InvalidParameterError(f"--out {path}: {f} is a directory")
+    for parent in p.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise InvalidParameterError(f"--out {path}: {parent} is not a directory")
+            break
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Execute ``contgrasp quality-map``; JSON keys in docs/cli.md."""
+    if args.plot:
+        from .plots import check_figure_path
+
+        check_figure_path(args.plot)
+    if args.out:
+        _check_out_path(args.out)
     if args.load:
         qm = load_map(args.load)
     else:
@@ -64,7 +84,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         from .plot_quality import quality_map_figure
 
         fig = quality_map_figure(qm)
-        fig.savefig(args.plot, dpi=120)
+        try:
+            fig.savefig(args.plot, dpi=120)
+        except (OSError, ValueError) as exc:
+            raise InvalidParameterError(f"cannot write the figure {args.plot}: {exc}") from exc
         out["plot"] = args.plot
     out["saved"] = args.out
     return out

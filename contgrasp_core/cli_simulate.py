@@ -26,17 +26,19 @@ def _object(spec: str) -> tuple[Boundary, float]:
     """``circle[:R]``, ``ellipse:a,b`` or ``deformed`` centred at the paper's (8, 8) cm; returns
     the boundary and the radius used by the adaptive mu2 (circle radius or mean radius)."""
     kind, _, arg = spec.partition(":")
-    vals = [float(v) for v in arg.split(",")] if arg else []
-    if kind == "circle":
+    usage = f"--object must be circle[:R], ellipse:a,b or deformed[:R] (metres), got {spec!r}"
+    try:
+        vals = [float(v) for v in arg.split(",")] if arg else []
+    except ValueError:
+        raise InvalidParameterError(usage) from None
+    if kind in ("circle", "deformed") and len(vals) <= 1:
         r = vals[0] if vals else PAPER_OBJECT_RADIUS
-        return circle(r, PAPER_OBJECT_CENTER), r
-    if kind == "ellipse":
-        a, b = vals if len(vals) == 2 else (0.03, 0.02)
+        make = circle if kind == "circle" else deformed_circle
+        return make(r, center=PAPER_OBJECT_CENTER), r
+    if kind == "ellipse" and len(vals) in (0, 2):
+        a, b = vals if vals else (0.03, 0.02)
         return ellipse(a, b, PAPER_OBJECT_CENTER), float(np.sqrt(a * b))
-    if kind == "deformed":
-        r = vals[0] if vals else PAPER_OBJECT_RADIUS
-        return deformed_circle(r, center=PAPER_OBJECT_CENTER), r
-    raise InvalidParameterError(f"--object must be circle[:R], ellipse:a,b or deformed[:R] (metres), got {spec!r}")
+    raise InvalidParameterError(usage)
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = None) -> argparse.ArgumentParser:
@@ -166,8 +168,12 @@ def plot_fig4(res: ClosedLoopResult, boundary: Boundary, path: str, obstacle_rad
     ax2.set_ylabel(r"$\alpha$ [rad]")
     ax1.legend(fontsize=6)
     fig.tight_layout()
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
+    try:
+        fig.savefig(path, dpi=150)
+    except (OSError, ValueError) as exc:
+        raise InvalidParameterError(f"cannot write the figure {path}: {exc}") from exc
+    finally:
+        plt.close(fig)
 
 
 def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 60) -> None:
@@ -195,14 +201,45 @@ def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 
         ax.set_xlabel("x [cm]")
 
     anim = FuncAnimation(fig, draw, frames=idx)
-    anim.save(path, writer=PillowWriter(fps=12))
-    plt.close(fig)
+    try:
+        anim.save(path, writer=PillowWriter(fps=12))
+    except (OSError, ValueError) as exc:
+        raise InvalidParameterError(f"cannot write the animation {path}: {exc}") from exc
+    finally:
+        plt.close(fig)
+
+
+MAX_NODES = 10_001
+"""Largest rod the command accepts (the paper's arm has 101 nodes)."""
+
+
+def _check_animation_path(path: str) -> None:
+    from pathlib import Path
+
+    from PIL import Image
+
+    p = Path(path)
+    fmt = Image.registered_extensions().get(p.suffix.lower())
+    if fmt not in ("GIF", "WEBP", "PNG"):
+        raise InvalidParameterError(f"--animate {path}: use a .gif, .webp or .png file name")
+    if p.is_dir() or (p.parent.exists() and not p.parent.is_dir()):
+        raise InvalidParameterError(f"--animate {path}: not a writable file name")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run the scenario; write the plot/animation if asked; return the JSON-able result."""
-    if args.nodes < 3:
-        raise InvalidParameterError(f"--nodes must be >= 3, got {args.nodes}")
+    if not 3 <= args.nodes <= MAX_NODES:
+        raise InvalidParameterError(f"--nodes must be in [3, {MAX_NODES}], got {args.nodes}")
+    if not (np.isfinite(args.contact_tol) and args.contact_tol >= 0.0):
+        raise InvalidParameterError(f"--contact-tol must be a finite number >= 0, got {args.contact_tol}")
+    if not (np.isfinite(args.dt) and args.dt > 0.0):  # checked also when --control-period makes it unused
+        raise InvalidParameterError(f"--dt must be a finite number > 0, got {args.dt}")
+    if args.plot:
+        from contgrasp_core.plots import check_figure_path
+
+        check_figure_path(args.plot)
+    if args.animate:
+        _check_animation_path(args.animate)
     boundary, r_obj = _object(args.object)
     overrides = {} if args.damping is None else {"damping": args.damping}
     model = paper_model(n_elements=args.nodes - 1, **overrides)

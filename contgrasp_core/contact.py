@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import solve_ivp
 
+from ._validate import float_array, instance, real
 from .arm import ArmShape, BasePose, curvature_spline
 from .boundary import Boundary
 from .errors import ContactValidityError, InvalidParameterError
@@ -84,7 +85,10 @@ def _wrap_pi(x: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def _radius_array(radius: float | ArrayLike, n: int) -> NDArray[np.float64]:
-    r = np.broadcast_to(np.asarray(radius, dtype=float), (n,)).copy()
+    r = float_array("arm radius", radius)
+    if r.shape not in ((), (n,)):
+        raise InvalidParameterError(f"arm radius must be a scalar or one value per arm node ({n}), got shape {r.shape}")
+    r = np.broadcast_to(r, (n,)).copy()
     if not np.all(np.isfinite(r)) or np.any(r < 0.0):
         raise InvalidParameterError("arm radius must be finite and >= 0 along the arm")
     return r
@@ -103,15 +107,19 @@ def sense(
     eq. delta (``delta = r_arm - rho``) and Definition 1 with tolerance ``tol``
     (``in_contact = delta >= -tol``).
     """
-    if not np.isfinite(tol) or tol < 0.0:
-        raise InvalidParameterError(f"contact tolerance must be >= 0, got {tol!r}")
-    r = np.asarray(shape.r, dtype=float)
-    theta = np.asarray(shape.theta, dtype=float)
+    instance("shape", shape, ArmShape)
+    instance("boundary", boundary, Boundary)
+    tol = real("contact tolerance", tol, lo=0.0)
+    r = float_array("arm shape r", shape.r)
+    theta = float_array("arm shape theta", shape.theta)
     if r.ndim != 2 or r.shape[1] != 2 or theta.shape != (len(r),) or len(r) == 0:
         raise InvalidParameterError(
             f"arm shape needs r of shape (n, 2) and theta of shape (n,), got {r.shape}, {theta.shape}"
         )
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(theta))):
+    ss = float_array("arm shape s", shape.s)
+    if ss.shape != theta.shape:
+        raise InvalidParameterError(f"arm shape needs s of shape {theta.shape}, got {ss.shape}")
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(theta)) and np.all(np.isfinite(ss))):
         raise InvalidParameterError("arm shape contains NaN or infinite values")
     rad = _radius_array(radius, len(r))
     proj = boundary.project(r)
@@ -125,7 +133,7 @@ def sense(
     delta = rad - rho
     valid = (rho > 0.0) & (alpha > 0.0) & (alpha < np.pi) & (one_plus > 0.0)
     return ContactState(
-        s=np.asarray(shape.s, dtype=float),
+        s=ss,
         rho=rho,
         alpha=alpha,
         delta=delta,
@@ -141,10 +149,18 @@ def sense(
 
 def check_state(boundary: Boundary, rho: float, alpha: float, s_o: float, *, s: float = 0.0) -> None:
     """Raise ContactValidityError unless (rho, alpha, s_o) is an admissible contact state."""
-    vals = np.array([rho, alpha, s_o], dtype=float)
+    instance("boundary", boundary, Boundary)
+    try:
+        if any(np.ndim(v) != 0 for v in (rho, alpha, s_o)):
+            raise TypeError("not scalars")
+        vals = np.array([float(rho), float(alpha), float(s_o)])
+    except (TypeError, ValueError) as exc:
+        raise InvalidParameterError(f"contact state (rho, alpha, s_o) must be three numbers, got {(rho, alpha, s_o)!r}") from exc
+    rho, alpha, s_o = (float(v) for v in vals)
+    s = real("s", s)
     if not np.all(np.isfinite(vals)):
         raise ContactValidityError(
-            f"contact state (rho, alpha, s_o) = {tuple(vals)} is not finite at s = {s:.6g}",
+            f"contact state (rho, alpha, s_o) = {tuple(vals.tolist())} is not finite at s = {s:.6g}",
             s=s,
             condition="finite",
         )
@@ -173,6 +189,8 @@ def check_state(boundary: Boundary, rho: float, alpha: float, s_o: float, *, s: 
         )
 
 
+_MAX_TURNING = 1e9  # largest |kappa| L integrate_contact accepts (radians of total turning)
+
 KappaProfile = Callable[[NDArray[np.float64]], NDArray[np.float64]] | ArrayLike
 
 
@@ -196,17 +214,41 @@ def integrate_contact(
     DOP853 (8th order) at tolerance ``rtol``/``atol``; leaving the admissible region raises
     ContactValidityError naming the arclength where it happened.
     """
-    ss = np.asarray(s, dtype=float)
-    if ss.ndim != 1 or len(ss) < 2 or np.any(np.diff(ss) <= 0.0) or not np.all(np.isfinite(ss)):
+    ss = float_array("s", s)
+    if ss.ndim != 1 or len(ss) < 2 or not np.all(np.isfinite(ss)) or np.any(np.diff(ss) <= 0.0):
         raise InvalidParameterError("s must be a finite, strictly increasing grid of >= 2 points")
-    kfun = kappa if callable(kappa) else curvature_spline(ss, kappa)
+    rtol = real("rtol", rtol, lo=100 * np.finfo(float).eps, hi=0.1)
+    atol = real("atol", atol, lo=0.0)
+    span = float(ss[-1] - ss[0])
+    if not np.isfinite(span):
+        raise InvalidParameterError("s spans more than the floating-point range")
+    # |kappa| L beyond this would turn the arm 1e9 times: the integrator's error norms overflow
+    # long before, and the contact would have left the admissible region within the first turn
+    k_max = _MAX_TURNING / span
+    if not callable(kappa):
+        kk = float_array("kappa", kappa)
+        if kk.shape == ss.shape and np.all(np.isfinite(kk)) and np.max(np.abs(kk)) > k_max:
+            raise InvalidParameterError(
+                f"|kappa| must be <= {_MAX_TURNING:.0e} / L = {k_max:.3g} (the arm would turn more than "
+                f"{_MAX_TURNING:.0e} radians), got max |kappa| = {np.max(np.abs(kk)):.3g}"
+            )
+    kspline = kappa if callable(kappa) else curvature_spline(ss, kappa)
     check_state(boundary, rho0, alpha0, s_o0, s=float(ss[0]))
+
+    def kfun(sv: float) -> float:
+        try:
+            k = float(kspline(sv))
+        except (TypeError, ValueError) as exc:
+            raise InvalidParameterError(f"kappa(s) at s = {sv:.6g} is not a number: {exc}") from exc
+        if not abs(k) <= k_max:
+            raise InvalidParameterError(f"kappa(s) = {k!r} at s = {sv:.6g}: must be finite with |kappa| <= {k_max:.3g}")
+        return k
 
     def rhs(sv: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
         rho, alpha, so = y
         k_o = float(boundary.curvature(so))
         nu = np.sin(alpha) / (1.0 + rho * k_o)
-        return np.array([-np.cos(alpha), -float(kfun(sv)) + k_o * nu, nu])
+        return np.array([-np.cos(alpha), -kfun(sv) + k_o * nu, nu])
 
     def ev_rho(sv: float, y: NDArray[np.float64]) -> float:
         return y[0]
@@ -259,12 +301,14 @@ def shape_from_contact(
 
     ``r = gamma(s_o) - rho n(s_o)`` and ``theta = phi(s_o) + pi/2 - alpha``.
     """
-    rr, aa, so = (np.asarray(v, dtype=float) for v in (rho, alpha, s_o))
-    ss = np.asarray(s, dtype=float)
+    instance("boundary", boundary, Boundary)
+    rr, aa, so, ss = (float_array(n, v) for n, v in (("rho", rho), ("alpha", alpha), ("s_o", s_o), ("s", s)))
     if not (rr.shape == aa.shape == so.shape == ss.shape):
         raise InvalidParameterError(
             f"s, rho, alpha, s_o must have equal shapes, got {ss.shape}, {rr.shape}, {aa.shape}, {so.shape}"
         )
+    if not all(np.all(np.isfinite(v)) for v in (rr, aa, ss)) or np.any(np.abs(rr) > 1e150):
+        raise InvalidParameterError("s, rho and alpha must be finite (|rho| <= 1e150)")
     phi = boundary.tangent_angle(so)
     normal = np.stack([-np.sin(phi), np.cos(phi)], axis=-1)
     r = boundary.point(so) - rr[..., None] * normal
@@ -277,6 +321,8 @@ def initial_state(boundary: Boundary, base: BasePose) -> tuple[float, float, flo
     Raises ContactValidityError if the base is inside the object or the heading does not keep
     the object on the left (alpha0 outside (0, pi)).
     """
+    instance("boundary", boundary, Boundary)
+    instance("base", base, BasePose)
     proj = boundary.project(np.array([[base.x, base.y]]))
     rho0 = float(proj.signed_distance[0])
     s_o0 = float(proj.s_o[0])
@@ -310,10 +356,12 @@ def offset_curvature(
     ``ds = (1 + d kappa_o(sigma)) d sigma`` so ``s = sigma - s_o0 + d (phi(sigma) - phi(s_o0))``
     and ``kappa = kappa_o / (1 + d kappa_o)``; for a circle of radius R this is 1/(R + d).
     """
-    ss = np.asarray(s, dtype=float)
-    d = float(distance)
-    if not np.isfinite(d) or d <= 0.0:
-        raise InvalidParameterError(f"offset distance must be > 0, got {distance!r}")
+    instance("boundary", boundary, Boundary)
+    ss = float_array("s", s)
+    if ss.size == 0 or not np.all(np.isfinite(ss)) or np.any(ss < 0.0):
+        raise InvalidParameterError("s must be a non-empty array of finite arclengths >= 0")
+    d = real("offset distance", distance, lo=0.0, lo_open=True)
+    s_o0 = real("s_o0", s_o0)
     phi0 = float(boundary.tangent_angle(s_o0))
 
     def s_of_sigma(sig: NDArray[np.float64]) -> NDArray[np.float64]:

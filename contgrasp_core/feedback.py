@@ -15,11 +15,12 @@ gains give a static closed loop whose equilibrium has ``rho < 0``: infeasible.)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Union
+from typing import Any, Callable, Union
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from contgrasp_core._validate import float_array, real
 from contgrasp_core.errors import InvalidParameterError
 
 __all__ = [
@@ -43,11 +44,31 @@ Gain = Union[float, np.ndarray, Callable[[np.ndarray], np.ndarray]]
 
 
 def _check_unit(length_unit: float) -> float:
-    if not (np.isfinite(length_unit) and length_unit > 0):
+    return real("length_unit (metres per law unit)", length_unit, lo=0.0, lo_open=True)
+
+
+def _finite_result(name: str, fn: Callable[[], Any]) -> Any:
+    """Evaluate a pointwise formula (an array or a tuple of arrays); NaN/Inf inputs, overflow or
+    a bad broadcast raise InvalidParameterError instead of returning non-finite values."""
+    try:
+        with np.errstate(all="ignore"):
+            out = fn()
+    except (TypeError, ValueError) as exc:
+        raise InvalidParameterError(f"{name}: inputs must be numbers or arrays of matching shapes ({exc})") from exc
+    except ArithmeticError as exc:  # Python-float overflow (e.g. length_unit**2)
+        raise InvalidParameterError(f"{name} overflows: an input is too large ({exc})") from exc
+    if not all(np.isfinite(v).all() for v in (out if isinstance(out, tuple) else (out,))):
         raise InvalidParameterError(
-            f"length_unit must be a finite positive number of metres per law unit, got {length_unit!r}"
+            f"{name} is not finite: an input is NaN or infinite, outside its domain, or too large"
         )
-    return float(length_unit)
+    return out
+
+
+def _law(rho: ArrayLike, alpha: ArrayLike, mu1: ArrayLike, mu2: ArrayLike, lu: float) -> np.ndarray:
+    """eq. curvature_feedback in 1/m (no checks)."""
+    a = np.asarray(alpha, dtype=float)
+    kappa_u = -np.asarray(mu1, dtype=float) * np.cos(a) + (np.asarray(rho, dtype=float) / lu - np.asarray(mu2, dtype=float)) * np.sin(a)
+    return kappa_u / lu
 
 
 def adaptive_mu2(
@@ -61,13 +82,11 @@ def adaptive_mu2(
     ``radius`` and ``object_radius`` are in metres; the result is in law units (cm by default).
     """
     lu = _check_unit(length_unit)
-    r = np.asarray(radius, dtype=float)
+    r = float_array("radius", radius)
     if np.any(~np.isfinite(r)) or np.any(r <= 0):
         raise InvalidParameterError("radius must be finite and > 0 (metres)")
-    if not (np.isfinite(object_radius) and object_radius > 0):
-        raise InvalidParameterError(f"object_radius must be finite and > 0 metres, got {object_radius!r}")
-    r_u = r / lu
-    return r_u - 1.0 / (object_radius / lu + r_u)
+    object_radius = real("object_radius (metres)", object_radius, lo=0.0, lo_open=True)
+    return _finite_result("adaptive mu2", lambda: r / lu - 1.0 / (object_radius / lu + r / lu))
 
 
 def curvature_feedback(
@@ -85,10 +104,7 @@ def curvature_feedback(
     ``kappa = kappa_u / length_unit``. ``rho`` in metres; gains scalar or per arclength.
     """
     lu = _check_unit(length_unit)
-    rho = np.asarray(rho, dtype=float)
-    alpha = np.asarray(alpha, dtype=float)
-    kappa_u = -np.asarray(mu1, dtype=float) * np.cos(alpha) + (rho / lu - np.asarray(mu2, dtype=float)) * np.sin(alpha)
-    return kappa_u / lu
+    return _finite_result("feedback curvature", lambda: _law(rho, alpha, mu1, mu2, lu))
 
 
 def feedback_couple(
@@ -106,10 +122,16 @@ def feedback_couple(
     units and converted to 1/m, so ``u = -EI * curvature_feedback(...)``; ``EI`` in N m^2.
     It enters the moment balance (eq. dynamics) as ``u_s``; the total couple is ``EI kappa + u``.
     """
-    ei = np.asarray(bending_stiffness, dtype=float)
-    if np.any(~np.isfinite(ei)) or np.any(ei <= 0):
+    lu = _check_unit(length_unit)
+    ei = _stiffness(bending_stiffness)
+    return _finite_result("feedback couple", lambda: -ei * _law(rho, alpha, mu1, mu2, lu))
+
+
+def _stiffness(bending_stiffness: ArrayLike) -> np.ndarray:
+    ei = float_array("bending_stiffness EI", bending_stiffness)
+    if not (np.isfinite(ei).all() and (ei > 0).all()):
         raise InvalidParameterError("bending_stiffness EI must be finite and > 0 (N m^2)")
-    return -ei * curvature_feedback(rho, alpha, mu1, mu2, length_unit=length_unit)
+    return ei
 
 
 def feedback_couple_gradient(
@@ -125,12 +147,16 @@ def feedback_couple_gradient(
     and ``du/dalpha = -EI (mu1 sin(alpha) + (rho/l - mu2) cos(alpha)) / l`` (N m/rad), with
     ``l`` the law's length unit."""
     lu = _check_unit(length_unit)
-    ei = np.asarray(bending_stiffness, dtype=float)
-    rho, alpha = np.asarray(rho, dtype=float), np.asarray(alpha, dtype=float)
-    sa, ca = np.sin(alpha), np.cos(alpha)
-    dk_da = (np.asarray(mu1, dtype=float) * sa + (rho / lu - np.asarray(mu2, dtype=float)) * ca) / lu
-    dk_dr = sa / lu**2
-    return -ei * dk_dr, -ei * dk_da
+    ei = _stiffness(bending_stiffness)
+
+    def grad() -> tuple[np.ndarray, np.ndarray]:
+        r, a = np.asarray(rho, dtype=float), np.asarray(alpha, dtype=float)
+        sa, ca = np.sin(a), np.cos(a)
+        dk_da = (np.asarray(mu1, dtype=float) * sa + (r / lu - np.asarray(mu2, dtype=float)) * ca) / lu
+        dk_dr = sa / lu**2
+        return -ei * dk_dr, -ei * dk_da
+
+    return _finite_result("feedback couple gradient", grad)
 
 
 def _check_prop1(kbar: float, mu2: float) -> None:
@@ -150,16 +176,20 @@ def equilibrium_distance(kbar: float, mu2: float, *, length_unit: float = 1.0) -
     consistent (e.g. dimensionless) unit, as in Prop. 1.
     """
     lu = _check_unit(length_unit)
-    k = float(kbar) * lu
-    _check_prop1(k, float(mu2))
+    mu2 = real("mu2", mu2)
+    k = real("kbar", kbar) * lu
+    _check_prop1(k, mu2)
     if k == 0.0:
-        return float(mu2) * lu
-    b = 1.0 - mu2 * k
-    c = -(mu2 + k)
-    disc = np.sqrt(b * b - 4.0 * k * c)  # = sqrt((1 + mu2 k)^2 + 4 k^2) > 0
-    # numerically stable positive root
-    root = (-b + disc) / (2.0 * k) if b <= 0 else (2.0 * -c) / (b + disc)
-    return float(root) * lu
+        return _finite_result("equilibrium distance", lambda: np.float64(mu2) * lu).item()
+
+    def root() -> np.ndarray:
+        b = 1.0 - mu2 * k
+        c = -(mu2 + k)
+        disc = np.sqrt(np.float64(b) * b - 4.0 * k * c)  # = sqrt((1 + mu2 k)^2 + 4 k^2) > 0
+        # numerically stable positive root
+        return ((-b + disc) / (2.0 * k) if b <= 0 else (2.0 * -c) / (b + disc)) * lu
+
+    return _finite_result("equilibrium distance", root).item()
 
 
 def lyapunov(rho: ArrayLike, alpha: ArrayLike, mu2: float, kbar: float) -> np.ndarray:
@@ -167,15 +197,29 @@ def lyapunov(rho: ArrayLike, alpha: ArrayLike, mu2: float, kbar: float) -> np.nd
 
     ``V = -ln(sin alpha) + (rho - mu2)^2 / 2 - ln(1 + rho kbar)``.
     """
-    rho = np.asarray(rho, dtype=float)
-    alpha = np.asarray(alpha, dtype=float)
-    return -np.log(np.sin(alpha)) + 0.5 * (rho - mu2) ** 2 - np.log1p(rho * kbar)
+
+    def v() -> np.ndarray:
+        r, a = np.asarray(rho, dtype=float), np.asarray(alpha, dtype=float)
+        return -np.log(np.sin(a)) + 0.5 * (r - np.asarray(mu2, dtype=float)) ** 2 - np.log1p(r * np.asarray(kbar, dtype=float))
+
+    return _finite_result("Lyapunov function V (needs sin(alpha) > 0 and 1 + rho kbar > 0)", v)
 
 
 def lyapunov_rate(alpha: ArrayLike, mu1: float) -> np.ndarray:
     """``dV/ds = -mu1 cos^2(alpha) / sin(alpha)`` along the closed loop (Prop. 1 proof)."""
-    alpha = np.asarray(alpha, dtype=float)
-    return -mu1 * np.cos(alpha) ** 2 / np.sin(alpha)
+
+    def rate() -> np.ndarray:
+        a = np.asarray(alpha, dtype=float)
+        return -np.asarray(mu1, dtype=float) * np.cos(a) ** 2 / np.sin(a)
+
+    return _finite_result("Lyapunov rate (needs sin(alpha) != 0)", rate)
+
+
+_MAX_RHS_EVALUATIONS = 20_000  # about 0.5 s of right-hand sides; a well-posed loop needs < 3000
+
+
+class _IntegrationAborted(Exception):
+    """Raised inside the right-hand side to stop a hopeless integration."""
 
 
 @dataclass(frozen=True)
@@ -193,9 +237,9 @@ class ClosedLoopKinematics:
 def _as_profile(g: Gain, name: str) -> Callable[[float], float]:
     if callable(g):
         return lambda s: float(np.asarray(g(np.asarray(s))))  # type: ignore[misc]
-    arr = np.asarray(g, dtype=float)
+    arr = float_array(name, g)
     if arr.ndim == 0:
-        v = float(arr)
+        v = real(name, arr)
         return lambda s: v
     raise InvalidParameterError(f"{name} must be a scalar or a callable of s (arrays: pass np.interp)")
 
@@ -223,24 +267,42 @@ def closed_loop_kinematics(
     the valid region (rho > 0, 0 < alpha < pi).
     """
     lu = _check_unit(length_unit)
-    s = np.asarray(s, dtype=float)
-    if s.ndim != 1 or s.size < 2 or np.any(np.diff(s) <= 0):
-        raise InvalidParameterError("s must be a strictly increasing 1-D grid with >= 2 points")
-    if not (rho0 > 0 and 0 < alpha0 < np.pi):
-        raise InvalidParameterError(f"need rho0 > 0 and 0 < alpha0 < pi, got rho0={rho0}, alpha0={alpha0}")
+    s = float_array("s", s)
+    if s.ndim != 1 or s.size < 2 or not np.all(np.isfinite(s)) or np.any(np.diff(s) <= 0):
+        raise InvalidParameterError("s must be a finite, strictly increasing 1-D grid with >= 2 points")
+    rho0 = real("rho0", rho0, lo=0.0, lo_open=True)
+    alpha0 = real("alpha0", alpha0, lo=0.0, hi=np.pi, lo_open=True, hi_open=True)
+    s_o0 = real("s_o0", s_o0)
+    rtol = real("rtol", rtol, lo=100 * np.finfo(float).eps, hi=0.1)
+    atol = real("atol", atol, lo=0.0, lo_open=True)
     m1 = _as_profile(mu1, "mu1")
     m2 = _as_profile(mu2, "mu2")
-    ko = (lambda so: float(object_curvature)) if not callable(object_curvature) else object_curvature
+    if callable(object_curvature):
+        ko = object_curvature
+    else:
+        k_const = real("object_curvature", object_curvature)
+        ko = lambda so: k_const  # noqa: E731
+    evaluations = [0]
 
     def rhs(si: float, y: np.ndarray) -> np.ndarray:
+        evaluations[0] += 1
+        if evaluations[0] > _MAX_RHS_EVALUATIONS or not np.all(np.isfinite(y)):
+            raise _IntegrationAborted
         rho, alpha, so = y
         k_o = float(ko(so))
         den = 1.0 + rho * k_o
         kap = float(curvature_feedback(rho, alpha, m1(si), m2(si), length_unit=lu))
         return np.array([-np.cos(alpha), -kap + k_o * np.sin(alpha) / den, np.sin(alpha) / den])
 
-    sol = solve_ivp(rhs, (s[0], s[-1]), [rho0, alpha0, s_o0], t_eval=s, method="LSODA", rtol=rtol, atol=atol)
-    if not sol.success:  # pragma: no cover - solver failure is reported, not hidden
+    try:
+        with np.errstate(all="ignore"):
+            sol = solve_ivp(rhs, (s[0], s[-1]), [rho0, alpha0, s_o0], t_eval=s, method="LSODA", rtol=rtol, atol=atol)
+    except _IntegrationAborted:
+        raise InvalidParameterError(
+            f"closed-loop kinematics integration failed: the state became non-finite or the problem is too stiff "
+            f"(more than {_MAX_RHS_EVALUATIONS} evaluations); check the gains, rho0 and the object curvature"
+        ) from None
+    if not sol.success or not np.all(np.isfinite(sol.y)):
         raise InvalidParameterError(f"closed-loop kinematics integration failed: {sol.message}")
     rho, alpha, so = sol.y
     kappa = np.array([curvature_feedback(r, a, m1(si), m2(si), length_unit=lu) for r, a, si in zip(rho, alpha, s, strict=True)])

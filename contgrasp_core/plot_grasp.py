@@ -83,9 +83,15 @@ def save_grasp_figure(result: GraspResult, path: str | Path, title: str | None =
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
+    from .errors import InvalidParameterError
+
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
     fig = plot_grasp(result, title=title)
-    fig.savefig(out, dpi=130)
-    plt.close(fig)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=130)
+    except (OSError, ValueError) as exc:
+        raise InvalidParameterError(f"cannot write the figure {out}: {exc}") from exc
+    finally:
+        plt.close(fig)
     return out

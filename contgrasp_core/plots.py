@@ -15,8 +15,33 @@ from numpy.typing import ArrayLike, NDArray  # noqa: E402
 from .arm import ArmShape  # noqa: E402
 from .boundary import Boundary  # noqa: E402
 from .contact import ContactKinematics, ContactState  # noqa: E402
+from .errors import InvalidParameterError  # noqa: E402
 
-__all__ = ["draw_boundary", "draw_arm", "kinematics_figure", "save"]
+__all__ = ["draw_boundary", "draw_arm", "kinematics_figure", "save", "check_figure_path"]
+
+
+def check_figure_path(path: object, option: str = "--plot") -> None:
+    """Raise InvalidParameterError unless ``path`` names a file matplotlib can write (a known
+    suffix, or none for PNG) in a directory that exists or can be created (called before
+    any computation, so a typo does not waste a run)."""
+    from pathlib import Path
+
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    if not isinstance(path, str | Path) or not str(path):
+        raise InvalidParameterError(f"{option} must be a file name, got {path!r}")
+    p = Path(path)
+    fmt = p.suffix[1:].lower()
+    supported = FigureCanvasBase.get_supported_filetypes()
+    if fmt and fmt not in supported:
+        raise InvalidParameterError(f"{option} {path}: unknown figure format {fmt!r}; use one of {', '.join(sorted(supported))}")
+    if p.is_dir():
+        raise InvalidParameterError(f"{option} {path} is a directory")
+    for parent in p.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise InvalidParameterError(f"{option} {path}: {parent} is not a directory")
+            break
 
 
 def draw_boundary(ax: Axes, boundary: Boundary, **kw: object) -> None:
@@ -84,5 +109,12 @@ def kinematics_figure(
 
 def save(fig: Figure, path: str) -> None:
     """Write the figure (format from the file suffix) and close it."""
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    from pathlib import Path
+
+    try:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=130)
+    except (OSError, ValueError) as exc:
+        raise InvalidParameterError(f"cannot write the figure {path}: {exc}") from exc
+    finally:
+        plt.close(fig)

@@ -24,9 +24,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._validate import float_array, instance
 from .boundary import Boundary
 from .contact import ContactState
 from .errors import InvalidParameterError
+
+_MAX_LEVER = 1e50  # |gamma - ref| beyond this overflows the Gramian's squared moments
+_MAX_ENTRY = 1e100  # grasp-map / Gramian entries beyond this overflow the metrics
 
 __all__ = [
     "point_grasp_maps",
@@ -43,9 +47,9 @@ __all__ = [
 
 
 def _points_angles(gamma: ArrayLike, phi: ArrayLike, ref: ArrayLike) -> tuple[NDArray, NDArray]:
-    g = np.asarray(gamma, dtype=float)
-    p = np.asarray(phi, dtype=float)
-    r = np.asarray(ref, dtype=float)
+    g = float_array("contact points", gamma)
+    p = float_array("tangent angles", phi)
+    r = float_array("reference point", ref)
     if g.ndim != 2 or g.shape[1] != 2 or p.shape != (len(g),):
         raise InvalidParameterError(
             f"contact points must be (n, 2) and tangent angles (n,), got {g.shape} and {p.shape}"
@@ -54,6 +58,8 @@ def _points_angles(gamma: ArrayLike, phi: ArrayLike, ref: ArrayLike) -> tuple[ND
         raise InvalidParameterError(f"reference point must be two finite numbers, got {ref!r}")
     if not (np.all(np.isfinite(g)) and np.all(np.isfinite(p))):
         raise InvalidParameterError("contact points and tangent angles must be finite")
+    if np.any(np.abs(g - r) > _MAX_LEVER):
+        raise InvalidParameterError(f"contact points must lie within {_MAX_LEVER:.0e} of the reference point")
     return g - r, p
 
 
@@ -85,16 +91,25 @@ def singular_value_metrics(grasp_map: ArrayLike) -> dict[str, float]:
     zero map). A map with fewer columns than rows has ``sigma_min = 0`` (it cannot span the
     wrench space).
     """
-    g = np.asarray(grasp_map, dtype=float)
+    g = float_array("grasp map", grasp_map)
     if g.ndim != 2 or not np.all(np.isfinite(g)):
         raise InvalidParameterError(f"grasp map must be a finite 2-D matrix, got shape {g.shape}")
+    if np.any(np.abs(g) > _MAX_ENTRY):
+        raise InvalidParameterError(f"grasp map entries must be within +-{_MAX_ENTRY:.0e}")
     m, k = g.shape
-    sv = np.linalg.svd(g, compute_uv=False) if g.size else np.zeros(0)
+    try:
+        sv = np.linalg.svd(g, compute_uv=False) if g.size else np.zeros(0)
+    except np.linalg.LinAlgError as exc:
+        raise InvalidParameterError(f"the grasp map's singular values cannot be computed: {exc}") from exc
     sv = np.concatenate([sv, np.zeros(max(0, m - len(sv)))])  # rank-deficient by shape
     smax = float(sv.max()) if len(sv) else 0.0
+    with np.errstate(over="ignore", under="ignore"):
+        volume = float(np.prod(sv))
+    if not np.isfinite(volume):
+        raise InvalidParameterError("the grasp map's volume (product of singular values) overflows; rescale it")
     return {
         "sigma_min": float(sv.min()) if len(sv) else 0.0,
-        "volume": float(np.prod(sv)),
+        "volume": volume,
         "isotropy": float(sv.min() / smax) if smax > 0 else 0.0,
         "singular_values": [float(v) for v in sv],
     }
@@ -107,15 +122,15 @@ def contact_weights(s: ArrayLike, delta: ArrayLike, tol: float | ArrayLike = 0.0
     linear zero crossing of ``delta + tol`` and its in-contact part integrated by the
     trapezoidal rule with the integrand linearly interpolated to the cut.
     """
-    ss = np.asarray(s, dtype=float)
-    if ss.ndim != 1 or len(ss) < 2 or not np.all(np.isfinite(ss)) or np.any(np.diff(ss) <= 0):
-        raise InvalidParameterError("s must be a finite, strictly increasing grid of >= 2 points")
-    d = np.asarray(delta, dtype=float)
-    if d.shape != ss.shape or not np.all(np.isfinite(d)):
-        raise InvalidParameterError(f"delta must be finite with the grid's shape {ss.shape}, got {d.shape}")
-    t = np.asarray(tol, dtype=float)
-    if t.shape not in ((), ss.shape) or not np.all(np.isfinite(t)) or np.any(t < 0):
-        raise InvalidParameterError("contact tolerance must be >= 0 (a scalar or one value per grid node)")
+    ss = float_array("s", s)
+    if ss.ndim != 1 or len(ss) < 2 or not np.all(np.abs(ss) <= _MAX_ENTRY) or np.any(np.diff(ss) <= 0):
+        raise InvalidParameterError(f"s must be a finite, strictly increasing grid of >= 2 points within +-{_MAX_ENTRY:.0e}")
+    d = float_array("delta", delta)
+    if d.shape != ss.shape or not np.all(np.abs(d) <= _MAX_ENTRY):
+        raise InvalidParameterError(f"delta must be finite (within +-{_MAX_ENTRY:.0e}) with the grid's shape {ss.shape}, got {d.shape}")
+    t = float_array("contact tolerance", tol)
+    if t.shape not in ((), ss.shape) or not np.all(np.abs(t) <= _MAX_ENTRY) or np.any(t < 0):
+        raise InvalidParameterError("contact tolerance must be finite and >= 0 (a scalar or one value per grid node)")
     c = d + t
     h = np.diff(ss)
     c0, c1 = c[:-1], c[1:]
@@ -194,13 +209,28 @@ class GraspQuality:
 
 def metrics_from_gramian(W: ArrayLike, contact_length: float = np.nan) -> GraspQuality:
     """Q1 = lambda_min(W), Q2 = det W = prod lambda_i, Q3 = lambda_min / lambda_max (0 if W = 0)."""
-    w = np.asarray(W, dtype=float)
-    if w.ndim != 2 or w.shape[0] != w.shape[1] or not np.all(np.isfinite(w)):
-        raise InvalidParameterError(f"W must be a finite square matrix, got shape {w.shape}")
-    lam = np.linalg.eigvalsh(0.5 * (w + w.T))
+    w = float_array("W", W)
+    if w.ndim != 2 or w.shape[0] != w.shape[1] or w.shape[0] == 0 or not np.all(np.isfinite(w)):
+        raise InvalidParameterError(f"W must be a finite, non-empty square matrix, got shape {w.shape}")
+    if np.any(np.abs(w) > _MAX_ENTRY):
+        raise InvalidParameterError(f"W must have entries within +-{_MAX_ENTRY:.0e}")
+    try:
+        length = float(contact_length) if np.ndim(contact_length) == 0 else None
+    except (TypeError, ValueError):
+        length = None
+    if length is None or not (np.isnan(length) or 0.0 <= length < np.inf):  # NaN: unknown
+        raise InvalidParameterError(f"contact_length must be a number >= 0 (or NaN), got {contact_length!r}")
+    try:
+        lam = np.linalg.eigvalsh(0.5 * (w + w.T))
+    except np.linalg.LinAlgError as exc:
+        raise InvalidParameterError(f"the eigenvalues of W cannot be computed: {exc}") from exc
     lam = np.clip(lam, 0.0, None)  # W is positive semi-definite; clip rounding below zero
     q3 = float(lam[0] / lam[-1]) if lam[-1] > 0 else 0.0
-    return GraspQuality(W=w, eigenvalues=lam, Q1=float(lam[0]), Q2=float(np.prod(lam)), Q3=q3, contact_length=float(contact_length))
+    with np.errstate(over="ignore", under="ignore"):
+        q2 = float(np.prod(lam))
+    if not np.isfinite(q2):
+        raise InvalidParameterError("det W overflows; rescale W")
+    return GraspQuality(W=w, eigenvalues=lam, Q1=float(lam[0]), Q2=q2, Q3=q3, contact_length=length)
 
 
 def grasp_quality(
@@ -228,5 +258,7 @@ def quality_of_state(
 
     ``tol`` defaults to the tolerance the state was sensed with.
     """
+    instance("state", state, ContactState)
+    instance("boundary", boundary, Boundary)
     phi = boundary.tangent_angle(state.s_o)
     return grasp_quality(state.s, state.foot, phi, state.delta, tol=state.tol if tol is None else tol, ref=ref)

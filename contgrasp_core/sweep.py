@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import brentq, minimize
 
+from ._validate import MAX_NODES, instance, integer, real
 from .arm import Arm, BasePose
 from .boundary import Boundary
 from .errors import ContgraspError, InvalidParameterError
@@ -44,6 +45,10 @@ __all__ = [
 ]
 
 METRICS = ("Q1", "Q2", "Q3")
+MAX_MAP_STEPS = 100_000
+"""Largest psi_steps / d_steps of a map."""
+MAX_MAP_SIZE = 100_000_000
+"""Largest psi_steps * d_steps * nodes (the stored arm centrelines: 16 bytes each)."""
 Array = NDArray[np.float64]
 
 
@@ -73,19 +78,29 @@ class MapSpec:
     solver_tol: float = 1e-8
 
     def __post_init__(self) -> None:
-        if self.psi_steps < 1 or self.d_steps < 1:
-            raise InvalidParameterError("psi_steps and d_steps must be >= 1")
-        if not (0.0 < self.d_min <= self.d_max and np.isfinite(self.d_max)):
+        psi_steps = integer("psi_steps", self.psi_steps, lo=1, hi=MAX_MAP_STEPS)
+        d_steps = integer("d_steps", self.d_steps, lo=1, hi=MAX_MAP_STEPS)
+        nodes = integer("nodes", self.nodes, lo=3, hi=MAX_NODES)
+        if psi_steps * d_steps * nodes > MAX_MAP_SIZE:
+            raise InvalidParameterError(
+                f"psi_steps * d_steps * nodes = {psi_steps * d_steps * nodes:.3g} exceeds {MAX_MAP_SIZE:.0e} "
+                "(the map keeps every arm shape in memory)"
+            )
+        d_min = real("d_min", self.d_min, lo=0.0, lo_open=True)
+        d_max = real("d_max", self.d_max, lo=0.0, lo_open=True)
+        if not d_min <= d_max:
             raise InvalidParameterError(f"need 0 < d_min <= d_max, got [{self.d_min}, {self.d_max}]")
         for name in ("chi", "rho_d", "arm_radius", "length_fraction", "solver_tol"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise InvalidParameterError(f"{name} must be > 0, got {v!r}")
-        if not 0.0 < self.alpha_d < np.pi:
-            raise InvalidParameterError(f"alpha_d must be in (0, pi), got {self.alpha_d!r}")
-        if not (np.isfinite(self.contact_tol) and self.contact_tol >= 0):
-            raise InvalidParameterError(f"contact_tol must be >= 0, got {self.contact_tol!r}")
-        paper_object(self.object)  # validates the name
+            real(name, getattr(self, name), lo=0.0, lo_open=True)
+        real("alpha_d", self.alpha_d, lo=0.0, hi=np.pi, lo_open=True, hi_open=True)
+        real("contact_tol", self.contact_tol, lo=0.0)
+        boundary = paper_object(self.object)  # validates the name
+        reach = self.length_fraction * boundary.length
+        if d_max >= reach:
+            raise InvalidParameterError(
+                f"d_max = {d_max:g} must be less than the arm length {reach:.6g} (= length_fraction * L_o): "
+                "a base farther from the object cannot touch it"
+            )
 
     def boundary(self) -> Boundary:
         return paper_object(self.object)
@@ -128,8 +143,11 @@ def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
     Heading ``theta0 = psi + pi/2``. Requires the origin inside the object (true for the paper's
     objects, which are star-shaped about it).
     """
-    if not (np.isfinite(psi) and np.isfinite(d) and d > 0):
-        raise InvalidParameterError(f"need finite psi and d > 0, got psi={psi!r}, d={d!r}")
+    instance("boundary", boundary, Boundary)
+    psi = real("psi", psi)
+    d = real("d", d, lo=0.0, lo_open=True)
+    if d > 1e100:
+        raise InvalidParameterError(f"d must be <= 1e100, got {d!r}")
     u = np.array([np.cos(psi), np.sin(psi)])
     if _ray_distance(boundary, u, 0.0) >= 0:
         raise InvalidParameterError("the object frame origin must lie inside the object to place bases in D")
@@ -198,6 +216,7 @@ def _evaluate(spec: MapSpec, boundary: Boundary, psi: float, d: float, base: Bas
 
 def solve_pose(spec: MapSpec, psi: float, d: float, warm: Any = None) -> PoseResult:
     """Inner optimal grasp and Q1..Q3 at the base pose (psi, d) of D."""
+    instance("spec", spec, MapSpec)
     boundary = spec.boundary()
     return _evaluate(spec, boundary, psi, d, disc_pose(boundary, psi, d), warm)[0]
 
@@ -323,6 +342,12 @@ def quality_map(
     optimise: bool = True,
 ) -> QualityMap:
     """Compute the quality map of ``spec`` (and, with ``optimise``, each metric's maximiser)."""
+    instance("spec", spec, MapSpec)
+    if not isinstance(executor, str) or executor not in ("serial", "processes", "dask"):
+        raise InvalidParameterError(f"unknown executor {executor!r}: serial, processes or dask")
+    if workers is not None:
+        # more processes than polar angles would only idle
+        workers = min(integer("workers", workers, lo=1, hi=MAX_WORKERS), spec.psi_steps)
     t0 = time.perf_counter()
     cols = _run_columns(spec, executor, workers, scheduler, progress)
     P, D = spec.psi_steps, spec.d_steps
@@ -348,13 +373,17 @@ def quality_map(
     return replace(qm, wall_time=time.perf_counter() - t0, optimum=optimum)
 
 
+MAX_WORKERS = 1024
+
+
 def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
     """Nelder-Mead maximisation of one metric over D (eq. max_quality), from the best grid point.
 
     The search variables are (psi, d) with d bounded to [d_min, d_max] (scipy's bounded
     Nelder-Mead); psi is periodic. Invalid poses count as -inf quality.
     """
-    if metric not in METRICS:
+    instance("qm", qm, QualityMap)
+    if not isinstance(metric, str) or metric not in METRICS:
         raise InvalidParameterError(f"metric must be one of {METRICS}, got {metric!r}")
     k = METRICS.index(metric)
     spec = qm.spec
@@ -410,28 +439,42 @@ def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
 def save_map(qm: QualityMap, path: str | Path) -> Path:
     """Save to ``path`` (.npz arrays) plus ``path`` with suffix .json (metadata, optimum)."""
     p = Path(path).with_suffix(".npz")
-    p.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(
-        p, psi=qm.psi, d=qm.d, Q=qm.Q, valid=qm.valid, base=qm.base, iterations=qm.iterations, arms=qm.arms,
-        seconds=qm.seconds, reasons=np.array(qm.reasons, dtype=str),
-    )
-    meta = {k: v for k, v in qm.to_dict().items() if k not in ("Q1", "Q2", "Q3", "valid")}
-    p.with_suffix(".json").write_text(json.dumps(meta, indent=1))
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(
+            p, psi=qm.psi, d=qm.d, Q=qm.Q, valid=qm.valid, base=qm.base, iterations=qm.iterations, arms=qm.arms,
+            seconds=qm.seconds, reasons=np.array(qm.reasons, dtype=str),
+        )
+        meta = {k: v for k, v in qm.to_dict().items() if k not in ("Q1", "Q2", "Q3", "valid")}
+        p.with_suffix(".json").write_text(json.dumps(meta, indent=1))
+    except OSError as exc:
+        raise InvalidParameterError(f"cannot save the quality map to {p}: {exc.strerror or exc}") from exc
     return p
 
 
 def load_map(path: str | Path) -> QualityMap:
     """Reload a map saved by :func:`save_map` (no recomputation)."""
-    p = Path(path).with_suffix(".npz")
+    try:
+        p = Path(path).with_suffix(".npz")
+    except (TypeError, ValueError) as exc:
+        raise InvalidParameterError(f"cannot load quality map {path!r}: not a file path ({exc})") from exc
     try:
         meta = json.loads(p.with_suffix(".json").read_text())
         with np.load(p) as z:
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, KeyError) as exc:
-        raise InvalidParameterError(f"cannot load quality map {p}: {exc}") from exc
-    spec = MapSpec(**meta["spec"])
-    return QualityMap(
-        spec, arrays["psi"], arrays["d"], arrays["Q"], arrays["valid"], arrays["reasons"].tolist(), arrays["base"],
-        arrays["iterations"], arrays["arms"], arrays["seconds"], float(meta["wall_time_s"]), str(meta["executor"]),
-        meta.get("optimum", {}),
-    )
+        spec = MapSpec(**meta["spec"])
+        qm = QualityMap(
+            spec, arrays["psi"], arrays["d"], arrays["Q"], arrays["valid"], arrays["reasons"].tolist(), arrays["base"],
+            arrays["iterations"], arrays["arms"], arrays["seconds"], float(meta["wall_time_s"]), str(meta["executor"]),
+            meta.get("optimum", {}),
+        )
+        P, D = spec.psi_steps, spec.d_steps
+        shapes = {"psi": (P,), "d": (D,), "Q": (3, P, D), "valid": (P, D), "base": (P, D, 3)}
+        bad = [k for k, shape in shapes.items() if np.shape(arrays[k]) != shape]
+        if bad or not isinstance(qm.optimum, dict):
+            raise ValueError(f"arrays {bad} do not match the map's grid {P} x {D}")
+    except ContgraspError as exc:
+        raise InvalidParameterError(f"cannot load quality map {p}: invalid settings ({exc})") from exc
+    except Exception as exc:  # noqa: BLE001 - any failure to parse the files means a corrupt map
+        raise InvalidParameterError(f"cannot load quality map {p}: {type(exc).__name__}: {exc}") from exc
+    return qm

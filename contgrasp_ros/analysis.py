@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.boundary import Boundary
-from contgrasp_core.errors import ContgraspError
+from contgrasp_core.errors import ContgraspError, InvalidParameterError
 from contgrasp_core.rod.session import SettleDetector
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
@@ -685,6 +685,12 @@ def analyze(
     """Analyse a recording: :func:`load_run`, :func:`recompute`, :func:`summarize`, and with
     ``csv_dir``/``plot`` :func:`write_csv`/:func:`write_plots`. Raises :class:`BagError` /
     :class:`ContgraspError` for bad input."""
+    for name, value in (("sensor_tolerance", sensor_tolerance), ("quality_tolerance", quality_tolerance)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value)):
+            raise InvalidParameterError(f"{name} must be a finite number, got {value!r}")
+    for name, value in (("csv_dir", csv_dir), ("plot", plot)):
+        if value is not None and not isinstance(value, str | Path):
+            raise InvalidParameterError(f"{name} must be a path, got {value!r}")
     run = load_run(path)
     rc = recompute(run, sensor_tolerance=sensor_tolerance, quality_tolerance=quality_tolerance)
     out = summarize(run, rc)

@@ -11,6 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from contgrasp_core.errors import ContgraspError
 from contgrasp_ros.analysis import analyze
 
 __all__ = ["add_parser", "run"]
@@ -38,5 +39,12 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser] | None = None) -
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    """Analyse ``args.bag``; the result dict (see :func:`contgrasp_ros.analysis.summarize`)."""
+    """Analyse ``args.bag``; the result dict (see :func:`contgrasp_ros.analysis.summarize`).
+    The output paths are checked first, so a typo does not cost an analysis."""
+    if args.plot is not None:
+        from contgrasp_core.plots import check_figure_path
+
+        check_figure_path(args.plot)
+    if args.csv is not None and args.csv.exists() and not args.csv.is_dir():
+        raise ContgraspError(f"--csv {args.csv} exists and is not a directory")
     return analyze(args.bag, csv_dir=args.csv, plot=args.plot)

@@ -9,22 +9,25 @@ recorded, so the sensing/controller/quality nodes, RViz or Foxglove can run agai
 from __future__ import annotations
 
 import importlib
+import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
-
-import rclpy
-from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from typing import TYPE_CHECKING, Any
 
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
 from contgrasp_ros.bag.reader import Recording, info, iter_raw, open_recording
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile
 
 __all__ = ["replay"]
 
 
 def _qos(offered: Any) -> QoSProfile:
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
     first = offered[0] if isinstance(offered, list) and offered and isinstance(offered[0], dict) else {}
     latched = first.get("durability") == "transient_local"
     return QoSProfile(
@@ -61,6 +64,13 @@ def replay(
     """
     if not (rate > 0 and rate < 1e6):
         raise InvalidParameterError(f"--rate must be in (0, 1e6), got {rate}")
+    for name, value in (("--start", start), ("--end", end)):
+        if value is not None and not (math.isfinite(value) and 0.0 <= value <= 1e9):
+            raise InvalidParameterError(f"{name} must be seconds in [0, 1e9] after the first message, got {value}")
+    if not (math.isfinite(delay) and 0.0 <= delay <= 3600.0):
+        raise InvalidParameterError(f"--delay must be in [0, 3600] s, got {delay}")
+    if topics is not None and (isinstance(topics, str) or not all(isinstance(t, str) for t in topics)):
+        raise InvalidParameterError(f"topics must be a list of topic names, got {topics!r}")
     rec: Recording = open_recording(path)
     meta = info(rec)
     known = {t["name"]: t for t in meta["topics"]}
@@ -74,6 +84,8 @@ def replay(
     if lo is not None and hi is not None and hi < lo:
         raise InvalidParameterError("--end must not be before --start")
     classes = {t: _message_class(known[t]["type"]) for t in chosen}
+    import rclpy  # only now: everything above works (and fails cleanly) without ROS
+
     own = node is None
     if own:
         rclpy.init(args=[])

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import ContactValidityError, InvalidParameterError
+from ..errors import ContactValidityError
 from .discrete import ForwardSolveError, PenaltyState, adjoint, evaluate, nodal_costates, solve_states
 from .fast import solve
 from .problem import (
@@ -24,6 +24,7 @@ from .problem import (
     ConstraintStatus,
     GraspProblem,
     GraspResult,
+    check_control,
     grasp_problem,
     paper_problem,
     problem_from_base,
@@ -58,9 +59,7 @@ def _states(problem: GraspProblem, u: NDArray[np.float64]) -> NDArray[np.float64
 
 def cost(problem: GraspProblem, kappa: ArrayLike) -> float:
     """Discretised cost J(kappa) of eq. optimal_kappa (trapezoid rule, no constraint penalty)."""
-    u = np.asarray(kappa, dtype=float)
-    if u.shape != (problem.nodes,) or not np.all(np.isfinite(u)):
-        raise InvalidParameterError(f"kappa must be {problem.nodes} finite values, got shape {u.shape}")
+    u = check_control(problem, kappa)
     x = _states(problem, u)
     return evaluate(problem.disc, u, x, PenaltyState.zero(problem.nodes, problem.penalty)).cost
 
@@ -74,10 +73,8 @@ def gradient(
     which is NOT the gradient of J unless kappa_o is constant along the boundary.
     ``penalty=True`` adds the state-constraint penalty (zero multipliers) to J and its gradient.
     """
+    u = check_control(problem, kappa)
     d = problem.disc
-    u = np.asarray(kappa, dtype=float)
-    if u.shape != (problem.nodes,) or not np.all(np.isfinite(u)):
-        raise InvalidParameterError(f"kappa must be {problem.nodes} finite values, got shape {u.shape}")
     x = _states(problem, u)
     pen = PenaltyState.zero(problem.nodes, problem.penalty if penalty else 0.0)
     traj = evaluate(d, u, x, pen)

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validate import MAX_NODES, instance, integer, real
 from ..errors import InvalidParameterError
 from .discrete import (
     ForwardSolveError,
@@ -102,13 +103,17 @@ def solve(
     0 Gauss-Newton) per reduced Newton iteration, ``sqp_steps`` (fine grid),
     ``coarse_sqp_steps`` and ``coarse_iterations`` (damped Newton on the coarse grid).
     """
-    if not (np.isfinite(tol) and tol > 0.0):
-        raise InvalidParameterError(f"tol must be > 0, got {tol!r}")
-    if cost_tol is not None and not (np.isfinite(cost_tol) and cost_tol > 0.0):
-        raise InvalidParameterError(f"cost_tol must be > 0 or None, got {cost_tol!r}")
-    if int(max_iterations) != max_iterations or max_iterations < 1:
-        raise InvalidParameterError(f"max_iterations must be an integer >= 1, got {max_iterations!r}")
-    if hessian not in ("exact", "gauss-newton"):
+    instance("problem", problem, GraspProblem)
+    tol = real("tol", tol, lo=0.0, lo_open=True)
+    if cost_tol is not None:
+        cost_tol = real("cost_tol", cost_tol, lo=0.0, lo_open=True)
+    max_iterations = integer("max_iterations", max_iterations, lo=1, hi=2**62)
+    max_outer = integer("max_outer", max_outer, lo=1, hi=1000)
+    constraint_tol = real("constraint_tol", constraint_tol, lo=0.0)
+    coarse_tol = real("coarse_tol", coarse_tol, lo=0.0, lo_open=True)
+    if coarse is not None:
+        coarse = integer("coarse", coarse, lo=-1, hi=MAX_NODES)
+    if not isinstance(hessian, str) or hessian not in ("exact", "gauss-newton"):
         raise InvalidParameterError(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
     t_start = time.perf_counter()
     d = problem.disc

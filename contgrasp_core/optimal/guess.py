@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from ..errors import InvalidParameterError
 from .discrete import ForwardSolveError, solve_states_linearised
-from .problem import GraspProblem, GraspResult
+from .problem import GraspProblem, GraspResult, check_control
 
 __all__ = ["initial_control", "approach_control"]
 
@@ -98,10 +98,7 @@ def initial_control(problem: GraspProblem, initial: Any) -> tuple[Array, Array |
         guess = np.stack([np.interp(t, src, v) for v in (initial.rho, initial.alpha, initial.s_o)], axis=-1)
         guess += problem.disc.x0 - guess[0]
         return np.interp(t, src, initial.kappa), guess
-    u = np.asarray(initial, dtype=float)
-    if u.shape != (n,) or not np.all(np.isfinite(u)):
-        raise InvalidParameterError(f"initial curvature must be {n} finite values, got shape {u.shape}")
-    return u.copy(), None
+    return check_control(problem, initial, "initial curvature").copy(), None
 
 
 def initial_states(d: Any, u: Array, guess: Array | None) -> tuple[Array, Any]:

@@ -7,6 +7,7 @@ derives the initial contact state from an arm base pose by closest-point project
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -15,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._validate import MAX_NODES, float_array, instance, integer
 from ..arm import Arm, ArmShape, BasePose, arclength_grid
 from ..boundary import Boundary
 from ..contact import check_state, initial_state, shape_from_contact
@@ -87,6 +89,8 @@ class GraspProblem:
 
 def _finite(name: str, value: float) -> float:
     try:
+        if np.ndim(value) != 0:
+            raise TypeError("not a scalar")
         v = float(value)
     except (TypeError, ValueError) as exc:
         raise InvalidParameterError(f"{name} must be a number, got {value!r}") from exc
@@ -98,10 +102,10 @@ def _finite(name: str, value: float) -> float:
 def _profile(name: str, value: Profile, s: Array) -> Array:
     """Desired profile as an array on the grid: scalar, array of length N, or callable of s."""
     if callable(value):
-        arr = np.asarray(value(s), dtype=float)
+        arr = float_array(f"desired profile {name}", value(s))
         arr = np.broadcast_to(arr, s.shape).copy() if arr.ndim == 0 else arr
     else:
-        arr = np.asarray(value, dtype=float)
+        arr = float_array(f"desired profile {name}", value)
         if arr.ndim == 0:
             arr = np.full(s.shape, float(arr))
     if arr.shape != s.shape:
@@ -158,33 +162,62 @@ def grasp_problem(
     chi_ = _finite("chi", chi)
     if chi_ <= 0.0:
         raise InvalidParameterError(f"chi must be > 0 (weight of the tracking cost), got {chi!r}")
-    if int(nodes) != nodes or nodes < 3:
-        raise InvalidParameterError(f"nodes must be an integer >= 3, got {nodes!r}")
-    if int(table_size) != table_size or table_size < 64:
-        raise InvalidParameterError(f"table_size must be an integer >= 64, got {table_size!r}")
+    nodes = integer("nodes", nodes, lo=3, hi=MAX_NODES)
+    table_size = integer("table_size", table_size, lo=64, hi=1 << 22)
     pen = _finite("penalty", penalty)
     if pen <= 0.0:
         raise InvalidParameterError(f"penalty must be > 0, got {penalty!r}")
-    m = tuple(_finite("margin", v) for v in margins)
+    try:
+        m = tuple(_finite("margin", v) for v in margins)
+    except TypeError as exc:
+        raise InvalidParameterError(f"margins must be three numbers >= 0, got {margins!r}") from exc
     if len(m) != 3 or any(v < 0.0 for v in m):
         raise InvalidParameterError(f"margins must be three numbers >= 0, got {margins!r}")
+    if arm is not None and not isinstance(arm, Arm):
+        raise InvalidParameterError(f"arm must be an Arm or None, got {type(arm).__name__}")
     arm_ = Arm.paper_tapered(2.0 * boundary.length / 3.0) if arm is None else arm
-    s = arclength_grid(arm_.length, int(nodes))
+    s = arclength_grid(arm_.length, nodes)
     h = float(s[1] - s[0])
     w = np.full(len(s), h)
     w[0] = w[-1] = 0.5 * h
+    rho_d_ = _profile("rho_d", arm_.radius if rho_d is None else rho_d, s)
+    # the tracking cost is about chi rho^2 L: keep it (and its derivatives) far from overflow
+    size = max(rho0_, float(np.max(np.abs(rho_d_))), arm_.length)
+    log_scale = math.log10(chi_) + 2.0 * math.log10(size) + math.log10(arm_.length)
+    if log_scale > 250.0:
+        raise InvalidParameterError(
+            f"chi (max(rho0, |rho_d|, L))^2 L = 1e{log_scale:.0f} overflows the cost; choose a smaller chi or other length units"
+        )
     disc = Discretisation(
         s=s,
         h=h,
         w=w,
         x0=np.array([rho0_, alpha0_, s_o0_]),
-        rho_d=_profile("rho_d", arm_.radius if rho_d is None else rho_d, s),
+        rho_d=rho_d_,
         alpha_d=_profile("alpha_d", alpha_d, s),
         chi=chi_,
         table=CurvatureTable.from_boundary(boundary, int(table_size)),
         margins=(m[0], m[1], m[2]),
     )
     return GraspProblem(boundary=boundary, arm=arm_, disc=disc, penalty=pen)
+
+
+MAX_TURNING = 1e9
+"""Largest ``max |kappa| L`` of a control (radians the arm would turn): beyond it the
+discretised dynamics overflow (and the contact leaves its admissible region anyway)."""
+
+
+def check_control(problem: GraspProblem, kappa: ArrayLike, name: str = "kappa") -> Array:
+    """``kappa`` as N finite curvature samples with ``max |kappa| L <= MAX_TURNING``."""
+    instance("problem", problem, GraspProblem)
+    u = float_array(name, kappa)
+    if u.shape != (problem.nodes,) or not np.all(np.isfinite(u)):
+        raise InvalidParameterError(f"{name} must be {problem.nodes} finite values, got shape {u.shape}")
+    if np.max(np.abs(u)) * problem.arm.length > MAX_TURNING:
+        raise InvalidParameterError(
+            f"{name} is too large: max |kappa| L = {np.max(np.abs(u)) * problem.arm.length:.3g} > {MAX_TURNING:.0e}"
+        )
+    return u
 
 
 def problem_from_base(boundary: Boundary, base: BasePose, **kwargs: Any) -> GraspProblem:
@@ -205,7 +238,7 @@ def paper_problem(name: str, *, nodes: int = 500, **kwargs: Any) -> GraspProblem
     """
     from ..objects import paper_object
 
-    if name not in PAPER_SETTINGS:
+    if not isinstance(name, str) or name not in PAPER_SETTINGS:
         raise InvalidParameterError(f"unknown object {name!r}; choose one of {', '.join(PAPER_SETTINGS)}")
     rho0, alpha0 = PAPER_SETTINGS[name]
     kwargs.setdefault("rho0", rho0)

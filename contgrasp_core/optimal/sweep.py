@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import instance, integer, real
 from ..errors import InvalidParameterError
 from .discrete import ForwardSolveError, PenaltyState, adjoint, evaluate, solve_states_linearised
 from .guess import initial_control, initial_states
@@ -51,12 +52,16 @@ def sweep(
     and ``result.costates`` the costates the sweep used. ``result.constraints`` counts the
     inadmissible iterates.
     """
-    if not (np.isfinite(eta) and eta > 0.0):
-        raise InvalidParameterError(f"eta must be > 0, got {eta!r}")
-    if gradient not in ("paper", "exact"):
+    instance("problem", problem, GraspProblem)
+    eta = real("eta", eta, lo=0.0, lo_open=True)
+    if not isinstance(gradient, str) or gradient not in ("paper", "exact"):
         raise InvalidParameterError(f"gradient must be 'paper' or 'exact', got {gradient!r}")
-    if int(max_iterations) != max_iterations or max_iterations < 0:
-        raise InvalidParameterError(f"max_iterations must be an integer >= 0, got {max_iterations!r}")
+    max_iterations = integer("max_iterations", max_iterations, lo=0, hi=2**62)
+    tol = real("tol", tol, lo=0.0, lo_open=True)
+    if target_cost is not None:
+        target_cost = real("target_cost", target_cost)
+    if time_budget is not None:
+        time_budget = real("time_budget", time_budget, lo=0.0, lo_open=True)
     frozen = gradient == "paper"
     t_start = time.perf_counter()
     d = problem.disc

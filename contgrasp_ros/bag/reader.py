@@ -95,6 +95,12 @@ def _opened(path: Path) -> io.BufferedReader:
         raise BagError(f"cannot open recording {path}: {exc.strerror or exc}") from exc
 
 
+def _path(path: Any, what: str = "recording") -> Path:
+    if not isinstance(path, str | Path) or not str(path) or "\0" in str(path):
+        raise BagError(f"the {what} must be a file or folder path, got {path!r}")
+    return Path(path)
+
+
 def _mcap_files(path: Path) -> tuple[list[Path], dict[str, Any] | None]:
     if not path.exists():
         raise BagError(f"no recording at {path}")
@@ -130,6 +136,8 @@ def check_file(path: Path) -> Any:
             f"{path} is incomplete: it ends without the MCAP footer (the recorder was killed or the file was "
             f"truncated); `contgrasp bag recover {path} OUT` copies every complete chunk into a new file"
         )
+    if len(data) < 2 * len(MAGIC) + _FOOTER.size:
+        raise BagError(f"{path} is corrupt: {len(data)} bytes are too few for an MCAP file with a footer")
     end = len(data) - len(MAGIC)
     op, length, summary_start, summary_offset_start, summary_crc = _FOOTER.unpack_from(data, end - _FOOTER.size)
     if op != _OP_FOOTER or length != 20:
@@ -164,7 +172,7 @@ def _read_all(path: Path) -> bytes:
 
 def open_recording(path: str | Path) -> Recording:
     """Open and validate a recording (bag folder or ``.mcap`` file); raises :class:`BagError`."""
-    p = Path(path)
+    p = _path(path)
     files, meta = _mcap_files(p)
     rec = Recording(p, files, meta)
     rec.summaries = [check_file(f) for f in files]
@@ -286,8 +294,12 @@ def recover(src: str | Path, dst: str | Path, *, layout: str | None = None) -> d
     """
     from .writer import BagWriter
 
-    src_p, dst_p = Path(src), Path(dst)
+    src_p, dst_p = _path(src), _path(dst, "output")
     files, _ = _mcap_files(src_p)
+    for f in files:  # before the output is created: a wrong input leaves nothing behind
+        with _opened(f) as stream:
+            if stream.read(len(MAGIC)) != MAGIC:
+                raise BagError(f"{f} is not an MCAP file (bad or missing magic)")
     layout = layout or ("file" if dst_p.suffix == ".mcap" else "folder")
     stats = {"chunks_kept": 0, "chunks_lost": 0, "records_lost": 0, "messages": 0, "messages_without_channel": 0, "truncated": False}
     out = BagWriter(dst_p, layout=layout)
