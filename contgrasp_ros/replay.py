@@ -55,12 +55,15 @@ def replay(
     start: float | None = None,
     end: float | None = None,
     delay: float = 1.0,
+    ack_timeout: float = 5.0,
     node: Node | None = None,
 ) -> dict[str, Any]:
     """Republish a recording; ``start``/``end`` are seconds from its first message. Returns counts.
 
     ``delay`` wall seconds pass between creating the publishers and the first message, so
-    subscribers can match. With ``node`` given the caller owns rclpy's init and the node.
+    subscribers can match; at the end up to ``ack_timeout`` seconds are given to reliable
+    subscribers to acknowledge the last messages. With ``node`` given the caller owns rclpy's
+    init and the node.
     """
     if not (rate > 0 and rate < 1e6):
         raise InvalidParameterError(f"--rate must be in (0, 1e6), got {rate}")
@@ -92,6 +95,7 @@ def replay(
         node = rclpy.create_node("contgrasp_replay")
     published = dict.fromkeys(chosen, 0)
     wall0 = time.monotonic()
+    pubs: dict[str, Any] = {}
     try:
         pubs = {t: node.create_publisher(classes[t], t, _qos(known[t]["offered_qos_profiles"])) for t in chosen}
         time.sleep(max(delay, 0.0))
@@ -112,6 +116,12 @@ def replay(
     except KeyboardInterrupt:
         pass
     finally:
+        # reliable subscribers still being served: let them acknowledge before the publishers go
+        from rclpy.duration import Duration
+
+        if node.context.ok():  # (after Ctrl-C rclpy has already shut the context down)
+            for pub in pubs.values():
+                pub.wait_for_all_acked(Duration(seconds=ack_timeout))
         if own:
             node.destroy_node()
             if rclpy.ok():

@@ -365,6 +365,7 @@ def test_replay_reproduces_sequence_and_timing(tmp_path: Path) -> None:
     copy = open_recording(tmp_path / "copy")
     got = list(iter_raw(copy, ["/contgrasp/rod_state"]))
     orig = list(iter_raw(open_recording(src), ["/contgrasp/rod_state"]))
+    assert len(got) == len(orig), (len(got), len(orig), [m.data[:40] for m in got[:2]])
     assert [m.data for m in got] == [m.data for m in orig]
     assert [m.data for m in iter_raw(copy, ["/contgrasp/object"])] == [m.data for m in iter_raw(open_recording(src), ["/contgrasp/object"])]
     t_got = np.array([m.log_time_ns for m in got]) * 1e-9
