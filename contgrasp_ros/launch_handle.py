@@ -33,8 +33,13 @@ class LaunchHandle:
         self.lines: list[str] = []
         self.pids: dict[str, int] = {}
         self._echo = echo
+        self._stdout: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
+        # stdout (the JSON summary) is drained by its own thread: communicate() would also read
+        # stderr and steal lines from the log reader
+        self._out_reader = threading.Thread(target=lambda: self._stdout.append(self.proc.stdout.read()), daemon=True)  # type: ignore[union-attr]
+        self._out_reader.start()
 
     def _read(self) -> None:
         assert self.proc.stderr is not None
@@ -63,9 +68,10 @@ class LaunchHandle:
 
     def result(self, timeout: float = 300.0) -> tuple[int, dict[str, Any]]:
         """Wait for the launcher; (exit code, JSON summary)."""
-        out, _ = self.proc.communicate(timeout=timeout)
-        self._reader.join(timeout=5)
-        return self.proc.returncode, json.loads(out)
+        self.proc.wait(timeout=timeout)
+        self._out_reader.join(timeout=30)
+        self._reader.join(timeout=30)
+        return self.proc.returncode, json.loads("".join(self._stdout))
 
     def close(self) -> None:
         """Kill the launcher if it is still running (its nodes are its own children)."""

@@ -27,12 +27,13 @@ BIN = Path(sys.executable).parent
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
 
 
-def fault_params(tmp_path: Path, duration: float = 1.5, timeout: float = 0.5) -> Path:
+def fault_params(tmp_path: Path, duration: float = 1.5, timeout: float = 0.5, fallback: str = "hold") -> Path:
     """The packaged scenario on a coarse rod (fast steps) with a short lock-step timeout."""
     data = yaml.safe_load(default_params_file().read_text())
     data["/**"]["ros__parameters"]["n_elements"] = 20
     sim = data["rod_simulator"]["ros__parameters"]
-    sim.update(duration=duration, couple_timeout=timeout, marker_period=0.0, min_time=10.0)  # never settles early
+    sim.update(duration=duration, couple_timeout=timeout, timeout_fallback=fallback, marker_period=0.0,
+               min_time=10.0)  # never settles early
     path = tmp_path / "params.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
@@ -88,8 +89,11 @@ def test_controller_and_sensor_killed_and_respawned_the_loop_resumes(tmp_path: P
 
 
 def test_a_dead_controller_without_respawn_degrades_to_the_fallback(tmp_path: Path) -> None:
+    """(The `zero` fallback: holding the last couple open loop for the rest of the run can make
+    the coarse rod's impact on the object fail a Newton step, which the simulator then reports
+    as a failed run - correct, but not what this test is about.)"""
     bag = tmp_path / "bag"
-    launch = Launch("--params", str(fault_params(tmp_path, duration=0.4, timeout=0.05)), "--bag", str(bag))
+    launch = Launch("--params", str(fault_params(tmp_path, duration=0.4, timeout=0.05, fallback="zero")), "--bag", str(bag))
     try:
         running(launch)
         launch.signal("grasp_controller", signal.SIGKILL)
@@ -97,9 +101,10 @@ def test_a_dead_controller_without_respawn_degrades_to_the_fallback(tmp_path: Pa
         code, out = launch.result()
     finally:
         launch.close()
-    assert out["simulator_state"] == "finished" and out["sim_time_s"] == pytest.approx(0.4)
+    assert out["simulator_state"] == "finished" and out["sim_time_s"] == pytest.approx(0.4), out.get("error")
     assert out["missed_deadlines"] > 0 and out["exit_codes"]["grasp_controller"] == -9
     assert {"node": "grasp_controller", "exit_code": -9, "action": "continued without it"} in out["faults"]
+    assert sum("applying the 'zero' fallback" in line for line in launch.lines) == 1  # once per outage
     assert recorded_steps(bag) == list(range(out["steps"] + 1))
     assert code == 0 and "error" not in out
 
