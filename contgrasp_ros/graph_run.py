@@ -156,7 +156,7 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
     (its file would exist): the run goes on unrecorded.
     """
     end = time.monotonic() + timeout
-    resume: dict[str, Any] = {"pending": False, "future": None, "sent": 0.0, "started": False}
+    resume: dict[str, Any] = {"pending": False, "future": None, "sent": 0.0, "started": False, "seen": None, "old": set()}
 
     def dead() -> str | None:
         if group is None:
@@ -186,11 +186,21 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
             mon.get_logger().error(f"node '{c.name}' exited with code {code}; restarting it ({n + 1}/{respawn})")
             group.restart(c)
             if c.name == "rod_simulator":
-                resume["pending"] = True
+                resume["pending"], resume["seen"] = True, None
+                resume["old"] = {tuple(i.endpoint_gid) for i in mon.get_publishers_info_by_topic(qos.TOPIC_ROD_STATE)}
         return None
 
     def resume_restarted_simulator() -> None:
-        # the dead simulator's service may still be listed: resend until the new one answers
+        # Wait until the new simulator's state publisher is discovered, and a grace period for
+        # the subscribers (sensor, recorder) to match it, so its first state is not lost; the
+        # dead simulator's service may still be listed: resend until the new one answers.
+        if resume["seen"] is None:
+            pubs = mon.get_publishers_info_by_topic(qos.TOPIC_ROD_STATE)
+            if any(tuple(i.endpoint_gid) not in resume["old"] for i in pubs):
+                resume["seen"] = time.monotonic()
+            return
+        if time.monotonic() - resume["seen"] < 1.0:
+            return
         fut = resume["future"]
         if fut is not None and fut.done():
             resume["pending"], resume["future"] = False, None
@@ -316,7 +326,10 @@ def run_graph(
             # Launcher overrides go in a second parameter file: a node's own section in the user's
             # file would beat a plain ``-p name:=value`` (rcl gives node-specific entries priority).
             overrides: dict[str, Any] = {name: {"ros__parameters": {"use_sim_time": True}} for name in NODES}
-            overrides["rod_simulator"]["ros__parameters"].update(start_paused=True, duration=float(sim_params["duration"]))
+            # the sensor and the launcher's monitor must hear the first state, also from a restarted
+            # simulator (not counting the recorder: a failed recorder must not block the run)
+            overrides["rod_simulator"]["ros__parameters"].update(start_paused=True, duration=float(sim_params["duration"]),
+                                                                min_subscribers=2)
             if record is not None:
                 overrides[RECORDER] = {"ros__parameters": recorder_params(record)}
             tmp = Path(tempfile.mkdtemp(prefix="contgrasp_launch_"))

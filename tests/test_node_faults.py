@@ -180,6 +180,7 @@ def test_boundary_sensor_survives_hostile_rod_states(make) -> None:  # type: ign
         bad = corrupt(arrays, how)
         clock[0] += 10_000_000
         sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(qos.TOPIC_ROD_STATE), frac, clock[0])
+        step = max(step, node.stamps.newest_step.get(qos.TOPIC_ROD_STATE, 0))  # (a lower step starts a new run)
         msg = RodState(step=0 if reset else step, **arrays)
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
         ok, reason = expect.deliver(node.on_rod_state, msg)
@@ -234,6 +235,7 @@ def test_grasp_controller_survives_hostile_contact_states(make) -> None:  # type
             bad = "wrong node count"
         clock[0] += 10_000_000
         sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(qos.TOPIC_CONTACT), frac, clock[0])
+        step = max(step, node.stamps.newest_step.get(qos.TOPIC_CONTACT, 0))  # (a lower step starts a new run)
         msg = ContactState(step=0 if reset else step, **fields)
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
         ok, reason = expect.deliver(node.on_contact, msg)
@@ -267,6 +269,7 @@ def test_grasp_quality_survives_hostile_contact_states(make) -> None:  # type: i
         fields, bad = hostile_contact(n, curv, pose, how)
         clock[0] += 10_000_000
         sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(qos.TOPIC_CONTACT), frac, clock[0])
+        step = max(step, node.stamps.newest_step.get(qos.TOPIC_CONTACT, 0))  # (a lower step starts a new run)
         msg = ContactState(step=0 if reset else step, **fields)
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
         ok, reason = expect.deliver(node.on_contact, msg)
@@ -463,6 +466,8 @@ def test_stamp_rule() -> None:
     assert stamp_problem(5, 0, 3, 6 * NS, now, 1.0) == "from the past"
     assert stamp_problem(6, 0, 3, 6 * NS, now, 1.0) is None  # equal stamps are not older
     assert stamp_problem(0, 0, 0, 6 * NS, now, 1.0) is None  # step 0: the simulator was reset
+    assert stamp_problem(0, 4, 2, 6 * NS, now, 1.0, newest_step=3) is None  # a lower step: a restarted run
+    assert stamp_problem(5, 0, 3, 6 * NS, now, 1.0, newest_step=3) == "from the past"  # same step, older: stale
     assert stamp_problem(5, 0, 3, 6 * NS, now, 1.0, check_past=False) is None
 
 

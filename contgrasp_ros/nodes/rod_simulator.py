@@ -87,6 +87,8 @@ class RodSimulator(Node):
         declare(self, "timeout_fallback", "hold", "lock-step timeout: 'hold' the last couple or apply 'zero'", choices=FALLBACKS)
         self.start_paused = declare(self, "start_paused", False, "wait for ~/pause(false) before the first step", read_only=True)
         declare(self, "marker_period", 0.05, "simulated seconds between RViz marker updates (0 = off)", lo=0.0, hi=1e6)
+        declare(self, "min_subscribers", 0, "publish the first state only once this many subscribers matched the "
+                "rod state (a restarted simulator: its first state is not lost while they reconnect)", lo=0, hi=1000)
         declare(self, "max_penetration_limit", 0.0,
                 "the run fails when the rod surface is deeper inside the object than this [m]; 0 = the tip radius",
                 lo=0.0, hi=100.0)
@@ -207,6 +209,11 @@ class RodSimulator(Node):
                 f"finished at t = {self.session.state.t:.4g} s (settled: {self.session.settled}, missed deadlines: {self.missed})"
             )
 
+    def _publish_first_observation(self) -> None:
+        """The run's first state, once ``min_subscribers`` subscribers matched the rod state."""
+        if self.pub_state.get_subscription_count() >= self.get_parameter("min_subscribers").value:
+            self._publish_observation()
+
     def _can_step(self) -> bool:
         return self.published and not self.paused and not self.session.finished and not self.failure
 
@@ -241,6 +248,8 @@ class RodSimulator(Node):
 
     @guarded("timer")
     def on_tick(self) -> None:
+        if not self.published and not self.paused:
+            self._publish_first_observation()
         if not self._can_step():
             return
         if not self.lockstep:
@@ -263,7 +272,7 @@ class RodSimulator(Node):
         self.paused = bool(req.data)
         if not self.paused:
             if not self.published:
-                self._publish_observation()
+                self._publish_first_observation()
             elif self.pending is not None and self._can_step():
                 u, self.pending = self.pending, None
                 self._advance(u)
