@@ -44,7 +44,7 @@ RECORDED_STREAMS = (qos.TOPIC_OBJECT, qos.TOPIC_ROD_STATE, qos.TOPIC_CONTACT, qo
 class Monitor(Node):
     """Observes the run: last rod state, contact and quality, a history, the simulator status."""
 
-    def __init__(self, history_period: float = 0.01, recording: bool = False, **kw: Any) -> None:
+    def __init__(self, history_period: float | None = 0.01, recording: bool = False, **kw: Any) -> None:
         super().__init__("contgrasp_monitor", **kw)
         self.recording = recording
         self.rod: RodState | None = None
@@ -70,6 +70,8 @@ class Monitor(Node):
     def _on_contact(self, msg: ContactState) -> None:
         self.contact = msg
         t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if self._period is None:  # no figure wanted: keep no history (it grows with simulated time)
+            return
         if t + 1e-12 >= self._next_t and self.rod is not None and self.rod.step == msg.step:
             self._next_t = t + self._period
             self.history.append(
@@ -282,6 +284,7 @@ def run_graph(
     timeout: float,
     record: dict[str, Any] | None = None,
     respawn: int = 0,
+    keep_history: bool = True,
 ) -> tuple[dict[str, Any], int]:
     """Run the graph once (recording it when ``record`` gives an ``output``, restarting crashed
     node processes up to ``respawn`` times each); returns (summary, exit code). SIGINT/SIGTERM
@@ -300,7 +303,7 @@ def run_graph(
     code = 0
     summary: dict[str, Any] = {}
     try:
-        mon = Monitor(recording=record is not None)
+        mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None)
         nodes.append(mon)
         if in_process:
             for cls, name in ((RodSimulator, "rod_simulator"), (BoundarySensor, "boundary_sensor"),

@@ -132,7 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     wall0 = time.perf_counter()
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
-                              respawn=args.respawn)
+                              respawn=args.respawn, keep_history=args.plot is not None)
     summary["wall_time_s"] = time.perf_counter() - wall0
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
