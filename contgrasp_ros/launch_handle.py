@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import threading
@@ -74,7 +75,17 @@ class LaunchHandle:
         return self.proc.returncode, json.loads("".join(self._stdout))
 
     def close(self) -> None:
-        """Kill the launcher if it is still running (its nodes are its own children)."""
+        """Stop the launcher if it is still running: SIGINT (it stops its nodes and finalises the
+        recording); if it does not end, SIGKILL it and every node pid it announced."""
         if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(timeout=30)
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=30)
+                for pid in self.pids.values():  # its nodes would be orphaned
+                    try:
+                        os.kill(pid, signal.SIGKILL)
+                    except ProcessLookupError:
+                        pass
