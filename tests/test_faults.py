@@ -185,5 +185,9 @@ def test_killed_simulator_with_respawn_restarts_the_run(tmp_path: Path) -> None:
     assert out["restarts"] == {"rod_simulator": 1} and out["simulator_state"] == "finished"
     assert out["sim_time_s"] == pytest.approx(0.3)
     steps = recorded_steps(bag)
-    restart = steps.index(0, 1)  # the second run starts at step 0 again
-    assert steps[:restart] == list(range(restart)) and steps[restart:] == list(range(out["steps"] + 1))
+    restart = next(i for i in range(1, len(steps)) if steps[i] <= steps[i - 1])  # the second run starts over
+    assert steps[:restart] == list(range(restart))
+    # gap-free to the end; the recorder may miss the restarted simulator's first state(s) while
+    # it matches the new publisher (the simulator waits for the sensor and the monitor only)
+    first = steps[restart]
+    assert first <= 25 and steps[restart:] == list(range(first, out["steps"] + 1))
