@@ -420,7 +420,7 @@ def rss_summary(rss: RssLog, min_lifetime: float, warmup: float = 15.0) -> dict[
     return {"per_role": per_role, "processes": procs}
 
 
-def plot_rss(rss: RssLog, runs: list[dict[str, Any]], path: Path, title: str) -> None:
+def plot_rss(rss: RssLog, runs: list[dict[str, Any]], path: Path, title: str, warmup: float = 15.0) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -436,6 +436,9 @@ def plot_rss(rss: RssLog, runs: list[dict[str, Any]], path: Path, title: str) ->
         for run in runs:
             if run.get("t_start_soak_s") is not None:
                 ax.axvline(run["t_start_soak_s"] / 60.0, color="0.8", lw=0.6, zorder=0)
+        warm = [p[1] for (_r, r, _p), ser in rss.series.items() if r == role for p in ser if p[0] >= ser[0][0] + warmup]
+        if warm:  # the axis spans the warmed-up samples; a (re)started node's first seconds lie below it
+            ax.set_ylim(min(warm) - 1.0, max(warm) + 1.0)
         ax.set_title(role, fontsize=10)
         ax.grid(alpha=0.3)
     for ax in axes[:, 0]:
@@ -572,8 +575,9 @@ def main(argv: list[str] | None = None) -> int:
     print_tables(rep)
     if runs:
         title = (f"soak: {len(runs)} runs, N = {args.nodes}, {args.wall_time / 60:.0f} min, faults every {args.kill_period:.0f} s "
-                 f"on average (seed {args.seed}); grey lines: run starts")
-        plot_rss(rss, runs, args.figure, title)
+                 f"on average (seed {args.seed}); grey lines: run starts; "
+                 f"y axes span samples >= {args.warmup:.0f} s after a process started")
+        plot_rss(rss, runs, args.figure, title, args.warmup)
         log(f"figure: {args.figure}\nreport: {report_path}")
     return 0
 
@@ -645,8 +649,9 @@ def reanalyse(args: argparse.Namespace) -> int:
     print_tables(rep)
     s = rep["settings"]
     title = (f"soak: {len(rep['runs'])} runs, N = {s['nodes']}, {s['wall_time'] / 60:.0f} min, faults every {s['kill_period']:.0f} s "
-             f"on average (seed {rep['seed']}); grey lines: run starts")
-    plot_rss(rss, rep["runs"], args.figure, title)
+             f"on average (seed {rep['seed']}); grey lines: run starts; "
+             f"y axes span samples >= {args.warmup:.0f} s after a process started")
+    plot_rss(rss, rep["runs"], args.figure, title, args.warmup)
     log(f"figure: {args.figure}\nreport: {out}")
     return 0
 

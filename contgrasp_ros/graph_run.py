@@ -16,6 +16,7 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -148,14 +149,16 @@ def _summary(mon: Monitor) -> dict[str, Any]:
     return out
 
 
-def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn: int = 0) -> str | None:
+def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn: int = 0,
+           on_recorder_lost: Callable[[], None] | None = None) -> str | None:
     """Connect, resume, wait for the end. Returns an error text or None.
 
     A node process that exits is restarted up to ``respawn`` times (a restarted simulator starts
     again from the initial state and is resumed here). Beyond that, the simulator's exit ends
     the run; a sensor, controller or quality node that stays dead is reported and the run goes
     on (the lock-step simulator applies its timeout fallback). The recorder is never restarted
-    (its file would exist): the run goes on unrecorded.
+    (its file would exist): the run goes on unrecorded, and ``on_recorder_lost`` is called (a
+    simulator restarted later must not wait for the recorder to match it).
     """
     end = time.monotonic() + timeout
     resume: dict[str, Any] = {"pending": False, "future": None, "sent": 0.0, "started": False, "seen": None, "old": set()}
@@ -170,6 +173,8 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
                     mon.recording = False
                     mon.faults.append({"node": RECORDER, "exit_code": code, "action": "continued unrecorded"})
                     mon.get_logger().error(f"the recorder exited with code {code}; the run continues unrecorded")
+                    if on_recorder_lost is not None:
+                        on_recorder_lost()
                 continue
             if c.name in mon.lost:
                 continue
@@ -302,6 +307,7 @@ def run_graph(
     tmp: Path | None = None
     code = 0
     summary: dict[str, Any] = {}
+    on_recorder_lost: Callable[[], None] | None = None
     try:
         mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None)
         nodes.append(mon)
@@ -329,15 +335,22 @@ def run_graph(
             # Launcher overrides go in a second parameter file: a node's own section in the user's
             # file would beat a plain ``-p name:=value`` (rcl gives node-specific entries priority).
             overrides: dict[str, Any] = {name: {"ros__parameters": {"use_sim_time": True}} for name in NODES}
-            # the sensor and the launcher's monitor must hear the first state, also from a restarted
-            # simulator (not counting the recorder: a failed recorder must not block the run)
+            # the sensor, the launcher's monitor and the recorder must hear the first state, also
+            # from a restarted simulator; once the recorder has died it no longer counts
+            # (``_drive`` rewrites this file before restarting the simulator)
             overrides["rod_simulator"]["ros__parameters"].update(start_paused=True, duration=float(sim_params["duration"]),
-                                                                min_subscribers=2)
+                                                                min_subscribers=2 + (record is not None))
             if record is not None:
                 overrides[RECORDER] = {"ros__parameters": recorder_params(record)}
             tmp = Path(tempfile.mkdtemp(prefix="contgrasp_launch_"))
             override_file = tmp / "overrides.yaml"
             override_file.write_text(yaml.safe_dump(overrides))
+
+            def unrecorded() -> None:
+                overrides["rod_simulator"]["ros__parameters"]["min_subscribers"] = 2
+                override_file.write_text(yaml.safe_dump(overrides))
+
+            on_recorder_lost = unrecorded
             if record is not None:
                 group.start(RECORDER, [sys.executable, "-m", f"contgrasp_ros.nodes.{RECORDER}", "--ros-args", "--params-file", str(override_file)])
             for name in NODES:
@@ -346,7 +359,7 @@ def run_graph(
         for n in nodes:
             executor.add_node(n)
         try:
-            error = _drive(mon, executor, group, timeout, respawn)
+            error = _drive(mon, executor, group, timeout, respawn, on_recorder_lost)
         except (KeyboardInterrupt, ExternalShutdownException):
             error, code = "interrupted", 130
         summary = _summary(mon)

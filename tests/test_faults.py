@@ -27,13 +27,13 @@ BIN = Path(sys.executable).parent
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
 
 
-def fault_params(tmp_path: Path, duration: float = 1.5, timeout: float = 0.5, fallback: str = "hold") -> Path:
+def fault_params(tmp_path: Path, duration: float = 1.5, timeout: float = 0.5, fallback: str = "hold", **sim_extra: float) -> Path:
     """The packaged scenario on a coarse rod (fast steps) with a short lock-step timeout."""
     data = yaml.safe_load(default_params_file().read_text())
     data["/**"]["ros__parameters"]["n_elements"] = 20
     sim = data["rod_simulator"]["ros__parameters"]
     sim.update(duration=duration, couple_timeout=timeout, timeout_fallback=fallback, marker_period=0.0,
-               min_time=10.0)  # never settles early
+               min_time=10.0, **sim_extra)  # never settles early
     path = tmp_path / "params.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
@@ -91,9 +91,12 @@ def test_controller_and_sensor_killed_and_respawned_the_loop_resumes(tmp_path: P
 def test_a_dead_controller_without_respawn_degrades_to_the_fallback(tmp_path: Path) -> None:
     """(The `zero` fallback: holding the last couple open loop for the rest of the run can make
     the coarse rod's impact on the object fail a Newton step, which the simulator then reports
-    as a failed run - correct, but not what this test is about.)"""
+    as a failed run - correct, but not what this test is about. For the same reason the
+    penetration limit is raised from the tip radius to 3 mm: with the couple zeroed at a random
+    moment of the swing, the coarse rod's impact reached 1.07 mm in one of five runs.)"""
     bag = tmp_path / "bag"
-    launch = Launch("--params", str(fault_params(tmp_path, duration=0.4, timeout=0.05, fallback="zero")), "--bag", str(bag))
+    params = fault_params(tmp_path, duration=0.4, timeout=0.05, fallback="zero", max_penetration_limit=0.003)
+    launch = Launch("--params", str(params), "--bag", str(bag))
     try:
         running(launch)
         launch.signal("grasp_controller", signal.SIGKILL)
@@ -187,7 +190,5 @@ def test_killed_simulator_with_respawn_restarts_the_run(tmp_path: Path) -> None:
     steps = recorded_steps(bag)
     restart = next(i for i in range(1, len(steps)) if steps[i] <= steps[i - 1])  # the second run starts over
     assert steps[:restart] == list(range(restart))
-    # gap-free to the end; the recorder may miss the restarted simulator's first state(s) while
-    # it matches the new publisher (the simulator waits for the sensor and the monitor only)
-    first = steps[restart]
-    assert first <= 25 and steps[restart:] == list(range(first, out["steps"] + 1))
+    # the restarted simulator waits for the sensor, the monitor and the recorder: its step 0 is recorded
+    assert steps[restart:] == list(range(out["steps"] + 1))

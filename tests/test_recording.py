@@ -397,6 +397,8 @@ def test_shipped_sample_analysis_reproduces_its_summary() -> None:
 def test_recorder_counts_messages_lost_before_it_from_sequence_gaps(ros_context, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """Gaps in a single publisher's sequence numbers are reported as lost in transport; a
     restarted publisher (numbers start over) or several publishers are not counted as loss."""
+    from types import SimpleNamespace
+
     from rclpy.parameter import Parameter
 
     from contgrasp_ros.nodes.mcap_recorder import McapRecorder
@@ -404,19 +406,70 @@ def test_recorder_counts_messages_lost_before_it_from_sequence_gaps(ros_context,
     node = McapRecorder(context=ros_context, parameter_overrides=[Parameter("output", value=str(tmp_path / "bag"))])
     try:
         node.writer.add_topic("/t", "std_msgs/msg/String")
-        node.received["/t"], node.lost_in_transport["/t"], node._single_publisher["/t"] = 0, 0, True
+        node.received["/t"], node.lost_in_transport["/t"] = 0, 0
         payload = b"\x00\x01\x00\x00\x01\x00\x00\x00\x00\x00\x00\x00"
-        for seq in (1, 2, 5, 6, 1, 2, 4):  # 3, 4 lost; restart; 3 lost
-            node.on_message("/t", payload, {"publication_sequence_number": seq, "source_timestamp": 1})
+
+        def receive(*seqs: int) -> None:
+            for seq in seqs:
+                node.on_message("/t", payload, {"publication_sequence_number": seq, "source_timestamp": 1})
+
+        receive(1, 5)  # no publisher matched yet: not checked
+        node.on_matched("/t", SimpleNamespace(current_count=1))
+        receive(1, 2, 5, 6, 1, 2, 4)  # 3, 4 lost; restart; 3 lost
         assert node.counts()["lost_in_transport"] == 3
-        node._single_publisher["/t"] = False
-        for seq in (10, 20):
-            node.on_message("/t", payload, {"publication_sequence_number": seq, "source_timestamp": 1})
+        node.on_matched("/t", SimpleNamespace(current_count=2))
+        receive(10, 20, 11)  # two publishers interleaved
+        node.on_matched("/t", SimpleNamespace(current_count=1))
+        receive(30, 31, 33)  # one publisher again: counted from its next message
         c = node.counts()
-        assert c["lost_in_transport"] == 3 and c["received"] == c["written"] == 9
+        assert c["lost_in_transport"] == 4 and c["received"] == c["written"] == 15
     finally:
         node.destroy_node()
-    assert json.loads(open_recording(tmp_path / "bag").metadata_records()[RECORDER_RECORD]["lost_in_transport"]) == 3
+    assert json.loads(open_recording(tmp_path / "bag").metadata_records()[RECORDER_RECORD]["lost_in_transport"]) == 4
+
+
+def test_recorder_does_not_count_interleaved_publishers_as_loss(ros_context, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Real publishers: a second publisher joining a recorded topic (and every node's
+    /parameter_events) mixes sequence numbers; none of it is reported as lost."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import String
+
+    from contgrasp_ros.nodes.mcap_recorder import McapRecorder
+
+    rec = McapRecorder(context=ros_context, parameter_overrides=[Parameter("output", value=str(tmp_path / "bag"))])
+    a, b = Node("pub_a", context=ros_context), Node("pub_b", context=ros_context)
+    ex = SingleThreadedExecutor(context=ros_context)
+    for n in (rec, a, b):
+        ex.add_node(n)
+    try:
+        pa = a.create_publisher(String, "/mixed", 100)
+
+        def spin_until(cond, timeout: float = 10.0) -> None:  # type: ignore[no-untyped-def]
+            end = time.monotonic() + timeout
+            while not cond() and time.monotonic() < end:
+                ex.spin_once(timeout_sec=0.02)
+            assert cond()
+
+        spin_until(lambda: "/mixed" in rec._subs and pa.get_subscription_count() == 1)
+        for i in range(20):
+            pa.publish(String(data=f"a{i}"))
+        spin_until(lambda: rec.received["/mixed"] == 20)
+        pb = b.create_publisher(String, "/mixed", 100)
+        spin_until(lambda: pb.get_subscription_count() == 1)
+        for i in range(30):  # a is at 20, b at 0: interleaved numbers jump both ways
+            (pa if i % 3 == 0 else pb).publish(String(data=str(i)))
+            if i % 5 == 0:  # more /parameter_events, from several nodes
+                (a if i % 2 else b).declare_parameter(f"p{i}", i)
+        spin_until(lambda: rec.received["/mixed"] == 50)
+        c = rec.counts()
+        assert c["lost_in_transport"] == 0, c["lost_in_transport_per_topic"]
+        assert c["received"] == c["written"]
+    finally:
+        ex.shutdown()
+        for n in (a, b, rec):
+            n.destroy_node()
 
 
 def test_replay_window_and_loop(tmp_path: Path) -> None:

@@ -13,7 +13,12 @@ message counts are published on ``/diagnostics`` and stored in the file (metadat
 
 Messages lost before they reach the recorder (in the middleware, e.g. a publisher's keep-last
 queue overrun at very high rates) are detected from gaps in the publishers' sequence numbers
-on topics with a single publisher and reported as ``lost_in_transport`` (diagnostics WARN).
+and reported as ``lost_in_transport`` (diagnostics WARN). rclpy does not say which publisher
+sent a message, so the check runs only while exactly one publisher is matched (tracked with the
+subscription's matched event; a change of publishers starts the count over) and never on the
+topics every node publishes to (``sequence_check_exclude_regex``: ``/parameter_events``,
+``/rosout``, ``/diagnostics``), where a new publisher's first messages can arrive before its
+matched event and would read as a gap.
 
 Optional decimation (to keep shipped sample recordings small): topics in ``decimate_topics``
 keep one message per ``decimate_period`` seconds of their header stamp (the quality node's
@@ -34,6 +39,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import QoSSubscriptionMatchedInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -92,6 +98,8 @@ class McapRecorder(Node):
         discovery = declare(self, "discovery_period", 0.2, "look for new topics this often [wall s]", lo=0.01, hi=3600.0, read_only=True)
         run_info = declare(self, "run_info", "", "JSON object stored in the recording (metadata record contgrasp_run)", read_only=True)
         decimate = [t for t in declare(self, "decimate_topics", [""], "topics to decimate ([''] = none)", read_only=True) if t]
+        no_seq = declare(self, "sequence_check_exclude_regex", "/parameter_events|/rosout|/diagnostics",
+                         "topics with many publishers: no sequence-gap check ('' = check all)", read_only=True)
         self.decimate_period = declare(self, "decimate_period", 0.0, "keep one message per this many stamp seconds [s]",
                                        lo=0.0, hi=1e6, read_only=True)
         self._decimate: dict[str, list[Any]] = {}  # topic -> [last kept stamp, held (data, info) or None]
@@ -104,6 +112,7 @@ class McapRecorder(Node):
         try:
             self.regex = re.compile(regex) if regex else None
             self.exclude = re.compile(exclude) if exclude else None
+            self.no_sequence_check = re.compile(no_seq) if no_seq else None
         except re.error as exc:
             raise InvalidParameterError(f"invalid regular expression: {exc}") from exc
         try:
@@ -168,16 +177,26 @@ class McapRecorder(Node):
                 raise FatalNodeError(str(exc)) from exc
             self.received[topic] = 0
             self.lost_in_transport[topic] = 0
-            self._single_publisher[topic] = len(offers) == 1
+            self._single_publisher[topic] = False  # until the matched event says one publisher is matched
             if topic in self._decimate_wanted:
                 if _starts_with_stamp(types[0]):
                     self._decimate[topic] = [None, None]
                 else:
                     self.get_logger().warn(f"not decimating {topic}: {types[0]} does not start with a stamp")
+            checked = self.no_sequence_check is None or not self.no_sequence_check.fullmatch(topic)
+            events = SubscriptionEventCallbacks(matched=lambda m, t=topic: self.on_matched(t, m)) if checked else None
             self._subs[topic] = self.create_subscription(
-                cls, topic, lambda data, info, t=topic: self.on_message(t, data, info), self._request_qos(offers), raw=True
+                cls, topic, lambda data, info, t=topic: self.on_message(t, data, info), self._request_qos(offers),
+                event_callbacks=events, raw=True,
             )
             self.get_logger().info(f"recording {topic} [{types[0]}]")
+
+    @guarded("matched event")
+    def on_matched(self, topic: str, info: QoSSubscriptionMatchedInfo) -> None:
+        """Check sequence numbers only while exactly one publisher is matched; any change of
+        publishers starts the count over (a new publisher numbers its messages from 1)."""
+        self._single_publisher[topic] = info.current_count == 1
+        self._last_seq[topic] = None
 
     # ------------------------------------------------------------------ messages
     def _track_sequence(self, topic: str, seq: int | None) -> None:
@@ -234,8 +253,6 @@ class McapRecorder(Node):
 
     @guarded("flush")
     def flush(self) -> None:
-        for topic in self._subs:
-            self._single_publisher[topic] = self.count_publishers(topic) == 1
         try:
             self.writer.flush()
         except BagError as exc:
