@@ -164,3 +164,78 @@ def test_invalid_parameters_raise():
         StepOptions(method="rk4")
     with pytest.raises(InvalidParameterError):
         RodSystem(uniform(8)).step(RodSystem(uniform(8)).straight_state(), 0.0)
+
+
+def _contact_case(method: str, feedback: str):
+    """A coarse tapered rod crossing a circle (some centres pressed into it, some moving), with
+    damping, drag, friction, a held couple, node forces and optionally the feedback couple."""
+    from contgrasp_core.boundary import circle, deformed_circle
+    from contgrasp_core.rod import Obstacle
+    from contgrasp_core.rod.closed_loop import sense_nodes
+    from contgrasp_core.rod.control import StateFeedback, paper_gains
+    from contgrasp_core.rod.session import HeldExpansion, feedback_at_joints
+
+    n = 14
+    model = RodModel(length=0.2, n_elements=n, radius_base=0.01, radius_tip=0.001, density=1042.0,
+                     youngs_modulus=1e4, damping=2.0, drag_normal=5110.0, drag_tangential=25.55,
+                     contact_stiffness=1e5, contact_damping=3.0, friction=0.4, friction_velocity=0.01)
+    boundary = circle(0.03, (0.1, -0.0347)) if feedback != "deformed" else deformed_circle(0.03, 0.1, 3, 0.2, (0.1, -0.0347))
+    system = RodSystem(model, Obstacle(boundary), StepOptions(method=method))
+    rng = np.random.default_rng(7)
+    state = RodState(t=0.0, theta=0.02 * rng.standard_normal(n), omega=0.5 * rng.standard_normal(n))
+    forces = np.zeros((n + 1, 2))
+    forces[-1] = (1e-3, -2e-3)
+    couple = 1e-5 * rng.standard_normal(n)
+    fb = None
+    if feedback in ("state", "deformed"):
+        fb = StateFeedback(model, system.obstacle, paper_gains(model, 0.03))
+    elif feedback == "held":  # the law expanded about a nearby state
+        sensed = sense_nodes(model, system.obstacle, state.theta + 0.01)
+        fb = HeldExpansion(model, system.obstacle, feedback_at_joints(model, paper_gains(model, 0.03), sensed.rho, sensed.alpha))
+    return system, state, RodLoads(couple=couple, node_forces=forces, feedback=fb)
+
+
+@pytest.mark.parametrize("method", ["euler", "midpoint"])
+@pytest.mark.parametrize("feedback", ["none", "state", "held", "deformed"])
+def test_newton_matrix_is_the_exact_jacobian_of_the_residual(method: str, feedback: str):
+    """Central finite differences of the implicit step's residual reproduce the analytic Newton
+    matrix (inertia incl. the mass matrix's angle dependence and the centripetal terms, damping,
+    anisotropic drag, penalty contact with damping and friction, node forces, the feedback
+    couple): the reason Newton converges quadratically."""
+    system, state, loads = _contact_case(method, feedback)
+    dt = 2e-3
+    frame = system.contact_frame(state, dt)
+    assert frame is not None
+    rng = np.random.default_rng(3)
+    w1 = state.omega + 5.0 * rng.standard_normal(len(state.omega))
+    res, jac, ev = system.newton_system(state, w1, dt, loads, frame)
+    assert ev.penetration > 0  # contact is active
+    fd = np.empty_like(jac)
+    eps = 1e-6
+    for j in range(len(w1)):
+        e = np.zeros_like(w1)
+        e[j] = eps
+        fd[:, j] = (system.newton_system(state, w1 + e, dt, loads, frame)[0]
+                    - system.newton_system(state, w1 - e, dt, loads, frame)[0]) / (2 * eps)
+    np.testing.assert_allclose(jac, fd, rtol=0, atol=1e-6 * np.abs(jac).max())
+    assert np.abs(jac - np.diag(np.diag(jac))).max() > 1e-3 * np.abs(jac).max()  # (not a trivial matrix)
+
+
+def test_newton_converges_quadratically():
+    """With the exact matrix the Newton increments square once they are small: each is at most
+    ten times the square of the previous one (rad/s), down to round-off."""
+    system, state, loads = _contact_case("euler", "state")
+    dt = 2e-3
+    frame = system.contact_frame(state, dt)
+    w1 = state.omega.copy()
+    sizes = []
+    for _ in range(12):
+        res, jac, _ = system.newton_system(state, w1, dt, loads, frame)
+        dw = np.linalg.solve(jac, -res)
+        w1 = w1 + dw
+        sizes.append(np.abs(dw).max())
+        if sizes[-1] < 1e-11:
+            break
+    assert sizes[-1] < 1e-11, sizes
+    pairs = [(a, b) for a, b in zip(sizes[:-1], sizes[1:], strict=True) if 1e-6 < a < 1.0]
+    assert len(pairs) >= 2 and all(b <= 10.0 * a**2 for a, b in pairs), sizes

@@ -5,7 +5,7 @@ and ``b_j = R(pi/2) a_j``, the nodes are ``x_k = r0 + h sum_{j<k} a_j`` and the 
 ``c_i = r0 + h (sum_{j<i} a_j + a_i / 2)``, so ``r(0) = r0`` and inextensibility/unshearability
 hold exactly. The centre Jacobian is ``dc_i/dtheta_j = h w_ij b_j`` with ``w_ij = 1`` for
 ``j < i``, ``1/2`` for ``j = i``, 0 otherwise. All maps are O(N) cumulative sums except the
-mass matrix (O(N^2)).
+mass matrix and the force derivatives (O(N^2), :func:`gram_form`).
 """
 
 from __future__ import annotations
@@ -27,8 +27,9 @@ __all__ = [
     "generalized_from_node_forces",
     "mass_matrix",
     "weight_matrix",
-    "weighted_gram",
-    "projected_jacobian",
+    "lower_weights",
+    "gram_form",
+    "outer_entries",
 ]
 
 
@@ -108,9 +109,11 @@ def generalized_from_node_forces(model: RodModel, theta: np.ndarray, f: np.ndarr
 
 
 @lru_cache(maxsize=8)
-def _lower_weights(n: int) -> np.ndarray:
+def lower_weights(n: int) -> np.ndarray:
+    """``w_ij`` (N, N): 1 for ``j < i``, 1/2 on the diagonal, 0 above (read-only, cached)."""
     w = np.tril(np.ones((n, n)), -1)
     w[np.diag_indices(n)] = 0.5
+    w.setflags(write=False)
     return w
 
 
@@ -118,23 +121,6 @@ def weight_matrix(model: RodModel) -> np.ndarray:
     """``W_jk = sum_i m_i w_ij w_ik`` (constant, N x N): the mass matrix is
     ``h^2 W * cos(theta_j - theta_k) + diag(J)``."""
     return model.weight_matrix
-
-
-@lru_cache(maxsize=8)
-def _max_index(n: int) -> np.ndarray:
-    i = np.arange(n)
-    return np.maximum.outer(i, i)
-
-
-def weighted_gram(g: np.ndarray) -> np.ndarray:
-    """``sum_i g_i w_ij w_ik`` for per-centre weights ``g`` (N,) in O(N^2): with ``S_m =
-    sum_{i>m} g_i`` it is ``S_max(j,k) + g_max/2`` off the diagonal and ``S_j + g_j/4`` on it."""
-    n = len(g)
-    tail = np.zeros(n)
-    np.cumsum(g[:0:-1], out=tail[-2::-1])
-    out = (tail + 0.5 * g)[_max_index(n)]
-    out[np.diag_indices(n)] = tail + 0.25 * g
-    return out
 
 
 def mass_matrix(model: RodModel, theta: np.ndarray) -> np.ndarray:
@@ -145,11 +131,43 @@ def mass_matrix(model: RodModel, theta: np.ndarray) -> np.ndarray:
     return m
 
 
-def projected_jacobian(model: RodModel, theta: np.ndarray, directions: np.ndarray,
-                       rows: np.ndarray | None = None) -> np.ndarray:
-    """``P_ij = d(dir_i . c_i)/dtheta_j = h w_ij (dir_i . b_j)`` for unit ``directions`` (n, 2)
-    at the centres ``rows`` (all by default); shape (n, N)."""
-    n = model.n_elements
-    w = _lower_weights(n) if rows is None else _lower_weights(n)[rows]
-    _, b = frames(theta)
-    return model.h * w * (directions @ b.T)
+@lru_cache(maxsize=8)
+def _strictly_lower(n: int) -> np.ndarray:
+    out = np.tri(n, k=-1, dtype=bool)
+    out.setflags(write=False)
+    return out
+
+
+def _apply(t: np.ndarray, v: np.ndarray, transpose: bool = False) -> np.ndarray:
+    """2x2 tensors with entries ``xx, xy, yx, yy`` (4, N) (or their transposes) applied to vectors ``v`` (N, 2)."""
+    xy, yx = (t[2], t[1]) if transpose else (t[1], t[2])
+    return np.stack([t[0] * v[:, 0] + xy * v[:, 1], yx * v[:, 0] + t[3] * v[:, 1]], axis=1)
+
+
+def gram_form(entries: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """``F_jk = sum_i w_ij w_ik left_j^T D_i right_k`` (N, N) in O(N^2) for per-centre 2x2
+    tensors ``D_i`` with entries ``xx, xy, yx, yy`` (4, N) (:func:`outer_entries`) and
+    per-element vectors ``left``, ``right`` (N, 2).
+
+    With ``left = right = b`` (the directions of the centre Jacobian) it is ``G^T D G``: the
+    generalised matrix of centre forces ``df_i = -D_i dc_i``; with ``right = a`` it maps the
+    angles through the centre velocities (``dv_i/dtheta_k = -h w_ik a_k omega_k``). Since
+    ``sum_i w_ij w_ik D_i = S_m + D_m/2`` with ``m = max(j, k)`` and ``S_m = sum_{i>m} D_i`` off the
+    diagonal (``S_j + D_j/4`` on it), each triangle is a rank-2 product.
+    """
+    n = entries.shape[-1]
+    tail = np.zeros_like(entries)
+    np.cumsum(entries[:, :0:-1], axis=1, out=tail[:, -2::-1])
+    t_off = tail + 0.5 * entries
+    lower = _apply(t_off, left, transpose=True) @ right.T  # [j, k] = left_j^T T_j right_k, used for j > k
+    upper = left @ _apply(t_off, right).T  # [j, k] = left_j^T T_k right_k, used for j < k
+    out = np.where(_strictly_lower(n), lower, upper)
+    idx = np.arange(n)
+    out[idx, idx] = np.sum(left * _apply(tail + 0.25 * entries, right), axis=1)
+    return out
+
+
+def outer_entries(g: np.ndarray, e: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Entries ``xx, xy, yx, yy`` (4, N) of the per-centre tensors ``g_i e_i f_i^T`` for weights
+    ``g`` (N,) and vectors ``e``, ``f`` (N, 2)."""
+    return np.stack([g * e[:, 0] * f[:, 0], g * e[:, 0] * f[:, 1], g * e[:, 1] * f[:, 0], g * e[:, 1] * f[:, 1]])

@@ -23,7 +23,7 @@ from contgrasp_core.rod import chain
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["FeedbackGains", "paper_gains", "StateFeedback", "sense_joints", "joint_couple_jacobian"]
+__all__ = ["FeedbackGains", "paper_gains", "StateFeedback", "JointSensing", "sense_joints", "joint_couple_jacobian"]
 
 
 @dataclass(frozen=True)
@@ -57,39 +57,56 @@ class StateFeedback:
 
     def couple_and_jacobian(self, theta: np.ndarray, *, jacobian: bool = True, nodes: np.ndarray | None = None,
                             normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
-        """``u`` (N,) and ``du/dtheta`` (N, N) (the latter without the small terms from the motion
-        of the foot's tangent angle; exactness is not needed in a Newton matrix). ``nodes``
+        """``u`` (N,) and ``du/dtheta`` (N, N) (:func:`joint_couple_jacobian`). ``nodes``
         (N+1, 2) and element ``normals`` (N, 2) may be passed when already computed."""
         m, g = self.model, self.gains
-        rho, alpha, normal_out = sense_joints(m, self.obstacle, theta, nodes)
+        js = sense_joints(m, self.obstacle, theta, nodes)
         ei = m.joint_ei
-        u = feedback_couple(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
+        u = feedback_couple(js.rho, js.alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         if not jacobian:
             return u, None
-        g_rho, g_alpha = feedback_couple_gradient(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
+        g_rho, g_alpha = feedback_couple_gradient(js.rho, js.alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         b = chain.frames(theta)[1] if normals is None else normals
-        return u, joint_couple_jacobian(m, g_rho, g_alpha, normal_out, b)
+        return u, joint_couple_jacobian(m, g_rho, g_alpha, js, b)
 
 
-def sense_joints(model: RodModel, obstacle: Obstacle, theta: np.ndarray,
-                 nodes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(rho, alpha, outward normal at the foot) at the N joints (eq. rho_alpha_definition);
-    alpha is not wrapped (it is used in differences and trigonometric functions)."""
+@dataclass(frozen=True)
+class JointSensing:
+    """(rho, alpha) at the N joints (eq. rho_alpha_definition; alpha not wrapped: it is used in
+    differences and trigonometric functions), the outward normal at the foot (N, 2) and
+    ``foot_turn = kappa_o / (1 + rho kappa_o)`` (1/m), the rate at which the foot's tangent angle
+    turns per unit tangential motion of the joint (0 where ``1 + rho kappa_o`` is not safely
+    positive: there the closest point is degenerate, paper Sec. III ``nu_o``)."""
+
+    rho: np.ndarray
+    alpha: np.ndarray
+    normal_out: np.ndarray
+    foot_turn: np.ndarray
+
+
+def sense_joints(model: RodModel, obstacle: Obstacle, theta: np.ndarray, nodes: np.ndarray | None = None) -> JointSensing:
+    """Sensing at the joints ``s_k = k h``, k = 0..N-1 (see :class:`JointSensing`)."""
     x = (chain.nodes(model, theta) if nodes is None else nodes)[:-1]
     th_n = chain.node_angles(model, theta)[:-1]
     pr = obstacle.project(x)
-    return pr.signed_distance, pr.phi + 0.5 * np.pi - th_n, pr.normal_out
+    den = 1.0 + pr.signed_distance * pr.kappa_o
+    turn = np.where(den > 0.05, pr.kappa_o / np.where(den > 0.05, den, 1.0), 0.0)
+    return JointSensing(rho=pr.signed_distance, alpha=pr.phi + 0.5 * np.pi - th_n, normal_out=pr.normal_out, foot_turn=turn)
 
 
-def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarray, normal_out: np.ndarray,
+def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarray, sensing: JointSensing,
                           b: np.ndarray) -> np.ndarray:
     """``du/dtheta`` (N, N) of a joint couple with partials ``g_rho``, ``g_alpha`` (N,).
 
-    ``d rho_k / d theta_l = h n_k . b_l`` for ``l < k`` (node k moves with the elements before it);
-    ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2`` (the node angle is the mean of
-    the adjacent elements). The motion of the foot's tangent angle is neglected.
+    Node k moves by ``h b_l`` per unit ``theta_l``, ``l < k``: ``d rho_k / d theta_l = h n_k . b_l``
+    and the foot's tangent angle turns by ``h foot_turn_k t_k . b_l`` (``t_k`` the boundary
+    tangent at the foot). The node angle is the mean of the adjacent elements:
+    ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2``.
     """
-    du = (g_rho * model.h)[:, None] * np.tril(normal_out @ b.T, -1)
+    n_out = sensing.normal_out
+    tangent = np.stack([-n_out[:, 1], n_out[:, 0]], axis=1)
+    direction = g_rho[:, None] * n_out + (g_alpha * sensing.foot_turn)[:, None] * tangent
+    du = model.h * np.tril(direction @ b.T, -1)
     coef = -0.5 * g_alpha
     k = np.arange(1, model.n_elements)
     du[k, k] += coef[1:]

@@ -12,7 +12,8 @@
   tangent.
 
 Each function returns centre forces (N, 2) (already multiplied by the element length) and the
-matrices of the force derivative needed by the implicit integrator.
+force derivatives the implicit integrator needs, per centre (assembled in the integrator with
+:func:`contgrasp_core.rod.chain.gram_form`).
 """
 
 from __future__ import annotations
@@ -21,11 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from contgrasp_core.rod.chain import projected_jacobian
+from contgrasp_core.rod.chain import outer_entries
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["ContactFrame", "contact_frame", "drag_forces", "contact_forces"]
+__all__ = ["ContactFrame", "ContactLoad", "contact_frame", "drag_forces", "contact_forces", "contact_tensors"]
 
 
 @dataclass(frozen=True)
@@ -70,13 +71,15 @@ def drag_forces(model: RodModel, a: np.ndarray, b: np.ndarray, v: np.ndarray) ->
 class ContactLoad:
     """Contact result for one evaluation: ``forces`` (N, 2); ``penetration`` (n,) on the frame
     rows; ``stiffness``/``damping`` (n,) force derivatives along the normal (active rows only
-    non-zero); ``friction_damping`` (n,) derivative of the friction force along the tangent."""
+    non-zero); ``friction_damping`` (n,) derivative of the friction force along the tangent;
+    ``friction_ratio`` (n,) ``mu tanh(v_t / v_eps)``, the friction force per unit normal force."""
 
     forces: np.ndarray
     penetration: np.ndarray
     stiffness: np.ndarray
     damping: np.ndarray
     friction_damping: np.ndarray
+    friction_ratio: np.ndarray
 
 
 def contact_forces(model: RodModel, frame: ContactFrame, c: np.ndarray, v: np.ndarray) -> ContactLoad:
@@ -89,29 +92,30 @@ def contact_forces(model: RodModel, frame: ContactFrame, c: np.ndarray, v: np.nd
     fn = np.where(active, fn, 0.0)
     forces = np.zeros_like(c)
     forces[r] = fn[:, None] * frame.normal
-    fr_damp = np.zeros_like(fn)
+    fr_damp, fr_ratio = np.zeros_like(fn), np.zeros_like(fn)
     if model.friction > 0:
         vt = np.sum(v[r] * frame.tangent, axis=1)
         x = vt / model.friction_velocity
-        forces[r] -= (model.friction * fn * np.tanh(x))[:, None] * frame.tangent
+        fr_ratio = model.friction * np.tanh(x)
+        forces[r] -= (fr_ratio * fn)[:, None] * frame.tangent
         fr_damp = model.friction * fn / model.friction_velocity / np.cosh(x) ** 2
     k = np.where(active, model.h * model.contact_stiffness, 0.0)
     d = np.where(active, model.h * model.contact_damping, 0.0)
-    return ContactLoad(forces=forces, penetration=pen, stiffness=k, damping=d, friction_damping=fr_damp)
+    return ContactLoad(forces=forces, penetration=pen, stiffness=k, damping=d, friction_damping=fr_damp,
+                       friction_ratio=np.where(active, fr_ratio, 0.0))
 
 
-def contact_matrices(model: RodModel, theta: np.ndarray, frame: ContactFrame, load: ContactLoad) -> tuple[np.ndarray, np.ndarray]:
-    """Generalised contact stiffness and damping matrices ``(K_c, D_c)`` (N, N)."""
-    act = (load.stiffness > 0) | (load.friction_damping > 0)
+def contact_tensors(model: RodModel, frame: ContactFrame, load: ContactLoad) -> tuple[np.ndarray, np.ndarray]:
+    """Per-centre contact stiffness ``-df_i/dc_i`` and damping ``-df_i/dv_i`` tensors as
+    ``xx, xy, yx, yy`` entries, each (4, N) (zero off contact). The frame is frozen over the
+    step, so the force ``f = f_n (n - mu tanh(v_t/v_eps) t)`` depends on the centre positions and
+    velocities only: ``-df/dc = k (n - mu tanh t) n^T``, ``-df/dv = c (n - mu tanh t) n^T +
+    friction_damping t t^T``. Assembled with :func:`contgrasp_core.rod.chain.gram_form`."""
     n = model.n_elements
-    if not np.any(act):
-        z = np.zeros((n, n))
-        return z, z
-    rows = frame.rows[act]
-    pn = projected_jacobian(model, theta, frame.normal[act], rows)
-    kc = pn.T @ (load.stiffness[act][:, None] * pn)
-    dc = pn.T @ (load.damping[act][:, None] * pn)
-    if model.friction > 0:
-        pt = projected_jacobian(model, theta, frame.tangent[act], rows)
-        dc = dc + pt.T @ (load.friction_damping[act][:, None] * pt)
-    return kc, dc
+    k, d, fr, ratio = (np.zeros(n) for _ in range(4))
+    r = frame.rows
+    k[r], d[r], fr[r], ratio[r] = load.stiffness, load.damping, load.friction_damping, load.friction_ratio
+    nrm, tng = np.zeros((n, 2)), np.zeros((n, 2))
+    nrm[r], tng[r] = frame.normal, frame.tangent
+    push = nrm - ratio[:, None] * tng  # direction of the force per unit normal force
+    return outer_entries(k, push, nrm), outer_entries(d, push, nrm) + outer_entries(fr, tng, tng)

@@ -284,13 +284,13 @@ class HeldExpansion:
     ) -> tuple[Array, Array | None]:
         """Deviation of the couple from the held value (N,) and its derivative (N, N)."""
         m, e = self.model, self.expansion
-        rho, alpha, normal_out = sense_joints(m, self.obstacle, theta, nodes)
-        d_alpha = np.mod(alpha - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
-        du = e.g_rho * (rho - e.rho_ref) + e.g_alpha * d_alpha
+        js = sense_joints(m, self.obstacle, theta, nodes)
+        d_alpha = np.mod(js.alpha - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
+        du = e.g_rho * (js.rho - e.rho_ref) + e.g_alpha * d_alpha
         if not jacobian:
             return du, None
         b = chain.frames(theta)[1] if normals is None else normals
-        return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, normal_out, b)
+        return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, js, b)
 
 
 def boundary_from_spec(kind: str, params: list[float] | Array) -> Boundary:
