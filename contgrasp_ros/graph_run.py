@@ -26,13 +26,14 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from std_srvs.srv import SetBool
 
 from contgrasp_core.errors import ContgraspError
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos
 from contgrasp_ros.analysis import contact_stats
-from contgrasp_ros.runtime import make_executor
+from contgrasp_ros.runtime import DropCounter, GuardedSpin, make_executor
 
 __all__ = ["Monitor", "run_graph"]
 
@@ -60,10 +61,12 @@ class Monitor(Node):
         self.create_subscription(GraspQuality, qos.TOPIC_QUALITY, self._on_quality, qos.STREAM)
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, qos.STREAM)
         self.pause = self.create_client(SetBool, "/rod_simulator/pause")
+        self.sim_params = AsyncParameterClient(self, "/rod_simulator")
         self.loop_wall_time: float | None = None
         self.restarts: dict[str, int] = {}
         self.lost: set[str] = set()
         self.faults: list[dict[str, Any]] = []
+        self.drops = DropCounter(self)  # (only rclpy take failures: see GuardedSpin)
 
     def _on_rod(self, msg: RodState) -> None:
         self.rod = msg
@@ -145,6 +148,7 @@ def _summary(mon: Monitor) -> dict[str, Any]:
     out.update(contact_stats(mon.contact))
     out["restarts"] = dict(mon.restarts)
     out["faults"] = list(mon.faults)
+    out["launcher_errors"] = dict(mon.drops.counts)
     out["history"] = mon.history
     return out
 
@@ -161,6 +165,7 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
     simulator restarted later must not wait for the recorder to match it).
     """
     end = time.monotonic() + timeout
+    spin = GuardedSpin(executor, mon.drops)
     resume: dict[str, Any] = {"pending": False, "future": None, "sent": 0.0, "started": False, "seen": None, "old": set()}
 
     def dead() -> str | None:
@@ -175,6 +180,7 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
                     mon.get_logger().error(f"the recorder exited with code {code}; the run continues unrecorded")
                     if on_recorder_lost is not None:
                         on_recorder_lost()
+                        lower["pending"] = True
                 continue
             if c.name in mon.lost:
                 continue
@@ -197,6 +203,17 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
                 resume["old"] = {tuple(i.endpoint_gid) for i in mon.get_publishers_info_by_topic(qos.TOPIC_ROD_STATE)}
         return None
 
+    lower: dict[str, Any] = {"pending": False, "future": None}
+
+    def lower_min_subscribers() -> None:
+        # the running simulator must not wait for a dead recorder to match its first state
+        fut = lower["future"]
+        if fut is not None and fut.done():
+            ok = fut.exception() is None and all(r.successful for r in fut.result().results)
+            lower["pending"], lower["future"] = not ok, None
+        elif fut is None and mon.sim_params.services_are_ready():
+            lower["future"] = mon.sim_params.set_parameters([Parameter("min_subscribers", value=2)])
+
     def resume_restarted_simulator() -> None:
         # Wait until the new simulator's state publisher is discovered, and a grace period for
         # the subscribers (sensor, recorder) to match it, so its first state is not lost; the
@@ -216,30 +233,34 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
             resume["future"], resume["sent"] = mon.pause.call_async(SetBool.Request(data=False)), time.monotonic()
 
     while not mon.connected():
-        executor.spin_once(timeout_sec=0.05)
+        spin(0.05)
+        if lower["pending"]:
+            lower_min_subscribers()
         if (err := dead()) or time.monotonic() > end:
             return err or "timed out waiting for the graph to connect"
     loop_start = time.perf_counter()
     fut = mon.pause.call_async(SetBool.Request(data=False))
     while not fut.done():
-        executor.spin_once(timeout_sec=0.05)
+        spin(0.05)
         if (err := dead()) or time.monotonic() > end:
             return err or "timed out resuming the simulator"
     resume["started"] = True
     mon.get_logger().info("graph connected; the simulator is running")
     while mon.status.get("state") not in ("finished", "failed") or resume["pending"]:
-        executor.spin_once(timeout_sec=0.05)
+        spin(0.05)
         if err := dead():
             return err
         if resume["pending"]:
             resume_restarted_simulator()
+        if lower["pending"]:
+            lower_min_subscribers()
         if time.monotonic() > end:
             return "wall-clock timeout"
     mon.loop_wall_time = time.perf_counter() - loop_start
     # let the last contact/quality of the final state arrive
     settle_end = time.monotonic() + 1.0
     while time.monotonic() < settle_end:
-        executor.spin_once(timeout_sec=0.02)
+        spin(0.02)
     if mon.status.get("state") == "failed":
         return f"simulator failed: {mon.status.get('message', '')}"
     return None
@@ -346,7 +367,7 @@ def run_graph(
             override_file = tmp / "overrides.yaml"
             override_file.write_text(yaml.safe_dump(overrides))
 
-            def unrecorded() -> None:
+            def unrecorded() -> None:  # for a restarted simulator, and the running one (_drive)
                 overrides["rod_simulator"]["ros__parameters"]["min_subscribers"] = 2
                 override_file.write_text(yaml.safe_dump(overrides))
 

@@ -28,7 +28,13 @@ NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"
 
 
 def fault_params(tmp_path: Path, duration: float = 1.5, timeout: float = 0.5, fallback: str = "hold", **sim_extra: float) -> Path:
-    """The packaged scenario on a coarse rod (fast steps) with a short lock-step timeout."""
+    """The packaged scenario on a coarse rod (fast steps) with a short lock-step timeout.
+
+    Twenty elements are not a converged discretisation of the grasp: the coarse arm swings
+    about without settling and its 1 cm elements can press up to ~1 mm into the object (more
+    after a fallback outage). These tests are about process faults, so the divergence limit on
+    penetration is raised from the tip radius to 1 cm (the divergence stop has its own tests)."""
+    sim_extra = {"max_penetration_limit": 0.01, **sim_extra}
     data = yaml.safe_load(default_params_file().read_text())
     data["/**"]["ros__parameters"]["n_elements"] = 20
     sim = data["rod_simulator"]["ros__parameters"]
@@ -92,11 +98,11 @@ def test_a_dead_controller_without_respawn_degrades_to_the_fallback(tmp_path: Pa
     """(The `zero` fallback: holding the last couple open loop for the rest of the run can make
     the coarse rod's impact on the object fail a Newton step, which the simulator then reports
     as a failed run - correct, but not what this test is about. For the same reason the
-    penetration limit is raised from the tip radius to 3 mm: with the couple zeroed at a random
-    moment of the swing, the coarse rod's impact reached 1.07 mm in one of five runs.)"""
+    penetration limit is raised: with the couple zeroed at a random
+    moment of the swing, the coarse rod's impact reached 1.07 mm in one of five runs; see
+    fault_params.)"""
     bag = tmp_path / "bag"
-    params = fault_params(tmp_path, duration=0.4, timeout=0.05, fallback="zero", max_penetration_limit=0.003)
-    launch = Launch("--params", str(params), "--bag", str(bag))
+    launch = Launch("--params", str(fault_params(tmp_path, duration=0.4, timeout=0.05, fallback="zero")), "--bag", str(bag))
     try:
         running(launch)
         launch.signal("grasp_controller", signal.SIGKILL)

@@ -816,3 +816,40 @@ def test_loop_session_check_divergence() -> None:
     session.state = CoreState(t=0.5, theta=np.full(6, np.inf), omega=np.zeros(6))
     with pytest.raises(SimulationDivergedError, match="NaN/Inf"):
         session.check_divergence(limits)
+
+
+def test_guarded_spin_survives_a_message_rclpy_cannot_take(ros_context) -> None:  # type: ignore[no-untyped-def]
+    """rclpy can fail inside take_message under load (seen in the soak test at SIGINT): the
+    failure is counted and spinning goes on; after shutdown it ends as a normal shutdown; a
+    failure that persists is re-raised."""
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.node import Node
+
+    from contgrasp_ros.runtime import DropCounter, GuardedSpin
+
+    class FlakyExecutor:
+        def __init__(self, fail: int, context_ok: bool = True) -> None:
+            self.fail, self.turns = fail, 0
+            self.context = type("Ctx", (), {"ok": staticmethod(lambda: context_ok)})()
+
+        def spin_once(self, timeout_sec=None) -> None:  # type: ignore[no-untyped-def]
+            self.turns += 1
+            if self.turns <= self.fail:
+                raise RuntimeError("Unable to convert call argument '0' to Python object")
+
+    node = Node("guarded_spin_test", context=ros_context)
+    try:
+        drops = DropCounter(node)
+        spin = GuardedSpin(FlakyExecutor(fail=2), drops, max_failures=5)  # type: ignore[arg-type]
+        for _ in range(4):
+            spin(0.0)
+        assert drops.counts == {"executor: internal error: RuntimeError": 2} and spin.streak == 0
+        with pytest.raises(ExternalShutdownException):
+            GuardedSpin(FlakyExecutor(fail=1, context_ok=False), drops)(0.0)  # type: ignore[arg-type]
+        persistent = GuardedSpin(FlakyExecutor(fail=100), drops, max_failures=3)  # type: ignore[arg-type]
+        for _ in range(3):
+            persistent(0.0)
+        with pytest.raises(RuntimeError):
+            persistent(0.0)
+    finally:
+        node.destroy_node()
