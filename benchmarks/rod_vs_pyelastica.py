@@ -40,6 +40,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from contgrasp_core.boundary import circle  # noqa: E402
+from contgrasp_core.errors import InvalidParameterError  # noqa: E402
 from contgrasp_core.feedback import feedback_couple  # noqa: E402
 from contgrasp_core.rod import Obstacle, RodModel, RodSystem  # noqa: E402
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains, run_closed_loop  # noqa: E402
@@ -156,9 +157,12 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
     tm = 0.0
     t0 = time.perf_counter()
     for k in range(steps):
-        if closed_rk:
-            control()
-        tm = stepper.step(sim, tm, dt)
+        try:
+            if closed_rk:
+                control()
+            tm = stepper.step(sim, tm, dt)
+        except InvalidParameterError:  # the state went non-finite: the law refuses it (diverged)
+            return None, time.perf_counter() - t0, False, float("nan")
         if check_only and k % 100 == 0 and not (np.all(np.isfinite(rod.position_collection))
                                                 and float(np.abs(rod.omega_collection).max()) < 1e4):
             return None, time.perf_counter() - t0, False, float("nan")

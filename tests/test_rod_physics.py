@@ -239,3 +239,22 @@ def test_newton_converges_quadratically():
     assert sizes[-1] < 1e-11, sizes
     pairs = [(a, b) for a, b in zip(sizes[:-1], sizes[1:], strict=True) if 1e-6 < a < 1.0]
     assert len(pairs) >= 2 and all(b <= 10.0 * a**2 for a, b in pairs), sizes
+
+
+def test_a_discontinuous_couple_is_stepped_through_linearly_implicitly():
+    """A couple that flips sign across a switching surface (as when a joint's closest point on a
+    non-convex object jumps between lobes) leaves the implicit step without a root: Newton
+    chatters at any step. After four halvings the integrator takes linearly implicit steps
+    instead of failing, and the rod stays at the switching surface (sliding mode)."""
+    m = uniform(8, damping=1.0)
+    system = RodSystem(m)
+    c = 0.2 * EI / L
+
+    class Switching:  # couple -c below the switching angle of the tip element (bends it up), +c above
+        def couple_and_jacobian(self, theta, *, jacobian=True, nodes=None, normals=None):  # type: ignore[no-untyped-def]
+            u = np.full(len(theta), -c if theta[-1] < 0.03 else c)
+            return u, np.zeros((len(theta), len(theta)))
+
+    state, info = system.advance(system.straight_state(), 0.5, RodLoads(feedback=Switching()), dt_try=0.05)
+    assert info["linearised_steps"] > 0
+    assert np.all(np.isfinite(state.theta)) and abs(state.theta[-1] - 0.03) < 0.01  # (either side alone: +-0.068)

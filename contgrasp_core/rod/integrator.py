@@ -23,12 +23,14 @@ matrix needed 9-12 and often failed.
 
 Step control (:meth:`RodSystem.advance`): a step whose Newton iteration diverges (an increment
 more than twice the previous one from the third iteration on, or no convergence in
-``max_iter``) is retried with half the step; a converged step that rotates an element by more
+``max_iter``) is retried with half the step; after four halvings a linearly implicit Euler
+step is taken instead (the residual is then discontinuous, see
+:meth:`RodSystem._linearly_implicit_step`); a run fails only if even that is unusable down to
+``duration / 2**max_halvings``. A converged step that rotates an element by more
 than ``max_angle_step`` (accuracy guard for violent transients) is retried with the step
 scaled to 0.9 ``max_angle_step``. After an accepted step the step doubles if Newton took at
 most ``max_iter / 2`` iterations (never beyond 0.9 ``max_angle_step`` of rotation). The first
-Newton iterate is extrapolated from the previous step's rate change. The step never goes below
-``duration / 2**max_halvings``.
+Newton iterate is extrapolated from the previous step's rate change.
 """
 
 from __future__ import annotations
@@ -242,15 +244,18 @@ class RodSystem:
         info = {"iterations": 0, "substeps": 0, "penetration": 0.0}
         dt = duration if dt_try is None else min(float(dt_try), duration)
         dt_min = duration / 2.0**self.options.max_halvings
+        dt_linear = duration / 2.0 ** min(4, self.options.max_halvings)  # see _linearly_implicit_step
         t_end = state.t + duration
         rate_change: np.ndarray | None = None  # d omega / dt of the last accepted step
         while t_end - state.t > 1e-12 * max(1.0, abs(t_end)):
             h = min(dt, t_end - state.t)
             new, factor = self._try_step(state, h, loads, info, rate_change)
+            if new is None and h <= dt_linear * (1 + 1e-9):
+                new, factor = self._linearly_implicit_step(state, h, loads, info), 1.0
             if new is None:
                 if h <= dt_min * (1 + 1e-9):
                     raise StepFailedError(f"Newton failed to converge at t={state.t:.6g} s even with dt={h:.3g} s")
-                dt = max(h * factor, dt_min)
+                dt = max(h * 0.5 if factor == 1.0 else h * factor, dt_min)
                 continue
             rate_change = (new.omega - state.omega) / h
             state = new
@@ -283,6 +288,25 @@ class RodSystem:
         m, th0, w0 = self.model, state.theta, state.omega
         c0 = chain.centres(m, th0 + 0.5 * dt * w0)
         return contact_frame(m, self.obstacle, c0, self.options.contact_margin + 2.0 * dt * np.abs(w0).max() * m.length)
+
+    def _linearly_implicit_step(self, state: RodState, dt: float, loads: RodLoads, info: dict) -> RodState | None:
+        """One Newton iteration from the old rates (linearly implicit Euler), for a step Newton
+        cannot converge even after four halvings: the residual jumps there, e.g. when a joint's
+        closest point on a non-convex object switches lobes and the feedback couple with it (the
+        implicit equation may have no root, and halving on to tiny steps only chatters). Stable
+        for the stiff linear part, first order like backward Euler; None if it would rotate an
+        element by more than ``max_angle_step``. Counted in ``info["linearised_steps"]``."""
+        frame = self.contact_frame(state, dt)
+        res, jac, ev = self.newton_system(state, state.omega, dt, loads, frame)
+        w1 = state.omega + np.linalg.solve(jac, -res)
+        th1 = state.theta + (0.5 * dt * (state.omega + w1) if self.options.method == "midpoint" else dt * w1)
+        info["iterations"] += 1
+        if not (np.all(np.isfinite(w1)) and np.abs(th1 - state.theta).max() <= self.options.max_angle_step):
+            return None
+        info["linearised_steps"] = info.get("linearised_steps", 0) + 1
+        info["substeps"] += 1
+        info["penetration"] = max(info["penetration"], ev.penetration)
+        return RodState(t=state.t + dt, theta=th1, omega=w1)
 
     def _try_step(self, state: RodState, dt: float, loads: RodLoads, info: dict,
                   rate_change: np.ndarray | None = None) -> tuple[RodState | None, float]:
