@@ -371,7 +371,7 @@ def run_graph(
                 overrides["rod_simulator"]["ros__parameters"]["min_subscribers"] = 2
                 override_file.write_text(yaml.safe_dump(overrides))
 
-            on_recorder_lost = unrecorded
+            on_recorder_lost = unrecorded if record is not None else None
             if record is not None:
                 group.start(RECORDER, [sys.executable, "-m", f"contgrasp_ros.nodes.{RECORDER}", "--ros-args", "--params-file", str(override_file)])
             for name in NODES:

@@ -144,8 +144,8 @@ class RodSystem:
     def _evaluate(self, theta: np.ndarray, omega: np.ndarray, loads: RodLoads, frame, delta: np.ndarray) -> _Eval:
         """Generalised force ``q`` at (``theta``, ``omega``) and the derivatives for the Newton
         matrix: ``jac_w = -dq/domega``, ``jac_q = -dq/dtheta`` and ``jac_m = d(M delta)/dtheta``
-        (``delta`` the rate increment of the step). Exact (the contact frame is frozen over the
-        step by design) except the motion of the feedback's foot (see :mod:`.control`)."""
+        (``delta`` the rate increment of the step). Exact for the model as stepped (the contact
+        frame is frozen over the step by design)."""
         m = self.model
         n = m.n_elements
         h = m.h
@@ -157,8 +157,10 @@ class RodSystem:
         cos_d = np.multiply.outer(cs, cs) + np.multiply.outer(sn, sn)  # cos(theta_j - theta_k) = b_j . b_k
         sin_d = np.multiply.outer(sn, cs) - np.multiply.outer(cs, sn)  # sin(theta_j - theta_k) = a_j . b_k
         hw = (h**2) * m.weight_matrix
-        mass = hw * cos_d
-        mass[np.diag_indices(n)] += m.rot_inertia
+        translational = hw * cos_d  # the mass matrix without the rotary inertia
+        mass = translational.copy()
+        diag = np.diag_indices(n)
+        mass[diag] += m.rot_inertia
         ws = hw * sin_d
         x = np.empty((n + 1, 2))
         x[0] = m.base_position
@@ -174,12 +176,14 @@ class RodSystem:
         acc[1:] += np.cumsum(aw[:-1], axis=0)
         f = -m.mass[:, None] * acc
         # inertia: d(M delta)/dtheta, and the centripetal forces' derivatives (both O(N^2))
-        jac_m = ws * delta - np.diag(ws @ delta)
-        jac_q = m.stiffness_matrix - (mass - np.diag(m.rot_inertia)) * omega**2
+        jac_m = ws * delta
+        jac_m[diag] -= ws @ delta
+        jac_q = m.stiffness_matrix - translational * omega**2
         jac_w = 2.0 * ws * omega
         if m.damping > 0:
             jac_w += m.damping * mass
-            jac_q += m.damping * (ws * omega - np.diag(ws @ omega))
+            jac_q += m.damping * (ws * omega)
+            jac_q[diag] -= m.damping * (ws @ omega)
         pen = 0.0
         damp = np.zeros((4, n))  # per-centre -df/dv tensors (xx, xy, yx, yy) of drag and contact
         if m.drag_normal > 0 or m.drag_tangential > 0:
@@ -251,11 +255,12 @@ class RodSystem:
             h = min(dt, t_end - state.t)
             new, factor = self._try_step(state, h, loads, info, rate_change)
             if new is None and h <= dt_linear * (1 + 1e-9):
-                new, factor = self._linearly_implicit_step(state, h, loads, info), 1.0
+                new = self._linearly_implicit_step(state, h, loads, info)
+                factor = 0.5 if new is None else 1.0
             if new is None:
                 if h <= dt_min * (1 + 1e-9):
                     raise StepFailedError(f"Newton failed to converge at t={state.t:.6g} s even with dt={h:.3g} s")
-                dt = max(h * 0.5 if factor == 1.0 else h * factor, dt_min)
+                dt = max(h * factor, dt_min)
                 continue
             rate_change = (new.omega - state.omega) / h
             state = new
@@ -289,6 +294,11 @@ class RodSystem:
         c0 = chain.centres(m, th0 + 0.5 * dt * w0)
         return contact_frame(m, self.obstacle, c0, self.options.contact_margin + 2.0 * dt * np.abs(w0).max() * m.length)
 
+    def _new_angles(self, state: RodState, w1: np.ndarray, dt: float) -> np.ndarray:
+        """The angles after a step to the rates ``w1`` under the chosen scheme."""
+        w = 0.5 * (state.omega + w1) if self.options.method == "midpoint" else w1
+        return state.theta + dt * w
+
     def _linearly_implicit_step(self, state: RodState, dt: float, loads: RodLoads, info: dict) -> RodState | None:
         """One Newton iteration from the old rates (linearly implicit Euler), for a step Newton
         cannot converge even after four halvings: the residual jumps there, e.g. when a joint's
@@ -299,7 +309,7 @@ class RodSystem:
         frame = self.contact_frame(state, dt)
         res, jac, ev = self.newton_system(state, state.omega, dt, loads, frame)
         w1 = state.omega + np.linalg.solve(jac, -res)
-        th1 = state.theta + (0.5 * dt * (state.omega + w1) if self.options.method == "midpoint" else dt * w1)
+        th1 = self._new_angles(state, w1, dt)
         info["iterations"] += 1
         if not (np.all(np.isfinite(w1)) and np.abs(th1 - state.theta).max() <= self.options.max_angle_step):
             return None
@@ -328,7 +338,7 @@ class RodSystem:
             w1 = w1 + dw
             if size <= opt.tol * (1.0 + np.abs(th0).max() + dt * np.abs(w1).max()):
                 info["iterations"] += it
-                th1 = th0 + (0.5 * dt * (w0 + w1) if opt.method == "midpoint" else dt * w1)
+                th1 = self._new_angles(state, w1, dt)
                 turn = np.abs(th1 - th0).max() / opt.max_angle_step
                 if turn > 1.0:
                     return None, 0.9 / turn  # accuracy guard: too large a rotation in one step
