@@ -428,6 +428,17 @@ def test_recorder_counts_messages_lost_before_it_from_sequence_gaps(ros_context,
     assert json.loads(open_recording(tmp_path / "bag").metadata_records()[RECORDER_RECORD]["lost_in_transport"]) == 4
 
 
+def test_recorder_refuses_an_invalid_sequence_check_regex(ros_context, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    from rclpy.parameter import Parameter
+
+    from contgrasp_core.errors import InvalidParameterError
+    from contgrasp_ros.nodes.mcap_recorder import McapRecorder
+
+    with pytest.raises(InvalidParameterError, match="invalid regular expression"):
+        McapRecorder(context=ros_context, parameter_overrides=[Parameter("output", value=str(tmp_path / "bag")),
+                                                               Parameter("sequence_check_exclude_regex", value="(")])
+
+
 def test_recorder_does_not_count_interleaved_publishers_as_loss(ros_context, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """Real publishers: a second publisher joining a recorded topic (and every node's
     /parameter_events) mixes sequence numbers; none of it is reported as lost."""
