@@ -177,7 +177,8 @@ def run_once(i: int, args: argparse.Namespace, rng: random.Random, env: dict[str
     rec: dict[str, Any] = {"run": i, **scenario, "bag_path": str(bag), "planned_run_time_s": run_time,
                            "kills": [], "launcher_pid": None}
     wall0 = time.monotonic()
-    launch = LaunchHandle("--params", str(params), "--bag", str(bag), "--respawn", "1000", "--domain-id", str(args.domain_id),
+    split = ["--max-bag-duration", str(args.max_bag_duration)] if args.max_bag_duration else []
+    launch = LaunchHandle("--params", str(params), "--bag", str(bag), *split, "--respawn", "1000", "--domain-id", str(args.domain_id),
                           "--timeout", str(run_time + 900), env=env)
     rec["launcher_pid"] = launch.proc.pid
     interrupted_by_us = False
@@ -280,6 +281,7 @@ def check_recording(bag: Path, kills: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     try:
         rec = open_recording(bag)
+        out["bag_files"] = len(rec.files)
         states = [(raw.log_time_ns, m.step) for raw, m in iter_decoded(rec, ["/contgrasp/rod_state"])]
         steps = [s for _, s in states]
         missed_total, missed_current, last = 0, 0, -1
@@ -505,6 +507,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--start-timeout", type=float, default=180.0, help="wait this long for the loop to start [s] (default 180)")
     p.add_argument("--report", type=Path, default=None, help="JSON report (default OUT/soak_report.json)")
     p.add_argument("--figure", type=Path, default=ROOT / "docs" / "figures" / "soak_rss.png", help="RSS plot (default docs/figures/soak_rss.png)")
+    p.add_argument("--max-bag-duration", type=float, default=0.0, metavar="SECONDS",
+                   help="split each run's bag into files of SECONDS (contgrasp-launch --max-bag-duration; default 0: one file)")
     p.add_argument("--delete-bags", action="store_true", help="delete a run's bag once its checks passed (default: keep every bag)")
     args = p.parse_args(argv)
     if args.seed is None:

@@ -267,13 +267,18 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
 
 
 def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
-    """The recorder's parameters for a launcher run: output, layout, run_info (a JSON string)."""
+    """The recorder's parameters for a launcher run: output, layout, run_info (a JSON string), and
+    the optional exclusion, decimation and file splitting."""
     out = {"output": str(record["output"]), "layout": record.get("layout", "folder"), "run_info": json.dumps(record.get("run_info", {}))}
     if record.get("exclude_regex"):
         out["exclude_regex"] = record["exclude_regex"]
     if record.get("decimate_period"):
         out["decimate_topics"] = list(DECIMATED_STREAMS)
         out["decimate_period"] = float(record["decimate_period"])
+    if record.get("max_bag_duration"):
+        out["max_bag_duration"] = float(record["max_bag_duration"])
+    if record.get("max_bag_size"):
+        out["max_bag_size"] = int(record["max_bag_size"])
     return out
 
 

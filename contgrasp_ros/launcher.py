@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from contgrasp_core.errors import InvalidParameterError
+from contgrasp_ros.bag.writer import MIN_BAG_SIZE
 
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
 
@@ -82,6 +83,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--bag-decimate", type=float, default=0.0, metavar="SECONDS",
                    help="record rod state, contact and couple only every SECONDS of simulated time (plus the last "
                         "message); for small sample recordings (default 0: every message)")
+    p.add_argument("--max-bag-duration", type=float, default=0.0, metavar="SECONDS",
+                   help="split the bag folder into files of at most SECONDS each, like ros2 bag record (default 0: "
+                        "one file); bounds the recorder's memory in long runs")
+    p.add_argument("--max-bag-size", type=int, default=0, metavar="BYTES",
+                   help=f"split the bag folder into files of about BYTES each (default 0: one file; else >= {MIN_BAG_SIZE})")
     return p
 
 
@@ -125,8 +131,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not (np.isfinite(args.bag_decimate) and args.bag_decimate >= 0):
             print("contgrasp-launch: --bag-decimate must be >= 0", file=sys.stderr)
             return 2
+        if not (np.isfinite(args.max_bag_duration) and 0 <= args.max_bag_duration <= 1e9):
+            print("contgrasp-launch: --max-bag-duration must be in [0, 1e9] seconds", file=sys.stderr)
+            return 2
+        if not (args.max_bag_size == 0 or MIN_BAG_SIZE <= args.max_bag_size <= 1 << 50):
+            print(f"contgrasp-launch: --max-bag-size must be 0 or in [{MIN_BAG_SIZE}, 2**50] bytes", file=sys.stderr)
+            return 2
+        if layout == "file" and (args.max_bag_duration or args.max_bag_size):
+            print("contgrasp-launch: --max-bag-duration / --max-bag-size split a bag folder, not a .mcap file", file=sys.stderr)
+            return 2
         record = {"output": out, "layout": layout, "run_info": run_info, "exclude_regex": args.bag_exclude,
-                  "decimate_period": args.bag_decimate}
+                  "decimate_period": args.bag_decimate, "max_bag_duration": args.max_bag_duration,
+                  "max_bag_size": args.max_bag_size}
     if args.respawn < 0 or (args.respawn and args.in_process):
         print("contgrasp-launch: --respawn takes N >= 0 and applies to separate node processes only", file=sys.stderr)
         return 2

@@ -34,6 +34,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import shutil
+import uuid
 import warnings
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -593,6 +594,23 @@ def test_analyze_overrides_of_the_wrong_type(files, kw) -> None:  # type: ignore
     from contgrasp_ros.analysis import analyze
 
     assert call(analyze, files["bag"], **kw, finite=lambda r: []) is None
+
+
+@QUICK
+@given(layout=st.one_of(*[st.sampled_from(["folder", "file"])] * 4, bad),
+       compression=st.one_of(*[st.sampled_from(["zstd", "lz4", "none"])] * 4, bad),
+       chunk_size=st.one_of(*[st.integers(1024, 1 << 20)] * 4, st.integers(-10, 1 << 31), bad),
+       max_bag_duration=st.one_of(num(-5.0, 5.0), st.just(1e300)), max_bag_size=st.one_of(st.integers(-10, 1 << 51), bad))
+def test_bag_writer_options(files, layout, compression, chunk_size, max_bag_duration, max_bag_size) -> None:  # type: ignore[no-untyped-def]
+    from contgrasp_ros.bag.writer import BagWriter
+
+    path = files["tmp"] / f"w_{uuid.uuid4().hex}{'.mcap' if isinstance(layout, str) and layout == 'file' else ''}"
+    w = call(BagWriter, path, layout=layout, compression=compression, chunk_size=chunk_size,
+             max_bag_duration=max_bag_duration, max_bag_size=max_bag_size, finite=lambda w: [])
+    if w is not None:
+        w.add_topic("/chatter", "std_msgs/msg/String")
+        w.write("/chatter", b"\x00\x01\x00\x00\x01\x00\x00\x00\x00\x00\x00\x00", 1)
+        assert w.close()["message_count"] == 1
 
 
 # ----------------------------------------------------------------------------- the CLI

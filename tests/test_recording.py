@@ -249,6 +249,90 @@ def test_unwritable_outputs_are_clear_errors(tmp_path: Path) -> None:
             w.write("/chatter", b"\x00\x01\x00\x00" + bytes(64), i)
 
 
+# ---------------------------------------------------------------- split bags
+
+
+def _chatter(n: int, noise: int = 0) -> list[bytes]:
+    """Serialized std_msgs/String messages, with ``noise`` random bytes (as hex) each."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    return [serialize_message(String(data=f"message {i:05d} " + os.urandom(noise).hex())) for i in range(n)]
+
+
+def _write_split(path: Path, data: list[bytes], period_ns: int, close: bool = True, **split: float) -> BagWriter:
+    w = BagWriter(path, chunk_size=4096, **split)
+    w.records[RUN_RECORD] = {"run": "split"}
+    w.add_topic("/chatter", "std_msgs/msg/String")
+    for i, d in enumerate(data):
+        w.write("/chatter", d, 10**9 + i * period_ns)
+    if close:
+        w.close()
+    else:
+        w.flush()
+    return w
+
+
+def test_split_bag_folder_by_duration_is_a_rosbag2_multi_file_bag(tmp_path: Path) -> None:
+    """--max-bag-duration: files NAME_0, NAME_1, ... each spanning less than the period, each a
+    complete MCAP file on its own; metadata.yaml lists them in order; our reader and rosbags
+    read the folder as one recording with every message in order."""
+    from rosbags.highlevel import AnyReader
+
+    data = _chatter(300)
+    _write_split(tmp_path / "bag", data, 10**7, max_bag_duration=1.0)  # 100 messages per second, 3 s
+    meta = yaml.safe_load((tmp_path / "bag" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    names = [f"bag_{k}.mcap" for k in range(3)]
+    assert meta["relative_file_paths"] == names and meta["message_count"] == 300
+    assert [f["message_count"] for f in meta["files"]] == [100, 100, 100]
+    assert [f["starting_time"]["nanoseconds_since_epoch"] for f in meta["files"]] == [10**9, 2 * 10**9, 3 * 10**9]
+    assert meta["topics_with_message_count"][0]["message_count"] == 300
+    for k, name in enumerate(names):  # each file stands on its own (summary, schema, channel, records)
+        rec = open_recording(tmp_path / "bag" / name)
+        assert [m.data for m in iter_raw(rec)] == data[100 * k : 100 * (k + 1)]
+        assert rec.metadata_records()[RUN_RECORD] == {"run": "split"} and "rosbag2" in rec.metadata_records()
+    assert [m.data for m in iter_raw(open_recording(tmp_path / "bag"))] == data
+    with AnyReader([tmp_path / "bag"]) as reader:
+        got = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages()]
+    assert got == [f"message {i:05d} " for i in range(300)]
+
+
+def test_split_bag_folder_by_size(tmp_path: Path) -> None:
+    from contgrasp_ros.bag.writer import MIN_BAG_SIZE
+
+    data = _chatter(600, noise=500)  # 600 kB of hex digits, ~half of it after zstd: several 64 kB files
+    w = _write_split(tmp_path / "bag", data, 10**6, max_bag_size=MIN_BAG_SIZE)
+    sizes = [(tmp_path / "bag" / f.name).stat().st_size for f in w.files]
+    assert len(sizes) >= 2
+    assert all(sz < MIN_BAG_SIZE + 8 * 4096 for sz in sizes[:-1])  # split at the first chunk past the size
+    assert [m.data for m in iter_raw(open_recording(tmp_path / "bag"))] == data
+
+
+def test_split_bag_without_metadata_reads_files_in_numeric_order_and_recovers(tmp_path: Path) -> None:
+    """A killed recorder leaves finished files and an incomplete last one, no metadata.yaml:
+    opening names the incomplete file; files sort NAME_2 < NAME_10; recovery keeps everything
+    that was flushed, in order."""
+    data = _chatter(1200)
+    w = _write_split(tmp_path / "bag", data, 10**7, close=False, max_bag_duration=1.0)  # 12 files, last one open
+    assert len(w.files) == 12 and not (tmp_path / "bag" / "metadata.yaml").exists()
+    with pytest.raises(BagError, match="bag_11.mcap is incomplete"):
+        open_recording(tmp_path / "bag")
+    stats = recover(tmp_path / "bag", tmp_path / "fixed")
+    got = [m.data for m in iter_raw(open_recording(tmp_path / "fixed"))]
+    assert got == data and stats["messages"] == 1200  # flushed: the open file's chunks are on disk too
+    (tmp_path / "bag" / "bag_11.mcap").unlink()  # the finished files alone are read file by file, in order
+    assert [m.data for m in iter_raw(open_recording(tmp_path / "bag"))] == data[:1100]
+
+
+def test_split_options_are_validated(tmp_path: Path) -> None:
+    with pytest.raises(BagError, match="max_bag_size"):
+        BagWriter(tmp_path / "a", max_bag_size=1000)
+    with pytest.raises(BagError, match="max_bag_duration"):
+        BagWriter(tmp_path / "b", max_bag_duration=float("nan"))
+    with pytest.raises(BagError, match="cannot be split"):
+        BagWriter(tmp_path / "c.mcap", layout="file", max_bag_duration=1.0)
+
+
 # ---------------------------------------------------------------- recorder processes
 
 
@@ -439,6 +523,25 @@ def test_recorder_refuses_an_invalid_sequence_check_regex(ros_context, tmp_path:
                                                                Parameter("sequence_check_exclude_regex", value="(")])
 
 
+@pytest.mark.parametrize(("params", "why"), [
+    ({"max_bag_size": 1000}, "max_bag_size must be 0"),
+    ({"max_bag_duration": -1.0}, "max_bag_duration"),
+    ({"layout": "file", "max_bag_duration": 10.0}, "use layout 'folder'"),
+])
+def test_recorder_refuses_invalid_split_options(ros_context, tmp_path: Path, params: dict, why: str) -> None:  # type: ignore[no-untyped-def]
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from contgrasp_core.errors import InvalidParameterError
+    from contgrasp_ros.nodes.mcap_recorder import McapRecorder
+
+    out = tmp_path / ("bag.mcap" if params.get("layout") == "file" else "bag")
+    with pytest.raises((InvalidParameterError, rclpy.exceptions.ParameterException), match=why):
+        McapRecorder(context=ros_context, parameter_overrides=[Parameter("output", value=str(out)),
+                                                               *(Parameter(k, value=v) for k, v in params.items())])
+    assert not out.exists()  # refused before anything was created
+
+
 def test_recorder_does_not_count_interleaved_publishers_as_loss(ros_context, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     """Real publishers: a second publisher joining a recorded topic (and every node's
     /parameter_events) mixes sequence numbers; none of it is reported as lost."""
@@ -504,8 +607,9 @@ def test_replay_window_and_loop(tmp_path: Path) -> None:
 
 
 def test_recorder_finalises_on_sigterm(tmp_path: Path) -> None:
+    """(With a split every 0.2 s: the messages span several files, none lost at the splits.)"""
     env = ros_env(fresh_domain_id())
-    rec = _recorder(tmp_path / "bag", env)
+    rec = _recorder(tmp_path / "bag", env, "-p", "max_bag_duration:=0.2")
     pub = subprocess.Popen([sys.executable, "-c", PUBLISHER, "300", "-1"], env=env, stdout=subprocess.PIPE, text=True)
     try:
         assert pub.stdout is not None
@@ -519,5 +623,7 @@ def test_recorder_finalises_on_sigterm(tmp_path: Path) -> None:
             if p.poll() is None:
                 p.kill()
                 p.wait(timeout=30)
-    steps = [m.step for _, m in iter_decoded(open_recording(tmp_path / "bag"), ["/contgrasp/rod_state"])]
+    rec_ = open_recording(tmp_path / "bag")
+    assert len(rec_.files) >= 3  # 300 messages 2 ms apart (and more) in 0.2 s files
+    steps = [m.step for _, m in iter_decoded(rec_, ["/contgrasp/rod_state"])]
     assert steps == list(range(300))

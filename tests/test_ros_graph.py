@@ -168,3 +168,7 @@ def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
     assert proc.returncode == 2 and "settle_hold" in json.loads(proc.stdout)["error"], proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr
     assert launch("--executor", "events").returncode == 2  # events executor: in-process only
+    for bad_split in (["--max-bag-duration", "nan"], ["--max-bag-size", "1000"],
+                      ["--bag", str(tmp_path / "one.mcap"), "--max-bag-duration", "5"]):
+        proc = launch(*bad_split)
+        assert proc.returncode == 2 and "--max-bag" in proc.stderr and "Traceback" not in proc.stderr, bad_split

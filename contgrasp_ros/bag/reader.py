@@ -13,6 +13,7 @@ chunk of such a file into a new, finished recording. Messages are decoded with
 from __future__ import annotations
 
 import io
+import re
 import struct
 import zlib
 from collections.abc import Iterable, Iterator
@@ -101,6 +102,12 @@ def _path(path: Any, what: str = "recording") -> Path:
     return Path(path)
 
 
+def _file_order(path: Path) -> tuple[str, int, str]:
+    """Order of a split bag's files without metadata.yaml: ``NAME_2.mcap`` before ``NAME_10.mcap``."""
+    m = re.fullmatch(r"(.*)_(\d+)\.mcap", path.name)
+    return (m.group(1), int(m.group(2)), "") if m else (path.stem, -1, path.name)
+
+
 def _mcap_files(path: Path) -> tuple[list[Path], dict[str, Any] | None]:
     if not path.exists():
         raise BagError(f"no recording at {path}")
@@ -120,7 +127,7 @@ def _mcap_files(path: Path) -> tuple[list[Path], dict[str, Any] | None]:
         if missing:
             raise BagError(f"{path}: metadata.yaml lists missing files {missing}")
         return files, info_
-    files = sorted(path.glob("*.mcap"))
+    files = sorted(path.glob("*.mcap"), key=_file_order)
     if not files:
         raise BagError(f"{path} holds no metadata.yaml and no .mcap file")
     return files, None

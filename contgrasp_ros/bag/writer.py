@@ -7,6 +7,14 @@ when it reaches ``chunk_size`` bytes or when :meth:`BagWriter.flush` is called (
 does so periodically), so a process killed with SIGKILL loses at most the open chunk and every
 complete chunk can be recovered (:func:`contgrasp_ros.bag.reader.recover`). Closing writes the
 summary and indexes, the ``rosbag2`` metadata record and ``metadata.yaml``.
+
+Splitting (like ``ros2 bag record --max-bag-duration / --max-bag-size``): a bag folder can be
+split into ``NAME_0.mcap``, ``NAME_1.mcap``, ... once a file spans ``max_bag_duration`` seconds
+of log time or reaches ``max_bag_size`` bytes on disk. Each finished file is a complete MCAP
+file (summary, indexes, ``rosbag2`` record); ``metadata.yaml`` lists them all at close. Besides
+bounding the file size, splitting bounds the writer's memory: an MCAP writer keeps one chunk
+index (~0.9 kB) per chunk until it writes the summary, so an unsplit recording's writer grows
+linearly with the recording's length (docs/RELIABILITY.md, soak).
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from .definitions import full_text
@@ -31,12 +40,37 @@ RUN_RECORD = "contgrasp_run"  # MCAP metadata record: how the run was made (laun
 RECORDER_RECORD = "contgrasp_recorder"  # MCAP metadata record: the recorder's received/written counts
 
 
+MIN_BAG_SIZE = 64 * 1024  # smallest max_bag_size: a split needs room for at least a chunk or two
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, int | np.integer) and not isinstance(x, bool)
+
+
+def _is_real(x: Any) -> bool:
+    return (isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)) and bool(np.isfinite(x))
+
+
 @dataclass
 class _Topic:
     record: TopicRecord
+    definition: str
     channel_id: int
-    first_ns: int | None = None
-    last_ns: int = 0
+
+
+@dataclass
+class _File:
+    """One file of the bag: its name, the log-time span and count of its messages."""
+
+    name: str
+    start_ns: int = 0
+    end_ns: int = 0
+    messages: int = 0
+
+    def add(self, log_time_ns: int) -> None:
+        self.start_ns = log_time_ns if not self.messages else min(self.start_ns, log_time_ns)
+        self.end_ns = log_time_ns if not self.messages else max(self.end_ns, log_time_ns)
+        self.messages += 1
 
 
 @dataclass
@@ -49,40 +83,88 @@ class BagWriter:
     compression: str = "zstd"
     chunk_size: int = 256 * 1024
     custom_data: Mapping[str, str] = field(default_factory=dict)
+    max_bag_duration: float = 0.0
+    max_bag_size: int = 0
 
     def __post_init__(self) -> None:
         self.path = Path(self.path)
-        if self.layout not in LAYOUTS:
+        if not isinstance(self.layout, str) or self.layout not in LAYOUTS:
             raise BagError(f"layout must be one of {LAYOUTS}, got {self.layout!r}")
-        if self.compression not in COMPRESSIONS:
+        if not isinstance(self.compression, str) or self.compression not in COMPRESSIONS:
             raise BagError(f"compression must be one of {tuple(COMPRESSIONS)}, got {self.compression!r}")
-        if not 1024 <= int(self.chunk_size) <= 1 << 30:
-            raise BagError(f"chunk_size must be in [1 KiB, 1 GiB], got {self.chunk_size}")
+        if not _is_int(self.chunk_size) or not 1024 <= self.chunk_size <= 1 << 30:
+            raise BagError(f"chunk_size must be an integer in [1 KiB, 1 GiB], got {self.chunk_size!r}")
+        if not _is_real(self.max_bag_duration) or not 0.0 <= self.max_bag_duration <= 1e9:
+            raise BagError(f"max_bag_duration must be in [0, 1e9] s (0 = no split), got {self.max_bag_duration!r}")
+        if not _is_int(self.max_bag_size) or not (self.max_bag_size == 0 or MIN_BAG_SIZE <= self.max_bag_size <= 1 << 50):
+            raise BagError(f"max_bag_size must be 0 (no split) or an integer in [{MIN_BAG_SIZE}, 2**50] bytes, "
+                           f"got {self.max_bag_size!r}")
+        self.split = bool(self.max_bag_duration or self.max_bag_size)
         if self.layout == "folder":
             if self.path.exists():
                 raise BagError(f"cannot record to {self.path}: it already exists")
-            self.file = self.path / f"{self.path.name}_0.mcap"
         else:
             if self.path.suffix != ".mcap":
                 raise BagError(f"a single-file recording must end in .mcap, got {self.path}")
             if self.path.exists():
                 raise BagError(f"cannot record to {self.path}: it already exists")
-            self.file = self.path
+            if self.split:
+                raise BagError("max_bag_duration / max_bag_size split a bag folder; a single .mcap file cannot be split")
+        self.topics: dict[str, _Topic] = {}
+        self.records: dict[str, dict[str, str]] = {}  # extra MCAP metadata records written at close
+        self.files: list[_File] = []
+        self.messages = 0
+        self.bytes = 0
+        self.closed = False
+        self._open_file()
+
+    def _open_file(self) -> None:
+        """Start the next file: ``NAME_<k>.mcap`` in a folder, or the ``.mcap`` path itself."""
+        name = f"{self.path.name}_{len(self.files)}.mcap" if self.layout == "folder" else self.path.name
+        self.file = self.path / name if self.layout == "folder" else self.path
         try:
             self.file.parent.mkdir(parents=True, exist_ok=True)
-            self._stream = open(self.file, "xb")  # noqa: SIM115 - closed in close()
+            self._stream = open(self.file, "xb")  # noqa: SIM115 - closed in _finish_file()
         except OSError as exc:
             raise BagError(f"cannot record to {self.file}: {exc.strerror or exc}") from exc
         self._mcap = Writer(
             self._stream, chunk_size=int(self.chunk_size), compression=COMPRESSIONS[self.compression], enable_data_crcs=True
         )
         self._schemas: dict[str, int] = {}
-        self.topics: dict[str, _Topic] = {}
-        self.records: dict[str, dict[str, str]] = {}  # extra MCAP metadata records written at close
-        self.messages = 0
-        self.bytes = 0
-        self.closed = False
+        self.files.append(_File(name))
         self._guard(lambda: self._mcap.start(profile="ros2", library=LIBRARY))
+        for t in self.topics.values():  # every file carries every known topic's schema and channel
+            t.channel_id = self._register(t.record.name, t.record.type, t.record.offered_qos_profiles, t.record.type_description_hash,
+                                          t.definition)
+
+    def _finish_file(self, info: dict[str, Any]) -> None:
+        """Write the metadata records and the summary of the open file and close it."""
+
+        def finish() -> None:
+            for name, data in self.records.items():
+                self._mcap.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+            self._mcap.add_metadata("rosbag2", {"serialized_metadata": metadata_yaml(info, top_level=False)})
+            self._mcap.finish()
+            self._stream.close()
+
+        self._guard(finish)
+
+    def _due_for_split(self, log_time_ns: int) -> bool:
+        f = self.files[-1]
+        if not self.split or not f.messages:
+            return False
+        if self.max_bag_duration and log_time_ns - f.start_ns >= self.max_bag_duration * 1e9:
+            return True
+        return bool(self.max_bag_size) and self._guard(self._stream.tell) >= self.max_bag_size
+
+    def _register(self, name: str, type_name: str, qos_text: str, type_hash: str, definition: str) -> int:
+        if type_name not in self._schemas:
+            self._schemas[type_name] = self._guard(lambda: self._mcap.register_schema(type_name, "ros2msg", definition.encode()))
+        return self._guard(
+            lambda: self._mcap.register_channel(
+                name, "cdr", self._schemas[type_name], {"offered_qos_profiles": qos_text, "topic_type_hash": type_hash}
+            )
+        )
 
     def _guard(self, op: Any) -> Any:
         try:
@@ -103,16 +185,10 @@ class BagWriter:
         ``offered_qos_profiles`` (profiles, or the YAML text) and ``topic_type_hash`` metadata."""
         if name in self.topics:
             return
-        if type_name not in self._schemas:
-            data = (full_text(type_name) if definition is None else definition).encode()
-            self._schemas[type_name] = self._guard(lambda: self._mcap.register_schema(type_name, "ros2msg", data))
+        text = full_text(type_name) if definition is None else definition
         qos_text = offered_qos if isinstance(offered_qos, str) else offered_qos_yaml(offered_qos)
-        cid = self._guard(
-            lambda: self._mcap.register_channel(
-                name, "cdr", self._schemas[type_name], {"offered_qos_profiles": qos_text, "topic_type_hash": type_hash}
-            )
-        )
-        self.topics[name] = _Topic(TopicRecord(name, type_name, qos_text, type_hash), cid)
+        cid = self._register(name, type_name, qos_text, type_hash, text)
+        self.topics[name] = _Topic(TopicRecord(name, type_name, qos_text, type_hash), text, cid)
 
     def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None, sequence: int = 0) -> None:
         """Append one serialized (CDR) message of a registered topic."""
@@ -120,10 +196,12 @@ class BagWriter:
         if t is None:
             raise BagError(f"topic {topic!r} was not registered with add_topic")
         pub = log_time_ns if publish_time_ns is None else publish_time_ns
+        if self._due_for_split(log_time_ns):
+            self._finish_file(self.metadata())
+            self._open_file()
         self._guard(lambda: self._mcap.add_message(t.channel_id, int(log_time_ns), bytes(data), int(pub), int(sequence) & 0xFFFFFFFF))
+        self.files[-1].add(log_time_ns)
         t.record.message_count += 1
-        t.first_ns = log_time_ns if t.first_ns is None else min(t.first_ns, log_time_ns)
-        t.last_ns = max(t.last_ns, log_time_ns)
         self.messages += 1
         self.bytes += len(data)
 
@@ -132,12 +210,9 @@ class BagWriter:
         self._guard(self._mcap.flush)
 
     def metadata(self) -> dict[str, Any]:
-        """rosbag2 bag metadata of what has been written so far."""
-        firsts = [t.first_ns for t in self.topics.values() if t.first_ns is not None]
-        start = min(firsts, default=0)
-        end = max((t.last_ns for t in self.topics.values()), default=start)
+        """rosbag2 bag metadata of what has been written so far (every file of a split bag)."""
         return bag_metadata(
-            files=[(self.file.name, start, end - start, self.messages)],
+            files=[(f.name, f.start_ns, f.end_ns - f.start_ns, f.messages) for f in self.files],
             topics=[t.record for t in self.topics.values()],
             custom_data=self.custom_data,
         )
@@ -148,15 +223,7 @@ class BagWriter:
         if self.closed:
             return self.metadata()
         info = self.metadata()
-
-        def finish() -> None:
-            for name, data in self.records.items():
-                self._mcap.add_metadata(name, {str(k): str(v) for k, v in data.items()})
-            self._mcap.add_metadata("rosbag2", {"serialized_metadata": metadata_yaml(info, top_level=False)})
-            self._mcap.finish()
-            self._stream.close()
-
-        self._guard(finish)
+        self._finish_file(info)
         self.closed = True
         if self.layout == "folder":
             try:

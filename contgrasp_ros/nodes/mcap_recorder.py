@@ -20,6 +20,10 @@ topics every node publishes to (``sequence_check_exclude_regex``: ``/parameter_e
 ``/rosout``, ``/diagnostics``), where a new publisher's first messages can arrive before its
 matched event and would read as a gap.
 
+A bag folder can be split into several files (``max_bag_duration`` / ``max_bag_size``, like
+``ros2 bag record``'s options of the same names); this also bounds the recorder's memory, which
+otherwise grows by the MCAP chunk index (~0.9 kB per chunk) for as long as one file is open.
+
 Optional decimation (to keep shipped sample recordings small): topics in ``decimate_topics``
 keep one message per ``decimate_period`` seconds of their header stamp (the quality node's
 rule: skip while ``0 <= t - t_kept < period``) plus the last message received; the skipped
@@ -48,7 +52,7 @@ from contgrasp_ros import qos
 from contgrasp_ros.bag.definitions import full_text
 from contgrasp_ros.bag.errors import BagError
 from contgrasp_ros.bag.rosbag2 import qos_profile_dict
-from contgrasp_ros.bag.writer import COMPRESSIONS, LAYOUTS, RECORDER_RECORD, RUN_RECORD, BagWriter
+from contgrasp_ros.bag.writer import COMPRESSIONS, LAYOUTS, MIN_BAG_SIZE, RECORDER_RECORD, RUN_RECORD, BagWriter
 from contgrasp_ros.runtime import DropCounter, FatalNodeError, declare, guarded, run_node
 
 
@@ -90,6 +94,10 @@ class McapRecorder(Node):
         layout = declare(self, "layout", "folder", f"one of {LAYOUTS}", read_only=True)
         compression = declare(self, "compression", "zstd", f"chunk compression, one of {tuple(COMPRESSIONS)}", read_only=True)
         chunk_size = declare(self, "chunk_size", 262144, "chunk size [bytes]", lo=1024, hi=1 << 30, read_only=True)
+        max_duration = declare(self, "max_bag_duration", 0.0, "start a new file of the bag folder after this many "
+                               "seconds (0 = one file) [s]", lo=0.0, hi=1e9, read_only=True)
+        max_size = declare(self, "max_bag_size", 0, f"start a new file of the bag folder at this size (0 = one file, "
+                           f"else >= {MIN_BAG_SIZE}) [bytes]", lo=0, hi=1 << 50, read_only=True)
         self.topics = list(declare(self, "topics", [""], "topics to record ([''] = all)", read_only=True))
         regex = declare(self, "regex", "", "also record topics matching this regular expression", read_only=True)
         exclude = declare(self, "exclude_regex", "", "never record topics matching this", read_only=True)
@@ -123,8 +131,13 @@ class McapRecorder(Node):
             raise InvalidParameterError(f"run_info must be a JSON object: {exc}") from exc
         if layout not in LAYOUTS or compression not in COMPRESSIONS:
             raise InvalidParameterError(f"layout must be one of {LAYOUTS} and compression one of {tuple(COMPRESSIONS)}")
+        if 0 < max_size < MIN_BAG_SIZE:
+            raise InvalidParameterError(f"max_bag_size must be 0 (one file) or >= {MIN_BAG_SIZE} bytes, got {max_size}")
+        if layout == "file" and (max_duration or max_size):
+            raise InvalidParameterError("max_bag_duration / max_bag_size split a bag folder: use layout 'folder'")
         try:
-            self.writer = BagWriter(Path(out or default_output()), layout=layout, compression=compression, chunk_size=chunk_size)
+            self.writer = BagWriter(Path(out or default_output()), layout=layout, compression=compression, chunk_size=chunk_size,
+                                    max_bag_duration=max_duration, max_bag_size=max_size)
         except BagError as exc:
             raise FatalNodeError(str(exc)) from exc
         self.writer.records[RUN_RECORD] = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in info.items()}
@@ -260,7 +273,8 @@ class McapRecorder(Node):
         c = self.counts()
         values = {"path": str(self.writer.path), "received": str(c["received"]), "written": str(c["written"]),
                   "decimated": str(c["decimated"]), "lost_in_transport": str(c["lost_in_transport"]),
-                  "bytes": str(c["bytes"]), "topics": str(len(self._subs)), **self.drops.key_values()}
+                  "bytes": str(c["bytes"]), "topics": str(len(self._subs)), "files": str(len(self.writer.files)),
+                  **self.drops.key_values()}
         unwritten = c["received"] - c["written"] - c["decimated"] - c["held"]
         ok = unwritten == 0 and c["lost_in_transport"] == 0 and self.drops.total == 0
         level = DiagnosticStatus.OK if ok else DiagnosticStatus.WARN
