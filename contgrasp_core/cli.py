@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__, cli_grasp, cli_kinematics, cli_quality, cli_simulate
-from .errors import ContgraspError
+from .errors import ContgraspError, one_line
 
 __all__ = ["build_parser", "main"]
 
@@ -72,11 +72,6 @@ def _summary(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _one_line(exc: BaseException) -> str:
-    """The exception's message on one line (a parser's multi-line message joined with ' | ')."""
-    return " | ".join(line.strip() for line in str(exc).splitlines() if line.strip())
-
-
 def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> int:
     """Entry point of the ``contgrasp`` command; returns the process exit code."""
     parser = build_parser(extra)
@@ -90,12 +85,12 @@ def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> 
     except ContgraspError as exc:
         if args.debug:
             raise
-        print(f"contgrasp {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"contgrasp {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except Exception as exc:  # noqa: BLE001 - the CLI turns every failure into one line
         if args.debug:
             raise
-        print(f"contgrasp {args.command}: failed: {type(exc).__name__}: {_one_line(exc)}", file=sys.stderr)
+        print(f"contgrasp {args.command}: failed: {type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
         return 1
     print(text)
     return 0

@@ -8,6 +8,12 @@ The message always says what was wrong and what the valid range is.
 from __future__ import annotations
 
 
+def one_line(exc: BaseException) -> str:
+    """The exception's message on one line (a parser's multi-line message joined with ' | '),
+    as the command-line tools print it."""
+    return " | ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+
+
 class ContgraspError(ValueError):
     """Base class of every error raised by :mod:`contgrasp_core` for bad input or state."""
 

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.errors import ContgraspError, InvalidParameterError, one_line
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE
 
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
@@ -88,12 +88,31 @@ def _parser() -> argparse.ArgumentParser:
                         "one file); bounds the recorder's memory in long runs")
     p.add_argument("--max-bag-size", type=int, default=0, metavar="BYTES",
                    help=f"split the bag folder into files of about BYTES each (default 0: one file; else >= {MIN_BAG_SIZE})")
+    p.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``contgrasp-launch``; returns the exit code (a failing node's code propagates)."""
+    """Entry point of ``contgrasp-launch``; returns the exit code (a failing node's code propagates).
+
+    An unexpected exception becomes one line on stderr: exit code 2 for bad input
+    (:class:`~contgrasp_core.errors.ContgraspError`), 1 otherwise; ``--debug`` shows the traceback."""
     args = _parser().parse_args(argv)
+    try:
+        return _launch(args, argv)
+    except ContgraspError as exc:
+        if args.debug:
+            raise
+        print(f"contgrasp-launch: error: {one_line(exc)}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # noqa: BLE001 - one line instead of a traceback (--debug shows it)
+        if args.debug:
+            raise
+        print(f"contgrasp-launch: failed: {type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
+        return 1
+
+
+def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     params_file = args.params or default_params_file()
     try:
         params = load_params(params_file)

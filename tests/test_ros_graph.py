@@ -16,6 +16,7 @@ import yaml
 
 pytest.importorskip("contgrasp_msgs.msg")
 
+from contgrasp_core.errors import InvalidParameterError  # noqa: E402
 from contgrasp_core.rod import Obstacle, RodModel, RodSystem  # noqa: E402
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains  # noqa: E402
 from contgrasp_core.rod.session import LoopSession, boundary_from_spec, feedback_at_joints, sense_observation  # noqa: E402
@@ -154,6 +155,27 @@ def test_launcher_keeps_running_when_the_recorder_cannot_write(tmp_path: Path) -
     assert proc.returncode == 1 and out["exit_codes"]["mcap_recorder"] == 1
     assert out["steps"] > 0 and "error" not in out
     assert "cannot record" in proc.stderr and "error" in out["bag"]
+
+
+@pytest.mark.parametrize(("exc", "code", "prefix"), [(RuntimeError("rmw said no\nsecond line"), 1, "failed: RuntimeError: "),
+                                                    (InvalidParameterError("n_elements must be >= 2"), 2, "error: ")])
+def test_launcher_turns_unexpected_errors_into_one_line(monkeypatch, capsys, exc, code, prefix) -> None:  # type: ignore[no-untyped-def]
+    """An exception out of the graph run is one line on stderr (exit 1, or 2 for bad input);
+    --debug shows the traceback instead."""
+    import contgrasp_ros.graph_run
+    from contgrasp_ros import launcher
+
+    def broken(*_a: object, **_k: object) -> None:
+        raise exc
+
+    monkeypatch.setattr(contgrasp_ros.graph_run, "run_graph", broken)
+    for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        monkeypatch.setenv(var, os.environ.get(var, "0"))
+    assert launcher.main(["--no-record", "--domain-id", str(fresh_domain_id())]) == code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"contgrasp-launch: {prefix}{' | '.join(str(exc).splitlines())}"]
+    with pytest.raises(type(exc)):
+        launcher.main(["--no-record", "--debug"])
 
 
 def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
