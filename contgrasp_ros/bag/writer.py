@@ -38,8 +38,6 @@ LAYOUTS = ("folder", "file")
 LIBRARY = "contgrasp mcap_recorder"
 RUN_RECORD = "contgrasp_run"  # MCAP metadata record: how the run was made (launcher parameters, argv)
 RECORDER_RECORD = "contgrasp_recorder"  # MCAP metadata record: the recorder's received/written counts
-
-
 MIN_BAG_SIZE = 64 * 1024  # smallest max_bag_size: a split needs room for at least a chunk or two
 
 
@@ -48,7 +46,7 @@ def _is_int(x: Any) -> bool:
 
 
 def _is_real(x: Any) -> bool:
-    return (isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)) and bool(np.isfinite(x))
+    return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool) and bool(np.isfinite(x))
 
 
 @dataclass
