@@ -27,7 +27,8 @@ import numpy as np
 import yaml
 
 from contgrasp_core.errors import ContgraspError, InvalidParameterError, one_line
-from contgrasp_ros.bag.writer import MIN_BAG_SIZE
+from contgrasp_ros.bag import BagError
+from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
 
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
 
@@ -150,14 +151,10 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         if not (np.isfinite(args.bag_decimate) and args.bag_decimate >= 0):
             print("contgrasp-launch: --bag-decimate must be >= 0", file=sys.stderr)
             return 2
-        if not (np.isfinite(args.max_bag_duration) and 0 <= args.max_bag_duration <= 1e9):
-            print("contgrasp-launch: --max-bag-duration must be in [0, 1e9] seconds", file=sys.stderr)
-            return 2
-        if not (args.max_bag_size == 0 or MIN_BAG_SIZE <= args.max_bag_size <= 1 << 50):
-            print(f"contgrasp-launch: --max-bag-size must be 0 or in [{MIN_BAG_SIZE}, 2**50] bytes", file=sys.stderr)
-            return 2
-        if layout == "file" and (args.max_bag_duration or args.max_bag_size):
-            print("contgrasp-launch: --max-bag-duration / --max-bag-size split a bag folder, not a .mcap file", file=sys.stderr)
+        try:
+            check_split(layout, args.max_bag_duration, args.max_bag_size)
+        except BagError as exc:
+            print(f"contgrasp-launch: --max-bag-duration / --max-bag-size: {exc}", file=sys.stderr)
             return 2
         record = {"output": out, "layout": layout, "run_info": run_info, "exclude_regex": args.bag_exclude,
                   "decimate_period": args.bag_decimate, "max_bag_duration": args.max_bag_duration,

@@ -31,7 +31,7 @@ from .definitions import full_text
 from .errors import BagError
 from .rosbag2 import TopicRecord, bag_metadata, metadata_yaml, offered_qos_yaml
 
-__all__ = ["BagWriter", "COMPRESSIONS", "LAYOUTS", "RUN_RECORD", "RECORDER_RECORD"]
+__all__ = ["BagWriter", "COMPRESSIONS", "LAYOUTS", "RUN_RECORD", "RECORDER_RECORD", "check_split"]
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 LAYOUTS = ("folder", "file")
@@ -47,6 +47,18 @@ def _is_int(x: Any) -> bool:
 
 def _is_real(x: Any) -> bool:
     return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool) and bool(np.isfinite(x))
+
+
+def check_split(layout: str, max_bag_duration: float, max_bag_size: int) -> None:
+    """Validate the split options (the one rule the writer, the recorder node and the launcher
+    apply); raises :class:`BagError` saying what is wrong."""
+    if not _is_real(max_bag_duration) or not 0.0 <= max_bag_duration <= 1e9:
+        raise BagError(f"max_bag_duration must be in [0, 1e9] s (0 = no split), got {max_bag_duration!r}")
+    if not _is_int(max_bag_size) or not (max_bag_size == 0 or MIN_BAG_SIZE <= max_bag_size <= 1 << 50):
+        raise BagError(f"max_bag_size must be 0 (no split) or an integer in [{MIN_BAG_SIZE}, 2**50] bytes, got {max_bag_size!r}")
+    if layout == "file" and (max_bag_duration or max_bag_size):
+        raise BagError("max_bag_duration / max_bag_size split a bag folder; a single .mcap file cannot be split: "
+                       "use layout 'folder'")
 
 
 @dataclass
@@ -92,22 +104,12 @@ class BagWriter:
             raise BagError(f"compression must be one of {tuple(COMPRESSIONS)}, got {self.compression!r}")
         if not _is_int(self.chunk_size) or not 1024 <= self.chunk_size <= 1 << 30:
             raise BagError(f"chunk_size must be an integer in [1 KiB, 1 GiB], got {self.chunk_size!r}")
-        if not _is_real(self.max_bag_duration) or not 0.0 <= self.max_bag_duration <= 1e9:
-            raise BagError(f"max_bag_duration must be in [0, 1e9] s (0 = no split), got {self.max_bag_duration!r}")
-        if not _is_int(self.max_bag_size) or not (self.max_bag_size == 0 or MIN_BAG_SIZE <= self.max_bag_size <= 1 << 50):
-            raise BagError(f"max_bag_size must be 0 (no split) or an integer in [{MIN_BAG_SIZE}, 2**50] bytes, "
-                           f"got {self.max_bag_size!r}")
+        check_split(self.layout, self.max_bag_duration, self.max_bag_size)
         self.split = bool(self.max_bag_duration or self.max_bag_size)
-        if self.layout == "folder":
-            if self.path.exists():
-                raise BagError(f"cannot record to {self.path}: it already exists")
-        else:
-            if self.path.suffix != ".mcap":
-                raise BagError(f"a single-file recording must end in .mcap, got {self.path}")
-            if self.path.exists():
-                raise BagError(f"cannot record to {self.path}: it already exists")
-            if self.split:
-                raise BagError("max_bag_duration / max_bag_size split a bag folder; a single .mcap file cannot be split")
+        if self.layout == "file" and self.path.suffix != ".mcap":
+            raise BagError(f"a single-file recording must end in .mcap, got {self.path}")
+        if self.path.exists():
+            raise BagError(f"cannot record to {self.path}: it already exists")
         self.topics: dict[str, _Topic] = {}
         self.records: dict[str, dict[str, str]] = {}  # extra MCAP metadata records written at close
         self.files: list[_File] = []

@@ -52,7 +52,7 @@ from contgrasp_ros import qos
 from contgrasp_ros.bag.definitions import full_text
 from contgrasp_ros.bag.errors import BagError
 from contgrasp_ros.bag.rosbag2 import qos_profile_dict
-from contgrasp_ros.bag.writer import COMPRESSIONS, LAYOUTS, MIN_BAG_SIZE, RECORDER_RECORD, RUN_RECORD, BagWriter
+from contgrasp_ros.bag.writer import COMPRESSIONS, LAYOUTS, MIN_BAG_SIZE, RECORDER_RECORD, RUN_RECORD, BagWriter, check_split
 from contgrasp_ros.runtime import DropCounter, FatalNodeError, declare, guarded, run_node
 
 
@@ -131,10 +131,10 @@ class McapRecorder(Node):
             raise InvalidParameterError(f"run_info must be a JSON object: {exc}") from exc
         if layout not in LAYOUTS or compression not in COMPRESSIONS:
             raise InvalidParameterError(f"layout must be one of {LAYOUTS} and compression one of {tuple(COMPRESSIONS)}")
-        if 0 < max_size < MIN_BAG_SIZE:
-            raise InvalidParameterError(f"max_bag_size must be 0 (one file) or >= {MIN_BAG_SIZE} bytes, got {max_size}")
-        if layout == "file" and (max_duration or max_size):
-            raise InvalidParameterError("max_bag_duration / max_bag_size split a bag folder: use layout 'folder'")
+        try:
+            check_split(layout, max_duration, max_size)
+        except BagError as exc:
+            raise InvalidParameterError(str(exc)) from exc
         try:
             self.writer = BagWriter(Path(out or default_output()), layout=layout, compression=compression, chunk_size=chunk_size,
                                     max_bag_duration=max_duration, max_bag_size=max_size)
