@@ -11,7 +11,7 @@ import argparse
 
 import numpy as np
 
-from contgrasp_core.sweep import METRICS, MapSpec, quality_map
+from contgrasp_core.quality_map import METRICS, MapSpec, quality_map
 
 
 def main() -> None:

@@ -33,14 +33,14 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small banded solves: threa
 
 import numpy as np  # noqa: E402
 
-from contgrasp_core.optimal import paper_problem, solve, sweep
+from contgrasp_core.optimal import paper_problem, solve, forward_backward
 
 
 def largest_stable_eta(problem, probe_iterations: int = 300, lo: float = 1e-6, hi: float = 1e-3) -> float:
     etas = lo * np.sqrt(2.0) ** np.arange(int(np.log(hi / lo) / np.log(np.sqrt(2.0))) + 1)
     best = lo
     for eta in etas:
-        r = sweep(problem, eta=float(eta), max_iterations=probe_iterations)
+        r = forward_backward(problem, eta=float(eta), max_iterations=probe_iterations)
         hist = r.history["cost"]
         ok = r.iterations == probe_iterations and np.all(np.isfinite(hist)) and hist[-1] < hist[0]
         if not ok:
@@ -74,12 +74,12 @@ def main() -> None:
         fast_err = abs(fast.cost - j_star) / j_star
         t_default = statistics.median([solve(p).wall_time for _ in range(6)])
         # (a) the paper's eta
-        a = sweep(p, eta=1e-6, max_iterations=args.paper_budget, target_cost=target)
+        a = forward_backward(p, eta=1e-6, max_iterations=args.paper_budget, target_cost=target)
         a_err = (a.cost - j_star) / j_star
         # (b) best stable eta
         eta_b = largest_stable_eta(p)
         while True:
-            b = sweep(p, eta=eta_b, max_iterations=args.max_sweep, target_cost=target)
+            b = forward_backward(p, eta=eta_b, max_iterations=args.max_sweep, target_cost=target)
             if b.converged or "diverged" not in b.message and "singular" not in b.message:
                 break
             eta_b /= np.sqrt(2.0)

@@ -28,17 +28,17 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from contgrasp_core.sweep import MapSpec, _problem, disc_pose, quality_map  # noqa: E402
+from contgrasp_core.quality_map import MapSpec, _problem, disc_pose, quality_map  # noqa: E402
 
 
 def paper_pose_seconds(spec: MapSpec, psi: float, d: float, budget: float) -> tuple[float, bool]:
-    from contgrasp_core.optimal import solve, sweep
+    from contgrasp_core.optimal import solve, forward_backward
 
     boundary = spec.boundary()
     problem = _problem(spec, boundary, disc_pose(boundary, psi, d))
     best = solve(problem, tol=1e-10)
     t0 = time.perf_counter()
-    res = sweep(problem, eta=1e-6, gradient="paper", max_iterations=10**9, target_cost=1.01 * best.cost, time_budget=budget)
+    res = forward_backward(problem, eta=1e-6, gradient="paper", max_iterations=10**9, target_cost=1.01 * best.cost, time_budget=budget)
     secs = time.perf_counter() - t0
     return secs, bool(res.cost <= 1.01 * best.cost)
 

@@ -41,9 +41,10 @@ import numpy as np  # noqa: E402
 
 from contgrasp_core.boundary import circle  # noqa: E402
 from contgrasp_core.errors import InvalidParameterError  # noqa: E402
-from contgrasp_core.feedback import feedback_couple  # noqa: E402
+from contgrasp_core.control.law import feedback_couple  # noqa: E402
 from contgrasp_core.rod import Obstacle, RodModel, RodSystem  # noqa: E402
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains, run_closed_loop  # noqa: E402
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop  # noqa: E402
+from contgrasp_core.control import paper_gains  # noqa: E402
 from contgrasp_core.rod.scenario import paper_model  # noqa: E402
 
 

@@ -31,8 +31,10 @@ from pathlib import Path
 import yaml
 
 from contgrasp_core.rod import Obstacle, RodModel, RodSystem
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains
-from contgrasp_core.rod.session import LoopSession, boundary_from_spec, feedback_at_joints, sense_observation
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig
+from contgrasp_core.control import paper_gains
+from contgrasp_core.rod.session import LoopSession, boundary_from_spec, sense_observation
+from contgrasp_core.control import feedback_at_joints
 from contgrasp_ros.launcher import default_params_file, load_params
 
 

@@ -477,7 +477,7 @@ def settle_recomputed(run: RunData) -> tuple[bool | None, float | None]:
 
 
 def history(run: RunData, period: float = 0.01) -> list[dict[str, Any]]:
-    """Snapshots for :func:`contgrasp_ros.figure.run_figure`, picked like the launcher's monitor
+    """Snapshots for :func:`contgrasp_core.figures.run.run_figure`, picked like the launcher's monitor
     (a rod state and contact state of the same step, at least ``period`` s of sim time apart)."""
     c = run.contact
     if c is None:
@@ -629,10 +629,10 @@ def quality_plot_path(path: str | Path) -> Path:
 
 
 def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: float | None = None) -> dict[str, Any]:
-    """Two figures: ``path``, the Fig. 4-style figure (:func:`contgrasp_ros.figure.run_figure`,
+    """Two figures: ``path``, the Fig. 4-style figure (:func:`contgrasp_core.figures.run.run_figure`,
     needs the run's parameters and paired rod/contact states), and :func:`quality_plot_path`,
     Q1, Q2, Q3 over sim time as recorded (line) and recomputed from the rod states (crosses)."""
-    from contgrasp_core.plots import plt, save  # Agg backend, set by contgrasp_core.plots
+    from contgrasp_core.figures.run import quality_history_figure, run_figure
 
     out: dict[str, Any] = {"figure": None, "quality": None}
     hist = history(run)
@@ -642,8 +642,6 @@ def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: 
         elif not hist:
             out["figure_skipped"] = "no rod state and contact state of the same step were recorded"
         else:
-            from contgrasp_ros.figure import run_figure
-
             run_figure({"history": hist}, run.params, str(path))
             out["figure"] = str(path)
         q = run.quality
@@ -651,21 +649,8 @@ def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: 
             out["quality_skipped"] = f"no {TOPIC_QUALITY} messages were recorded"
             return out
         qpath = quality_plot_path(path)
-        fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
-        labels = ("Q1 = lambda_min(W)", "Q2 = det W", "Q3 = lambda_min / lambda_max")
-        for n, (ax, rec_vals, label) in enumerate(zip(axes, (q.q1, q.q2, q.q3), labels, strict=True)):
-            ax.plot(q.t, rec_vals, "-", color="tab:blue", lw=1.2, label="recorded")
-            if len(rc.quality_index):
-                ax.plot(q.t[rc.quality_index], rc.quality[:, n], "x", color="tab:red", ms=5, label="recomputed")
-            if settle_time is not None:
-                ax.axvline(settle_time, color="0.5", ls=":", lw=1.0, label="settled")
-            ax.set_ylabel(label)
-            ax.grid(alpha=0.3)
-        axes[0].legend(fontsize=8)
-        axes[0].set_title("continuum grasp quality (Sec. IV) over the run")
-        axes[-1].set_xlabel("sim time t [s]")
-        fig.tight_layout()
-        save(fig, str(qpath))
+        quality_history_figure(q.t, (q.q1, q.q2, q.q3), str(qpath), recomputed_t=q.t[rc.quality_index],
+                               recomputed=rc.quality, settle_time=settle_time)
         out["quality"] = str(qpath)
     except (OSError, ValueError) as exc:
         if isinstance(exc, ContgraspError):

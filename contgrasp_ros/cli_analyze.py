@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Analyse ``args.bag``; the result dict (see :func:`contgrasp_ros.analysis.summarize`).
     The output paths are checked first, so a typo does not cost an analysis."""
     if args.plot is not None:
-        from contgrasp_core.plots import check_figure_path
+        from contgrasp_core.figures.draw import check_figure_path
 
         check_figure_path(args.plot)
     if args.csv is not None and args.csv.exists() and not args.csv.is_dir():

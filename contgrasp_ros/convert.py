@@ -21,7 +21,8 @@ from contgrasp_core.boundary import Boundary, from_points
 from contgrasp_core.contact import ContactState
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.quality import GraspQuality
-from contgrasp_core.rod.session import FeedbackExpansion, boundary_from_spec
+from contgrasp_core.rod.session import boundary_from_spec
+from contgrasp_core.control import FeedbackExpansion
 
 if TYPE_CHECKING:
     from contgrasp_msgs.msg import ContactState as ContactStateMsg

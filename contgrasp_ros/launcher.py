@@ -169,7 +169,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
     if args.plot is not None and summary.get("history"):
-        from contgrasp_ros.figure import run_figure
+        from contgrasp_core.figures.run import run_figure
 
         run_figure(summary, params, str(args.plot))
         summary["plot"] = str(args.plot)

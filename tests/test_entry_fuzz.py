@@ -48,10 +48,10 @@ from hypothesis import strategies as st
 from contgrasp_core import arm as A
 from contgrasp_core import boundary as B
 from contgrasp_core import contact as C
-from contgrasp_core import feedback as F
+from contgrasp_core.control import law as F
 from contgrasp_core import optimal as O
 from contgrasp_core import quality as Q
-from contgrasp_core import sweep as S
+from contgrasp_core import quality_map as S
 from contgrasp_core.errors import ContgraspError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -418,14 +418,14 @@ def test_solve(problem, initial, tol, max_iterations, max_outer, constraint_tol,
        tol=st.one_of(st.just(1e-6), num(0.0, 1.0)), target_cost=st.one_of(st.none(), num(-1.0, 1e3)),
        time_budget=st.one_of(st.none(), st.just(5.0), num(0.0, 5.0)))
 def test_sweep_solver(problem, eta, max_iterations, gradient, initial, tol, target_cost, time_budget) -> None:  # type: ignore[no-untyped-def]
-    call(O.sweep, problem, eta=eta, max_iterations=max_iterations, gradient=gradient, initial=initial, tol=tol,
+    call(O.forward_backward, problem, eta=eta, max_iterations=max_iterations, gradient=gradient, initial=initial, tol=tol,
          target_cost=target_cost, time_budget=time_budget, finite=result_values)
 
 
 @FAST
 @given(name=st.sampled_from(["circle", "ellipse", "deformed"]), rho0=st.floats(1e-9, 200.0), alpha0=st.floats(1e-9, np.pi - 1e-9),
        s_o0=st.floats(-100.0, 100.0), chi=st.floats(1e-9, 1e9), rho_d=st.one_of(st.none(), st.floats(-5.0, 50.0)),
-       alpha_d=st.floats(-10.0, 10.0), solver=st.sampled_from(["fast", "fast-zero", "sweep"]))
+       alpha_d=st.floats(-10.0, 10.0), solver=st.sampled_from(["fast", "fast-zero", "forward-backward"]))
 def test_solvers_on_random_valid_problems(name, rho0, alpha0, s_o0, chi, rho_d, alpha_d, solver) -> None:  # type: ignore[no-untyped-def]
     """Valid but extreme problems: the solvers return finite results (converged or not) or a
     ContgraspError (e.g. an initial state with 1 + rho kappa_o <= 0 on the deformed circle)."""
@@ -434,8 +434,8 @@ def test_solvers_on_random_valid_problems(name, rho0, alpha0, s_o0, chi, rho_d, 
                    finite=lambda p: [p.disc.x0])
     if problem is None:
         return
-    if solver == "sweep":
-        call(O.sweep, problem, eta=1e-3, max_iterations=20, finite=result_values)
+    if solver == "forward-backward":
+        call(O.forward_backward, problem, eta=1e-3, max_iterations=20, finite=result_values)
     else:
         call(O.solve, problem, initial="zero" if solver == "fast-zero" else None, max_iterations=40, finite=result_values)
 
@@ -696,7 +696,7 @@ def grasp_argv(draw: Any, files: dict[str, Path]) -> list[str]:
         "--s-o0": (st.sampled_from(["0", "2"]), st.sampled_from(["nan", "inf", "1e300", "x"])),
         "--chi": (st.sampled_from(["10", "1"]), st.sampled_from(BAD_NUMBERS)),
         "--nodes": (st.sampled_from(["60", "100"]), st.sampled_from(BAD_COUNTS + ["2"])),
-        "--solver": (st.sampled_from(["fast", "sweep"]), st.sampled_from(["newton", ""])),
+        "--solver": (st.sampled_from(["fast", "forward-backward"]), st.sampled_from(["newton", ""])),
         "--eta": (st.sampled_from(["1e-6", "0.01"]), st.sampled_from(["nan", "inf", "-inf", "-1", "0", "-1e300", "x"])),
         "--gradient": (st.sampled_from(["paper", "exact"]), st.sampled_from(["adjoint"])),
         "--max-iterations": (st.sampled_from(["5", "50"]), st.sampled_from(["0", "-3", "2.5", "x"])),
@@ -845,7 +845,7 @@ def test_cli_json_output_has_no_nan(capsys, monkeypatch) -> None:  # type: ignor
     """A result holding numpy NaN scalars prints valid JSON (null), not a traceback."""
     import json
 
-    from contgrasp_core import cli_kinematics
+    from contgrasp_core.cli import kinematics as cli_kinematics
 
     monkeypatch.setattr(cli_kinematics, "run", lambda args: {"x": np.float64("nan"), "y": [np.float32(np.inf)]})
     from contgrasp_core.cli import main

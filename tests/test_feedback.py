@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.feedback import (
+from contgrasp_core.control.law import (
     CENTIMETRE,
     adaptive_mu2,
     closed_loop_kinematics,
@@ -134,9 +134,9 @@ def test_validation_of_inputs():
 
 def test_feedback_expansion_gains_are_the_law_derivatives() -> None:
     """du/drho and du/dalpha of the controller's expansion against central differences."""
-    from contgrasp_core.rod.closed_loop import paper_gains
+    from contgrasp_core.control import paper_gains
     from contgrasp_core.rod.scenario import paper_model
-    from contgrasp_core.rod.session import feedback_at_joints
+    from contgrasp_core.control import feedback_at_joints
 
     model = paper_model(20)
     gains = paper_gains(model, 0.025)

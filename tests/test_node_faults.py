@@ -784,8 +784,9 @@ def test_deep_penetration_fails_the_run_at_once(make) -> None:  # type: ignore[n
 
 def test_paper_scale_limits_do_not_trip_a_normal_run(make) -> None:  # type: ignore[no-untyped-def]
     """A short lock-step run with the controller's law: no failure with the default limits."""
-    from contgrasp_core.rod.closed_loop import paper_gains
-    from contgrasp_core.rod.session import feedback_at_joints, sense_observation
+    from contgrasp_core.control import paper_gains
+    from contgrasp_core.rod.session import sense_observation
+    from contgrasp_core.control import feedback_at_joints
     from contgrasp_ros.convert import couple_to_msg
     from contgrasp_ros.nodes.rod_simulator import _stamp
 

@@ -15,7 +15,7 @@ from contgrasp_core.optimal import (
     paper_problem,
     problem_from_base,
     solve,
-    sweep,
+    forward_backward,
 )
 from contgrasp_core.optimal.discrete import (
     CurvatureTable,
@@ -143,7 +143,7 @@ def test_fast_solver_and_long_sweep_reach_the_same_optimum():
         p = _small_problem(boundary)
         f = solve(p, tol=1e-12)
         assert f.converged
-        sw = sweep(p, eta=1e-3, gradient="exact", tol=1e-5, initial="zero", max_iterations=30000)
+        sw = forward_backward(p, eta=1e-3, gradient="exact", tol=1e-5, initial="zero", max_iterations=30000)
         assert sw.converged, sw.message
         assert abs(sw.cost - f.cost) <= 1e-9 * f.cost
         assert np.max(np.abs(sw.kappa - f.kappa)) < 2e-5
@@ -153,7 +153,7 @@ def test_fast_solver_and_long_sweep_reach_the_same_optimum():
         assert np.all(np.diff(tail) <= 1e-12 * f.cost)
     # On the ellipse the paper's costates (frozen kappa_o) stop at a different point: the exact
     # PMP residual stays finite while the paper's own residual vanishes.
-    pp = sweep(p, eta=1e-3, gradient="paper", tol=1e-5, initial="zero", max_iterations=30000)
+    pp = forward_backward(p, eta=1e-3, gradient="paper", tol=1e-5, initial="zero", max_iterations=30000)
     assert pp.converged
     assert pp.residual > 1e-4
     assert pp.cost > f.cost
@@ -453,7 +453,7 @@ def test_sweep_reports_inadmissible_iterates_without_aborting():
     p = grasp_problem(b, rho0=0.3, alpha0=1.0, arm=Arm(5.0, 0.3), nodes=41)
     x = solve_states(p.disc, np.zeros(41))
     assert np.min(x[:, 0]) < 0.0  # the initial iterate passes through the object
-    r = sweep(p, eta=3e-4, initial="zero", gradient="exact", max_iterations=1500)
+    r = forward_backward(p, eta=3e-4, initial="zero", gradient="exact", max_iterations=1500)
     c = r.constraints
     assert r.iterations == 1500  # ran on through the inadmissible phase
     assert c.inadmissible_iterations >= 1 and c.first_inadmissible == 0
@@ -513,7 +513,7 @@ def test_desired_profile_of_wrong_length_is_rejected():
 def test_bad_solver_settings_are_rejected():
     p = paper_problem("circle", nodes=30)
     with pytest.raises(InvalidParameterError, match="eta"):
-        sweep(p, eta=0.0)
+        forward_backward(p, eta=0.0)
     with pytest.raises(InvalidParameterError, match="tol"):
         solve(p, tol=-1.0)
     with pytest.raises(InvalidParameterError, match="cost_tol"):
@@ -534,7 +534,7 @@ def test_result_dictionary_has_the_cli_keys(paper_solutions):
 def _parse(argv):
     import argparse
 
-    from contgrasp_core import cli_grasp
+    from contgrasp_core.cli import grasp as cli_grasp
 
     parser = argparse.ArgumentParser()
     sub = parser.add_subparsers(dest="command", required=True)
@@ -554,7 +554,7 @@ def test_cli_grasp_returns_the_solution_and_writes_a_plot(tmp_path):
 
 
 def test_cli_grasp_sweep_and_bad_input():
-    args = _parse(["grasp", "--solver", "sweep", "--nodes", "60", "--max-iterations", "20"])
+    args = _parse(["grasp", "--solver", "forward-backward", "--nodes", "60", "--max-iterations", "20"])
     res = args.func(args)
     assert res["iterations"] == 20 and not res["converged"]
     assert len(res["cost_history"]) == 21

@@ -12,7 +12,8 @@ from contgrasp_core.boundary import circle, deformed_circle, ellipse
 from contgrasp_core.contact import sense
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import Obstacle, RodSystem, chain
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains, run_closed_loop, sense_nodes
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop, sense_nodes
+from contgrasp_core.control import paper_gains
 from contgrasp_core.rod.scenario import paper_model, paper_object
 
 _wrap = lambda a: np.mod(a + np.pi, 2 * np.pi) - np.pi  # noqa: E731
@@ -71,7 +72,7 @@ def test_paper_scenario_grasps_and_settles(paper_run):
 
 
 def test_paper_scenario_matches_static_theory_where_unobstructed(paper_run):
-    from contgrasp_core.cli_simulate import static_solution
+    from contgrasp_core.control import static_solution
 
     res, m = paper_run, paper_run.model
     s, rho_th, alpha_th = static_solution(res, 0.025)
@@ -110,7 +111,7 @@ def test_closed_loop_rejects_bad_config():
 
 
 def test_simulate_subcommand_json_and_plot(tmp_path):
-    from contgrasp_core import cli_simulate
+    from contgrasp_core.cli import simulate as cli_simulate
 
     ap = argparse.ArgumentParser()
     sub = ap.add_subparsers()
@@ -135,9 +136,11 @@ def test_held_expansion_is_the_law_to_first_order() -> None:
     import numpy as np
 
     from contgrasp_core.rod import Obstacle, RodSystem
-    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig
+    from contgrasp_core.control import paper_gains
     from contgrasp_core.rod.scenario import paper_model, paper_object
-    from contgrasp_core.rod.session import HeldExpansion, LoopSession, feedback_at_joints, sense_observation
+    from contgrasp_core.rod.session import LoopSession, sense_observation
+    from contgrasp_core.control import feedback_at_joints, HeldExpansion
 
     model, obj = paper_model(30), paper_object()
     system = RodSystem(model, Obstacle(obj))

@@ -172,8 +172,8 @@ def _contact_case(method: str, feedback: str):
     from contgrasp_core.boundary import circle, deformed_circle
     from contgrasp_core.rod import Obstacle
     from contgrasp_core.rod.closed_loop import sense_nodes
-    from contgrasp_core.rod.control import StateFeedback, paper_gains
-    from contgrasp_core.rod.session import HeldExpansion, feedback_at_joints
+    from contgrasp_core.control import paper_gains, StateFeedback
+    from contgrasp_core.control import feedback_at_joints, HeldExpansion
 
     n = 14
     model = RodModel(length=0.2, n_elements=n, radius_base=0.01, radius_tip=0.001, density=1042.0,

@@ -18,8 +18,10 @@ pytest.importorskip("contgrasp_msgs.msg")
 
 from contgrasp_core.errors import InvalidParameterError  # noqa: E402
 from contgrasp_core.rod import Obstacle, RodModel, RodSystem  # noqa: E402
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains  # noqa: E402
-from contgrasp_core.rod.session import LoopSession, boundary_from_spec, feedback_at_joints, sense_observation  # noqa: E402
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig  # noqa: E402
+from contgrasp_core.control import paper_gains  # noqa: E402
+from contgrasp_core.rod.session import LoopSession, boundary_from_spec, sense_observation  # noqa: E402
+from contgrasp_core.control import feedback_at_joints  # noqa: E402
 from contgrasp_ros.launcher import default_params_file, load_params  # noqa: E402
 
 from conftest import fresh_domain_id  # noqa: E402

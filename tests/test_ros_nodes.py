@@ -158,8 +158,8 @@ def _paper_model(n: int = 12):  # type: ignore[no-untyped-def]
 def test_grasp_controller_matches_core_and_takes_new_gains(graph) -> None:  # type: ignore[no-untyped-def]
     from rclpy.parameter import Parameter
 
-    from contgrasp_core.rod.closed_loop import paper_gains
-    from contgrasp_core.rod.session import feedback_at_joints
+    from contgrasp_core.control import paper_gains
+    from contgrasp_core.control import feedback_at_joints
     from contgrasp_msgs.msg import CoupleControl
     from contgrasp_ros.nodes.grasp_controller import GraspController
 

@@ -4,7 +4,7 @@
   discretised instance (:class:`GraspProblem`).
 * :func:`solve` - the fast default solver: Newton on the KKT system of the discretised problem
   with the exact discrete adjoint gradient (including d kappa_o / d s_o).
-* :func:`sweep` - the paper's forward-backward sweep (eq. forward_backward), kept as the
+* :func:`forward_backward` - the paper's forward-backward sweep (eq. forward_backward), kept as the
   reference baseline (eta = 1e-6, chi = 10 by default).
 * :func:`gradient` - the exact gradient of the discretised cost (for checks and custom solvers).
 
@@ -29,7 +29,7 @@ from .problem import (
     paper_problem,
     problem_from_base,
 )
-from .sweep import sweep
+from .forward_backward import forward_backward
 
 __all__ = [
     "PAPER_SETTINGS",
@@ -40,7 +40,7 @@ __all__ = [
     "paper_problem",
     "problem_from_base",
     "solve",
-    "sweep",
+    "forward_backward",
     "cost",
     "gradient",
 ]

@@ -2,12 +2,12 @@
 
 Reduced coordinates (element angles; exactly inextensible and unshearable), implicit
 time stepping with Newton, drag, damping, couple control and penalty contact with any
-:class:`~contgrasp_core.boundary.Boundary`; a closed-loop runner for the feedback law.
+:class:`~contgrasp_core.boundary.Boundary`; a closed-loop runner for the feedback law of
+:mod:`contgrasp_core.control`.
 See ``docs/rod.md``.
 """
 
 from contgrasp_core.rod import chain
-from contgrasp_core.rod.control import FeedbackGains, StateFeedback, paper_gains
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem, StepFailedError, StepOptions
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle, ObstacleProjection
@@ -21,8 +21,5 @@ __all__ = [
     "StepFailedError",
     "Obstacle",
     "ObstacleProjection",
-    "FeedbackGains",
-    "StateFeedback",
-    "paper_gains",
     "chain",
 ]

@@ -3,7 +3,7 @@
 Two ways to close the loop:
 
 * ``control_period=None`` (default): continuous feedback. The law is evaluated on the rod's own
-  state inside every implicit step (:class:`~contgrasp_core.rod.control.StateFeedback`), which is
+  state inside every implicit step (:class:`~contgrasp_core.control.StateFeedback`), which is
   the continuous-time loop of paper Prop. 2 and stays stable at large steps ``dt``.
 * ``control_period=T``: sampled feedback. Every ``T`` seconds the runner senses ``(rho, alpha)``
   at the rod nodes from the current centreline (eq. rho_alpha_definition), evaluates the couple of
@@ -24,15 +24,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from contgrasp_core.control.gains import FeedbackGains
+from contgrasp_core.control.law import feedback_couple
+from contgrasp_core.control.rod_feedback import StateFeedback
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.feedback import feedback_couple
 from contgrasp_core.rod import chain
-from contgrasp_core.rod.control import FeedbackGains, StateFeedback, paper_gains
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["FeedbackGains", "paper_gains", "StateFeedback", "NodeSensing", "sense_nodes", "ClosedLoopConfig",
+__all__ = ["NodeSensing", "sense_nodes", "ClosedLoopConfig",
            "ClosedLoopResult", "run_closed_loop"]
 
 

@@ -36,12 +36,12 @@ Newton iterate is extrapolated from the previous step's rate change.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import chain
-from contgrasp_core.rod.control import StateFeedback
 from contgrasp_core.rod.loads import contact_forces, contact_frame, contact_tensors, drag_forces
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
@@ -62,16 +62,26 @@ class RodState:
     omega: np.ndarray
 
 
+class CoupleFeedback(Protocol):
+    """A joint couple that depends on the rod state, applied implicitly inside Newton: its value
+    (N,) at element angles ``theta`` and, with ``jacobian``, its derivative ``du/dtheta`` (N, N).
+    ``nodes`` (N+1, 2) and element ``normals`` (N, 2) are passed when already computed."""
+
+    def couple_and_jacobian(self, theta: np.ndarray, *, jacobian: bool = True, nodes: np.ndarray | None = None,
+                            normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]: ...
+
+
 @dataclass(frozen=True)
 class RodLoads:
     """Applied loads: internal couple control ``couple`` at the joints ``s_k = k h`` (N,) in N m
     (eq. dynamics ``u``, held over the step), point forces on the nodes (N+1, 2) in N, and an
-    optional state feedback (:class:`~contgrasp_core.rod.control.StateFeedback`) whose couple is
-    evaluated implicitly at the new state and added to ``couple``."""
+    optional state feedback (a :class:`CoupleFeedback`, e.g.
+    :class:`~contgrasp_core.control.StateFeedback`) whose couple is evaluated implicitly at the new
+    state and added to ``couple``."""
 
     couple: np.ndarray | None = None
     node_forces: np.ndarray | None = None
-    feedback: StateFeedback | None = None
+    feedback: CoupleFeedback | None = None
 
 
 @dataclass(frozen=True)

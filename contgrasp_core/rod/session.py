@@ -6,10 +6,10 @@ One control cycle k (paper Sec. V-B):
    publishes) and the settle/duration bookkeeping;
 2. :func:`sense_observation` - geometric sensing of (rho, alpha, delta, s_o) from those arrays
    (:func:`contgrasp_core.contact.sense`, eq. rho_alpha_definition) (what the sensor does);
-3. :func:`feedback_at_joints` - the couple of eq. dynamic_feedback at the joints and its
+3. :func:`contgrasp_core.control.feedback_at_joints` - the couple of eq. dynamic_feedback at the joints and its
    first-order expansion in (rho, alpha) (what the controller does);
 4. :meth:`LoopSession.advance` - hold the couple, to first order in the state
-   (:class:`HeldExpansion`), for one control period (the integrator's substeps) to reach
+   (:class:`contgrasp_core.control.HeldExpansion`), for one control period (the integrator's substeps) to reach
    state k + 1 (what the simulator does when the couple arrives).
 
 :meth:`LoopSession.check_divergence` tells a broken run (NaN/Inf state, penetration or kinetic
@@ -30,23 +30,17 @@ from contgrasp_core.arm import ArmShape
 from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse
 from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
-from contgrasp_core.feedback import feedback_couple, feedback_couple_gradient
+from contgrasp_core.control.rod_feedback import FeedbackExpansion, HeldExpansion
 from contgrasp_core.rod import chain
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, FeedbackGains
-from contgrasp_core.rod.control import joint_couple_jacobian, sense_joints
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
-from contgrasp_core.rod.model import RodModel
-from contgrasp_core.rod.obstacle import Obstacle
 
 __all__ = [
     "Observation",
     "LoopSession",
     "DivergenceLimits",
     "SimulationDivergedError",
-    "FeedbackExpansion",
-    "HeldExpansion",
     "sense_observation",
-    "feedback_at_joints",
     "boundary_from_spec",
 ]
 
@@ -233,64 +227,6 @@ class LoopSession:
 def sense_observation(obs: Observation, boundary: Boundary, tol: float = 0.0) -> ContactState:
     """Geometric sensing at the rod nodes (eq. rho_alpha_definition, eq. delta, Definition 1)."""
     return sense(ArmShape(s=obs.s, r=obs.x, theta=obs.theta), boundary, obs.radius, tol=tol)
-
-
-@dataclass(frozen=True)
-class FeedbackExpansion:
-    """The feedback law at the N joints, expanded to first order about the sensed state:
-    ``u(rho, alpha) ~ u + g_rho (rho - rho_ref) + g_alpha (alpha - alpha_ref)`` (N m, N m/m, N m/rad)."""
-
-    u: Array
-    rho_ref: Array
-    alpha_ref: Array
-    g_rho: Array
-    g_alpha: Array
-
-
-def feedback_at_joints(model: RodModel, gains: FeedbackGains, rho: Array, alpha: Array) -> FeedbackExpansion:
-    """Couple of eq. dynamic_feedback at the N joints from (rho, alpha) sensed at the N+1 nodes,
-    with its partial derivatives ``du/drho = -EI sin(alpha) / l^2`` and
-    ``du/dalpha = -EI (mu1 sin(alpha) + (rho/l - mu2) cos(alpha)) / l`` (l the law's length unit)."""
-    rho, alpha = np.asarray(rho, dtype=float), np.asarray(alpha, dtype=float)
-    n = model.n_elements
-    if rho.shape != (n + 1,) or alpha.shape != (n + 1,):
-        raise InvalidParameterError(f"rho and alpha must be given at the {n + 1} nodes, got {rho.shape}, {alpha.shape}")
-    r, a = rho[:-1], alpha[:-1]
-    lu, ei = gains.length_unit, model.joint_ei
-    u = feedback_couple(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
-    g_rho, g_alpha = feedback_couple_gradient(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
-    return FeedbackExpansion(u=u, rho_ref=r, alpha_ref=a, g_rho=g_rho, g_alpha=g_alpha)
-
-
-@dataclass(frozen=True)
-class HeldExpansion:
-    """First-order hold of the feedback law in the STATE (not in time).
-
-    Between samples the integrator adds ``g_rho (rho(theta) - rho_ref) + g_alpha (alpha(theta) -
-    alpha_ref)`` to the held couple, with (rho, alpha)(theta) sensed on the rod at the new state
-    inside every Newton iteration, and its derivative to the Newton matrix. A plain zero-order
-    hold of this law is unstable at any practical control rate (the law acts like a stiffness at
-    the element scale, where the tapered tip's bending modes reach ~1000 rad/s; measured: the
-    arm crumples at a 1 kHz hold); holding the expansion keeps the continuous law's stability
-    while the controller still only runs once per control period.
-    """
-
-    model: RodModel
-    obstacle: Obstacle
-    expansion: FeedbackExpansion
-
-    def couple_and_jacobian(
-        self, theta: Array, *, jacobian: bool = True, nodes: Array | None = None, normals: Array | None = None
-    ) -> tuple[Array, Array | None]:
-        """Deviation of the couple from the held value (N,) and its derivative (N, N)."""
-        m, e = self.model, self.expansion
-        js = sense_joints(m, self.obstacle, theta, nodes)
-        d_alpha = np.mod(js.alpha - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
-        du = e.g_rho * (js.rho - e.rho_ref) + e.g_alpha * d_alpha
-        if not jacobian:
-            return du, None
-        b = chain.frames(theta)[1] if normals is None else normals
-        return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, js, b)
 
 
 def boundary_from_spec(kind: str, params: list[float] | Array) -> Boundary:

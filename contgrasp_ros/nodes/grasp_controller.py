@@ -16,9 +16,9 @@ import numpy as np
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
-from contgrasp_core.feedback import CENTIMETRE
-from contgrasp_core.rod.closed_loop import FeedbackGains, paper_gains
-from contgrasp_core.rod.session import feedback_at_joints
+from contgrasp_core.control.law import CENTIMETRE
+from contgrasp_core.control import FeedbackGains, paper_gains
+from contgrasp_core.control import feedback_at_joints
 from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros import qos
 from contgrasp_ros.convert import MessageError, contact_arrays, couple_to_msg, require_finite

@@ -34,7 +34,8 @@ from visualization_msgs.msg import MarkerArray
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.rod import Obstacle, RodSystem
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
-from contgrasp_core.rod.session import DivergenceLimits, FeedbackExpansion, LoopSession, boundary_from_spec
+from contgrasp_core.rod.session import DivergenceLimits, LoopSession, boundary_from_spec
+from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_ros import qos
 from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays

@@ -26,8 +26,10 @@ def lockstep_paper_run() -> dict[str, Any]:
     """The ROS graph's paper scenario (packaged YAML, 2 ms control period, held expansion),
     stepped with the core functions only, as the nodes step it."""
     from contgrasp_core.rod import Obstacle, RodModel, RodSystem
-    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains
-    from contgrasp_core.rod.session import LoopSession, boundary_from_spec, feedback_at_joints, sense_observation
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig
+    from contgrasp_core.control import paper_gains
+    from contgrasp_core.rod.session import LoopSession, boundary_from_spec, sense_observation
+    from contgrasp_core.control import feedback_at_joints
 
     model = RodModel(length=0.20, n_elements=100, radius_base=0.01, radius_tip=0.001, density=1042.0,
                      youngs_modulus=1.0e4, damping=1.0, drag_normal=5110.0, drag_tangential=25.55,
@@ -48,7 +50,8 @@ def closed_loop_continuous() -> dict[str, Any]:
     """``contgrasp simulate``'s default run: continuous implicit feedback, dt 10 ms."""
     from contgrasp_core.boundary import circle
     from contgrasp_core.rod import Obstacle, RodSystem
-    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, paper_gains, run_closed_loop
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
+    from contgrasp_core.control import paper_gains
     from contgrasp_core.rod.scenario import paper_model
 
     model = paper_model(100)
@@ -59,20 +62,20 @@ def closed_loop_continuous() -> dict[str, Any]:
 
 def optimal_grasps() -> dict[str, Any]:
     """Fig. 2: the fast solver on the three paper objects; the forward-backward sweep, 300 iterations."""
-    from contgrasp_core.optimal import paper_problem, solve, sweep
+    from contgrasp_core.optimal import paper_problem, solve, forward_backward
 
     out: dict[str, Any] = {}
     for name in PAPER_OBJECTS:
         res = solve(paper_problem(name, nodes=200))
         out[name] = {"cost": res.cost, "kappa": res.kappa, "rho": res.rho, "alpha": res.alpha}
-    fb = sweep(paper_problem("circle", nodes=200), max_iterations=300)
+    fb = forward_backward(paper_problem("circle", nodes=200), max_iterations=300)
     out["forward_backward_circle"] = {"cost": fb.cost, "kappa": fb.kappa}
     return out
 
 
 def quality_maps() -> dict[str, Any]:
     """Fig. 3 on a coarse grid (6 x 3 poses) for the three paper objects, serial executor."""
-    from contgrasp_core.sweep import MapSpec, quality_map
+    from contgrasp_core.quality_map import MapSpec, quality_map
 
     out: dict[str, Any] = {}
     for name in PAPER_OBJECTS:

@@ -28,10 +28,10 @@ from .discrete import ForwardSolveError, PenaltyState, adjoint, evaluate, solve_
 from .guess import initial_control, initial_states
 from .problem import GraspProblem, GraspResult, make_result
 
-__all__ = ["sweep"]
+__all__ = ["forward_backward"]
 
 
-def sweep(
+def forward_backward(
     problem: GraspProblem,
     *,
     eta: float = 1e-6,
@@ -115,7 +115,7 @@ def sweep(
     wall = time.perf_counter() - t_start
     return make_result(
         problem,
-        solver=f"sweep[{gradient}]",
+        solver=f"forward_backward[{gradient}]",
         u=traj.u,
         x=traj.x,
         lam=lam,

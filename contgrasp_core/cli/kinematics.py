@@ -18,11 +18,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .arm import Arm, shape_from_curvature
-from .boundary import Boundary
-from .contact import base_pose, integrate_contact, offset_curvature, sense
-from .errors import InvalidParameterError
-from .objects import PAPER_OBJECTS, make_object
+from ..arm import Arm, shape_from_curvature
+from ..boundary import Boundary
+from ..contact import base_pose, integrate_contact, offset_curvature, sense
+from ..errors import InvalidParameterError
+from ..objects import PAPER_OBJECTS, make_object
 
 __all__ = ["add_parser", "curvature_profile", "run"]
 
@@ -118,7 +118,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Execute ``contgrasp kinematics``; returns the JSON result (keys in docs/cli.md)."""
     if args.plot:
-        from .plots import check_figure_path
+        from ..figures.draw import check_figure_path
 
         check_figure_path(args.plot)
     boundary = make_object(args.object, outline=args.outline, closed=args.closed)
@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     d_alpha = float(np.max(np.abs(ode.alpha - geo.alpha)))
     d_so = float(np.max(np.abs(ode.s_o - geo.s_o)))
     if args.plot:
-        from .plots import kinematics_figure, save
+        from ..figures.draw import kinematics_figure, save
 
         save(kinematics_figure(boundary, shape, radius, ode, geo, title=f"{boundary.kind}: contact kinematics"), args.plot)
     return {

@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__, cli_grasp, cli_kinematics, cli_quality, cli_simulate
-from .errors import ContgraspError, one_line
+from .. import __version__
+from . import grasp, kinematics, quality, simulate
+from ..errors import ContgraspError, one_line
 
 __all__ = ["build_parser", "main"]
 
@@ -37,10 +38,10 @@ def build_parser(extra: Sequence[Registrar] = ()) -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"contgrasp {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    cli_kinematics.add_parser(sub, [common])
-    cli_quality.add_parser(sub, [common])
-    cli_grasp.add_parsers(sub, [common])
-    cli_simulate.add_parser(sub, [common])
+    kinematics.add_parser(sub, [common])
+    quality.add_parser(sub, [common])
+    grasp.add_parsers(sub, [common])
+    simulate.add_parser(sub, [common])
     for register in extra:
         register(sub, [common])
     return parser

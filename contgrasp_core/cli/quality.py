@@ -6,9 +6,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from .errors import InvalidParameterError
-from .objects import PAPER_OBJECTS
-from .sweep import METRICS, MapSpec, load_map, quality_map, save_map
+from ..errors import InvalidParameterError
+from ..objects import PAPER_OBJECTS
+from ..quality_map import METRICS, MapSpec, load_map, quality_map, save_map
 
 __all__ = ["add_parser", "run"]
 
@@ -55,7 +55,7 @@ def _check_out_path(path: str) -> None:
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Execute ``contgrasp quality-map``; JSON keys in docs/cli.md."""
     if args.plot:
-        from .plots import check_figure_path
+        from ..figures.draw import check_figure_path
 
         check_figure_path(args.plot)
     if args.out:
@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.metric != "all":
         out["optimum"] = {args.metric: out["optimum"].get(args.metric)}
     if args.plot:
-        from .plot_quality import quality_map_figure
+        from ..figures.quality_map import quality_map_figure
 
         fig = quality_map_figure(qm)
         try:

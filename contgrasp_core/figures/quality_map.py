@@ -6,8 +6,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
-from .plots import draw_boundary
-from .sweep import METRICS, QualityMap
+from .draw import draw_boundary
+from ..quality_map import METRICS, QualityMap
 
 __all__ = ["quality_map_figure"]
 

@@ -7,7 +7,7 @@ import pytest
 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import paper_object
-from contgrasp_core.sweep import MapSpec, disc_pose, load_map, maximise, quality_map, save_map
+from contgrasp_core.quality_map import MapSpec, disc_pose, load_map, maximise, quality_map, save_map
 
 FAST = dict(nodes=80, solver_tol=1e-9)
 

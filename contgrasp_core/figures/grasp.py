@@ -1,4 +1,4 @@
-"""Figure 2 of the paper: optimal grasping configurations (matplotlib, Agg backend).
+"""Figure 2 of the paper: optimal grasping configurations (matplotlib object API).
 
 One panel per object: (top) the arm drawn with its tapered radius around the object;
 (middle) rho/rho_d and alpha against s/L with their targets 1 and alpha_d dashed;
@@ -10,8 +10,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
 
-from .optimal import GraspResult
+from ..optimal import GraspResult
+from .draw import save
 
 __all__ = ["plot_grasp", "save_grasp_figure"]
 
@@ -22,13 +25,9 @@ _ORANGE = "#ff7f0e"
 
 def plot_grasp(result: GraspResult, axes=None, title: str | None = None):  # type: ignore[no-untyped-def]
     """Draw one Fig. 2 column for ``result`` into three axes (created if None); returns the figure."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
     if axes is None:
-        fig, axes = plt.subplots(3, 1, figsize=(4.2, 7.2), gridspec_kw={"height_ratios": [1.7, 1, 1]})
+        fig = Figure(figsize=(4.2, 7.2))
+        axes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [1.7, 1, 1]})
     else:
         fig = axes[0].figure
     ax_arm, ax_ra, ax_k = axes
@@ -47,7 +46,7 @@ def plot_grasp(result: GraspResult, axes=None, title: str | None = None):  # typ
     outline = np.vstack([left, right[::-1]])
     ax_arm.fill(outline[:, 0], outline[:, 1], color=_ARM, alpha=0.75, lw=0.0, zorder=2)
     ax_arm.plot(r[:, 0], r[:, 1], color="k", lw=0.5, zorder=3)
-    ax_arm.add_patch(matplotlib.patches.Circle(r[0], rad[0], color=_ARM, alpha=0.75, lw=0, zorder=2))
+    ax_arm.add_patch(Circle(r[0], rad[0], color=_ARM, alpha=0.75, lw=0, zorder=2))
     ax_arm.plot(*r[0], "ko", ms=3, zorder=4)
     ax_arm.set_aspect("equal")
     ax_arm.axis("off")
@@ -77,21 +76,6 @@ def plot_grasp(result: GraspResult, axes=None, title: str | None = None):  # typ
 
 
 def save_grasp_figure(result: GraspResult, path: str | Path, title: str | None = None) -> Path:
-    """Render :func:`plot_grasp` to ``path`` (PNG/PDF/SVG by extension) and close the figure."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    from .errors import InvalidParameterError
-
-    out = Path(path)
-    fig = plot_grasp(result, title=title)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=130)
-    except (OSError, ValueError) as exc:
-        raise InvalidParameterError(f"cannot write the figure {out}: {exc}") from exc
-    finally:
-        plt.close(fig)
-    return out
+    """Render :func:`plot_grasp` to ``path`` (PNG/PDF/SVG by extension)."""
+    save(plot_grasp(result, title=title), str(path))
+    return Path(path)

@@ -1,7 +1,7 @@
 """``contgrasp simulate``: the closed-loop grasp of paper Sec. V-C on the project's rod engine.
 
-Wire-up (in ``cli.py``): ``cli_simulate.add_parser(sub, [common])``; the parsed namespace has
-``func=cli_simulate.run``, which returns the JSON-able result dict (``cli.main`` prints it).
+Wire-up (in ``cli/__init__.py``): ``simulate.add_parser(sub, [common])``; the parsed namespace has
+``func=simulate.run``, which returns the JSON-able result dict (``cli.main`` prints it).
 Without ``parents`` the subcommand adds its own ``--json`` flag.
 """
 
@@ -14,12 +14,13 @@ import numpy as np
 
 from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.feedback import closed_loop_kinematics
+from contgrasp_core.control import paper_gains
+from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.rod import Obstacle, RodSystem
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, paper_gains, run_closed_loop
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
 from contgrasp_core.rod.scenario import PAPER_OBJECT_CENTER, PAPER_OBJECT_RADIUS, paper_model
 
-__all__ = ["add_parser", "run", "summarize", "static_solution", "snapshot_indices", "plot_fig4", "animate"]
+__all__ = ["add_parser", "run", "summarize"]
 
 
 def _object(spec: str) -> tuple[Boundary, float]:
@@ -62,18 +63,6 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
     return p
 
 
-def static_solution(res: ClosedLoopResult, obstacle_radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The theoretical static closed loop (eq. rho_alpha_2 with eq. curvature_feedback) from the
-    rod's base state, for a circular object: (s, rho, alpha) on the rod nodes."""
-    m, g = res.model, res.gains
-    s = m.s_nodes
-    mu2 = np.asarray(g.mu2, dtype=float)
-    mu2_fn = (lambda si: np.interp(si, m.joint_s, mu2)) if mu2.ndim else float(mu2)
-    sol = closed_loop_kinematics(float(res.rho[-1][0]), float(res.alpha[-1][0]), s, g.mu1, mu2_fn,
-                                 1.0 / obstacle_radius, length_unit=g.length_unit)
-    return s, sol.rho, sol.alpha
-
-
 def summarize(res: ClosedLoopResult, contact_tol: float = 0.5) -> dict[str, Any]:
     """The JSON result: final shape and contact state along s, settle data, penetration and the
     contact-region statistics of rho/rho_d (rho_d = r(s)) and alpha."""
@@ -104,111 +93,6 @@ def summarize(res: ClosedLoopResult, contact_tol: float = 0.5) -> dict[str, Any]
     }
 
 
-def _draw_arm(ax, x: np.ndarray, r: np.ndarray, **kw) -> None:
-    t = np.gradient(x, axis=0)
-    t /= np.hypot(t[:, 0], t[:, 1])[:, None]
-    nrm = np.stack([-t[:, 1], t[:, 0]], axis=1)
-    outline = np.concatenate([x + r[:, None] * nrm, (x - r[:, None] * nrm)[::-1]])
-    ax.fill(outline[:, 0] * 100, outline[:, 1] * 100, **kw)
-
-
-def snapshot_indices(res: ClosedLoopResult, count: int = 6) -> np.ndarray:
-    """Record indices at equal fractions of the tip's travelled path (the motion is fast early and
-    slow late, so equal time spacing would bunch the snapshots)."""
-    tip = res.x[:, -1]
-    path = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(tip, axis=0).T))])
-    targets = np.linspace(0.0, path[-1], count)
-    idx = np.searchsorted(path, targets).clip(0, len(path) - 1)
-    idx[-1] = len(path) - 1
-    return np.unique(idx)
-
-
-def plot_fig4(res: ClosedLoopResult, boundary: Boundary, path: str, obstacle_radius: float | None = None) -> None:
-    """Paper Fig. 4: six snapshots of the arm (with its radius) around the object; rho/rho_d and
-    alpha along s at several times, the static solution of eq. curvature_feedback dashed."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    m = res.model
-    r = m.radius(m.s_nodes)
-    fig = plt.figure(figsize=(7.0, 7.5))
-    ax0 = fig.add_subplot(2, 1, 1)
-    idx = snapshot_indices(res, 6)
-    _, pts = boundary.sample(400)
-    ax0.fill(pts[:, 0] * 100, pts[:, 1] * 100, color="0.75", zorder=1)
-    for j, k in enumerate(idx):
-        _draw_arm(ax0, res.x[k], r, color="purple", alpha=0.15 + 0.12 * j, lw=0, zorder=2)
-        ax0.annotate(f"{res.t[k]:.2f} s", res.x[k][-1] * 100, fontsize=7, color="purple")
-    ax0.plot(0, 0, "ks", ms=5)
-    ax0.set_aspect("equal")
-    ax0.set_xlabel("x [cm]")
-    ax0.set_ylabel("y [cm]")
-    ax0.set_title("closed-loop grasp (eq. dynamic_feedback), six time instances")
-    ax1 = fig.add_subplot(2, 2, 3)
-    ax2 = fig.add_subplot(2, 2, 4)
-    s_n = m.s_nodes / m.length
-    cmap = plt.get_cmap("Blues")
-    for j, k in enumerate(idx[1:]):
-        c = cmap(0.35 + 0.65 * (j + 1) / len(idx))
-        ax1.plot(s_n, res.rho[k] / r, color=c, lw=1.2, label=f"{res.t[k]:.2f} s")
-        ax2.plot(s_n, res.alpha[k], color=c, lw=1.2)
-    if obstacle_radius is not None:
-        s, rho_s, alpha_s = static_solution(res, obstacle_radius)
-        ax1.plot(s / m.length, rho_s / r, "k--", lw=1.2, label="static theory")
-        ax2.plot(s / m.length, alpha_s, "k--", lw=1.2)
-    ax1.axhline(1.0, color="0.6", lw=0.6)
-    ax2.axhline(0.5 * np.pi, color="0.6", lw=0.6)
-    ax1.set_ylim(0, 3)
-    ax2.set_ylim(0, np.pi)
-    ax1.set_xlabel("s / L")
-    ax2.set_xlabel("s / L")
-    ax1.set_ylabel(r"$\rho / \rho_d$")
-    ax2.set_ylabel(r"$\alpha$ [rad]")
-    ax1.legend(fontsize=6)
-    fig.tight_layout()
-    try:
-        fig.savefig(path, dpi=150)
-    except (OSError, ValueError) as exc:
-        raise InvalidParameterError(f"cannot write the figure {path}: {exc}") from exc
-    finally:
-        plt.close(fig)
-
-
-def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 60) -> None:
-    """GIF of the arm (with its radius) wrapping the object."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
-
-    m = res.model
-    r = m.radius(m.s_nodes)
-    idx = snapshot_indices(res, frames)
-    _, pts = boundary.sample(400)
-    fig, ax = plt.subplots(figsize=(4, 4))
-
-    def draw(k: int) -> None:
-        ax.clear()
-        ax.fill(pts[:, 0] * 100, pts[:, 1] * 100, color="0.75")
-        _draw_arm(ax, res.x[k], r, color="purple", alpha=0.7, lw=0)
-        ax.set_xlim(-2, 22)
-        ax.set_ylim(-6, 14)
-        ax.set_aspect("equal")
-        ax.set_title(f"t = {res.t[k]:.2f} s")
-        ax.set_xlabel("x [cm]")
-
-    anim = FuncAnimation(fig, draw, frames=idx)
-    try:
-        anim.save(path, writer=PillowWriter(fps=12))
-    except (OSError, ValueError) as exc:
-        raise InvalidParameterError(f"cannot write the animation {path}: {exc}") from exc
-    finally:
-        plt.close(fig)
-
-
 MAX_NODES = 10_001
 """Largest rod the command accepts (the paper's arm has 101 nodes)."""
 
@@ -235,7 +119,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if not (np.isfinite(args.dt) and args.dt > 0.0):  # checked also when --control-period makes it unused
         raise InvalidParameterError(f"--dt must be a finite number > 0, got {args.dt}")
     if args.plot:
-        from contgrasp_core.plots import check_figure_path
+        from contgrasp_core.figures.draw import check_figure_path
 
         check_figure_path(args.plot)
     if args.animate:

@@ -1,8 +1,8 @@
-"""Fig. 4-style figure of a graph run, drawn from what travelled over the topics.
+"""Figures of a graph run (Fig. 4 style, and the grasp quality over time), drawn from what travelled over the topics.
 
 Top: six snapshots of the arm (with its radius) around the object. Bottom: rho/rho_d and
 alpha along s at those times, with the static theoretical solution of eq. curvature_feedback
-(closed-loop kinematics from the base's contact state, :func:`contgrasp_core.feedback.closed_loop_kinematics`)
+(closed-loop kinematics from the base's contact state, :func:`contgrasp_core.control.closed_loop_kinematics`)
 dashed.
 """
 
@@ -11,20 +11,20 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from matplotlib import colormaps
+from matplotlib.figure import Figure
 
 from contgrasp_core.arm import ArmShape
 from contgrasp_core.errors import ContgraspError
-from contgrasp_core.feedback import adaptive_mu2, closed_loop_kinematics
-from contgrasp_core.plots import draw_arm, draw_boundary, save
+from contgrasp_core.control.law import adaptive_mu2, closed_loop_kinematics
+from contgrasp_core.figures.draw import draw_arm, draw_boundary, save
 from contgrasp_core.rod.session import boundary_from_spec
 
-__all__ = ["run_figure"]
+__all__ = ["run_figure", "quality_history_figure"]
 
 
 def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path: str) -> None:
     """Draw the figure of ``summary['history']`` (the launcher's monitor samples) to ``path``."""
-    import matplotlib.pyplot as plt
-
     hist = summary["history"]
     sim, ctl = params["rod_simulator"], params["grasp_controller"]
     boundary = boundary_from_spec(sim["object_kind"], sim["object_params"])
@@ -33,10 +33,10 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
     times = np.array([h["t"] for h in hist])
     wanted = [0.0, 0.05, 0.1, 0.15, 0.25, times[-1]]
     picks = np.unique([int(np.argmin(np.abs(times - w))) for w in wanted])
-    fig = plt.figure(figsize=(11, 8))
+    fig = Figure(figsize=(11, 8))
     ax = fig.add_subplot(2, 1, 1)
     draw_boundary(ax, boundary)
-    colours = plt.cm.Purples(np.linspace(0.35, 1.0, len(picks)))
+    colours = colormaps["Purples"](np.linspace(0.35, 1.0, len(picks)))
     for colour, i in zip(colours, picks, strict=True):
         h = hist[i]
         shape = ArmShape(np.asarray(h["s"]), np.stack([h["x"], h["y"]], -1), np.asarray(h["theta"]))
@@ -71,5 +71,28 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
     ax_a.set_xlabel("s / L")
     ax_a.set_ylabel("alpha [rad]")
     ax_a.axhline(np.pi / 2, color="0.6", lw=0.8, ls=":")
+    fig.tight_layout()
+    save(fig, path)
+
+
+def quality_history_figure(t: np.ndarray, q: tuple[np.ndarray, np.ndarray, np.ndarray], path: str, *,
+                           recomputed_t: np.ndarray | None = None, recomputed: np.ndarray | None = None,
+                           settle_time: float | None = None) -> None:
+    """Q1, Q2, Q3 (paper Sec. IV) over sim time ``t`` as recorded (lines), optionally recomputed
+    from the rod states (crosses, ``recomputed`` (K, 3) at ``recomputed_t``), to ``path``."""
+    fig = Figure(figsize=(8, 8))
+    axes = fig.subplots(3, 1, sharex=True)
+    labels = ("Q1 = lambda_min(W)", "Q2 = det W", "Q3 = lambda_min / lambda_max")
+    for n, (ax, rec_vals, label) in enumerate(zip(axes, q, labels, strict=True)):
+        ax.plot(t, rec_vals, "-", color="tab:blue", lw=1.2, label="recorded")
+        if recomputed is not None and recomputed_t is not None and len(recomputed_t):
+            ax.plot(recomputed_t, recomputed[:, n], "x", color="tab:red", ms=5, label="recomputed")
+        if settle_time is not None:
+            ax.axvline(settle_time, color="0.5", ls=":", lw=1.0, label="settled")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[0].set_title("continuum grasp quality (Sec. IV) over the run")
+    axes[-1].set_xlabel("sim time t [s]")
     fig.tight_layout()
     save(fig, path)

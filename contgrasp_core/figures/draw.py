@@ -1,21 +1,20 @@
-"""Matplotlib drawing helpers shared by the figures (headless, Agg backend)."""
+"""Matplotlib drawing helpers shared by the figures.
+
+Figures are built with matplotlib's object API (:class:`~matplotlib.figure.Figure`, no pyplot),
+so importing or using this package never selects or switches a backend: a notebook keeps its own.
+"""
 
 from __future__ import annotations
 
-import matplotlib
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from numpy.typing import ArrayLike, NDArray
 
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.axes import Axes  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from numpy.typing import ArrayLike, NDArray  # noqa: E402
-
-from .arm import ArmShape  # noqa: E402
-from .boundary import Boundary  # noqa: E402
-from .contact import ContactKinematics, ContactState  # noqa: E402
-from .errors import InvalidParameterError  # noqa: E402
+from ..arm import ArmShape
+from ..boundary import Boundary
+from ..contact import ContactKinematics, ContactState
+from ..errors import InvalidParameterError
 
 __all__ = ["draw_boundary", "draw_arm", "kinematics_figure", "save", "check_figure_path"]
 
@@ -79,7 +78,7 @@ def kinematics_figure(
     title: str = "",
 ) -> Figure:
     """Arm around the object with its shadow points; rho and alpha against s/L (ODE vs geometry)."""
-    fig = plt.figure(figsize=(10, 4.6))
+    fig = Figure(figsize=(10, 4.6))
     ax = fig.add_subplot(1, 2, 1)
     draw_boundary(ax, boundary)
     draw_arm(ax, shape, radius)
@@ -107,14 +106,12 @@ def kinematics_figure(
     return fig
 
 
-def save(fig: Figure, path: str) -> None:
-    """Write the figure (format from the file suffix) and close it."""
+def save(fig: Figure, path: str, dpi: int = 130) -> None:
+    """Write the figure (format from the file suffix)."""
     from pathlib import Path
 
     try:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=130)
+        fig.savefig(path, dpi=dpi)
     except (OSError, ValueError) as exc:
         raise InvalidParameterError(f"cannot write the figure {path}: {exc}") from exc
-    finally:
-        plt.close(fig)

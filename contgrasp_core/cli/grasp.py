@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import MAX_NODES
-from .errors import InvalidParameterError
-from .objects import PAPER_OBJECTS
-from .optimal import PAPER_SETTINGS, GraspResult, paper_problem, solve, sweep
+from .._validate import MAX_NODES
+from ..errors import InvalidParameterError
+from ..objects import PAPER_OBJECTS
+from ..optimal import PAPER_SETTINGS, GraspResult, paper_problem, solve, forward_backward
 
 __all__ = ["add_parsers", "run_grasp", "run_figures"]
 
@@ -38,12 +38,12 @@ def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()
     g.add_argument("--s-o0", dest="s_o0", type=float, default=0.0, help="initial shadow point arclength (default 0)")
     g.add_argument("--chi", type=float, default=10.0, help="tracking weight chi > 0 (default 10)")
     g.add_argument("--nodes", type=int, default=500, help="grid nodes along the arm (default 500)")
-    g.add_argument("--solver", choices=("fast", "sweep"), default="fast", help="fast Newton (default) or the paper's sweep")
+    g.add_argument("--solver", choices=("fast", "forward-backward"), default="fast", help="fast Newton (default) or the paper's forward-backward sweep")
     g.add_argument("--eta", type=float, default=1e-6, help="sweep step size (paper: 1e-6)")
     g.add_argument("--gradient", choices=("paper", "exact"), default="paper", help="sweep costates (default: paper's eq. costates)")
     g.add_argument("--max-iterations", dest="max_iterations", type=int, default=None,
-                   help="iteration limit (default 200 fast, 100000 sweep)")
-    g.add_argument("--tol", type=float, default=None, help="stopping threshold on max|kappa + p2| (default 1e-9 fast, 1e-6 sweep)")
+                   help="iteration limit (default 200 fast, 100000 forward-backward)")
+    g.add_argument("--tol", type=float, default=None, help="stopping threshold on max|kappa + p2| (default 1e-9 fast, 1e-6 forward-backward)")
     g.add_argument("--plot", default=None, metavar="FILE", help="save a Fig. 2-style panel (PNG/PDF/SVG)")
     g.set_defaults(func=run_grasp)
 
@@ -67,7 +67,7 @@ def _solve(args: argparse.Namespace) -> GraspResult:
     if args.tol is not None and not (np.isfinite(args.tol) and args.tol > 0.0):
         raise InvalidParameterError(f"--tol must be a finite number > 0, got {args.tol}")
     if args.plot:
-        from .plots import check_figure_path
+        from ..figures.draw import check_figure_path
 
         check_figure_path(args.plot)
     name = args.object
@@ -94,7 +94,7 @@ def _solve(args: argparse.Namespace) -> GraspResult:
         kw["max_iterations"] = args.max_iterations
     if args.tol is not None:
         kw["tol"] = args.tol
-    return sweep(problem, **kw)
+    return forward_backward(problem, **kw)
 
 
 def run_grasp(args: argparse.Namespace) -> dict[str, Any]:
@@ -102,7 +102,7 @@ def run_grasp(args: argparse.Namespace) -> dict[str, Any]:
     result = _solve(args)
     out = result.to_dict(arrays=True)
     if args.plot:
-        from .plot_grasp import save_grasp_figure
+        from ..figures.grasp import save_grasp_figure
 
         out["plot"] = str(save_grasp_figure(result, args.plot, title=f"{args.object} ({result.solver})"))
     return out
@@ -111,8 +111,8 @@ def run_grasp(args: argparse.Namespace) -> dict[str, Any]:
 def run_figures(args: argparse.Namespace) -> dict[str, Any]:
     """Solve the three Fig. 2 problems with the fast solver and save ``fig2_<object>.png``;
     compute the three Fig. 3 quality maps (process executor) and save ``fig3_<object>.png``."""
-    from .plot_grasp import save_grasp_figure
-    from .sweep import MapSpec
+    from ..figures.grasp import save_grasp_figure
+    from ..quality_map import MapSpec
 
     out_dir = Path(args.out)
     for d in (out_dir, *out_dir.parents):
@@ -136,8 +136,8 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
             "constraints_ok": result.constraints.ok,
         }
     if not args.no_maps:
-        from .plot_quality import quality_map_figure
-        from .sweep import MapSpec, quality_map
+        from ..figures.quality_map import quality_map_figure
+        from ..quality_map import MapSpec, quality_map
 
         for name in PAPER_OBJECTS:
             qm = quality_map(MapSpec(name, psi_steps=args.psi_steps, d_steps=args.d_steps), progress=not args.json)

@@ -1,0 +1,187 @@
+"""The feedback law applied to the rod engine (paper Sec. V-B on the rod of Sec. V, appendix D).
+
+Two ways the couple of eq. dynamic_feedback reaches the rod:
+
+* :class:`StateFeedback` - continuous feedback, the law evaluated on the rod's own state inside
+  every implicit step;
+* :func:`feedback_at_joints` + :class:`HeldExpansion` - the sampled law (what the ROS controller
+  sends once per control period), held to first order in the state between samples.
+
+:func:`static_solution` is the static closed loop (eq. rho_alpha_2 with eq. curvature_feedback)
+the dynamic loop is compared with in Fig. 4.
+
+With a zero-order hold the couple of eq. dynamic_feedback is sampled every control period and
+held; the loop then inherits a sampling-rate stability limit (the law acts at the element scale,
+where the tapered tip has bending frequencies of thousands of rad/s). :class:`StateFeedback`
+instead evaluates the law inside every Newton iteration of the implicit step, at the new state,
+and supplies its derivative ``du/dtheta`` to the Newton matrix, so the continuous-time loop of
+paper Prop. 2 is integrated with the same unconditional stability as the elastic forces.
+
+Sensing is at the joints ``s_k = k h`` (the clamp and the internal nodes; the tip carries no
+couple): ``rho_k`` the signed distance of node ``k`` to the boundary, ``alpha_k = phi + pi/2 -
+theta_k`` with ``theta_k`` the mean angle of the adjacent elements (eq. rho_alpha_definition).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from contgrasp_core.control.gains import FeedbackGains
+from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_gradient
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.rod import chain
+from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.obstacle import Obstacle
+
+if TYPE_CHECKING:
+    from contgrasp_core.rod.closed_loop import ClosedLoopResult
+
+Array = NDArray[np.float64]
+
+__all__ = ["StateFeedback", "JointSensing", "sense_joints", "joint_couple_jacobian", "FeedbackExpansion",
+           "feedback_at_joints", "HeldExpansion", "static_solution"]
+
+
+@dataclass(frozen=True)
+class StateFeedback:
+    """``u(theta)`` of eq. dynamic_feedback sensed on the rod itself, with its Jacobian."""
+
+    model: RodModel
+    obstacle: Obstacle
+    gains: FeedbackGains
+
+    def couple(self, theta: np.ndarray) -> np.ndarray:
+        """The couple at the joints (N,) in N m for element angles ``theta``."""
+        return self.couple_and_jacobian(theta, jacobian=False)[0]
+
+    def couple_and_jacobian(self, theta: np.ndarray, *, jacobian: bool = True, nodes: np.ndarray | None = None,
+                            normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """``u`` (N,) and ``du/dtheta`` (N, N) (:func:`joint_couple_jacobian`). ``nodes``
+        (N+1, 2) and element ``normals`` (N, 2) may be passed when already computed."""
+        m, g = self.model, self.gains
+        js = sense_joints(m, self.obstacle, theta, nodes)
+        ei = m.joint_ei
+        u = feedback_couple(js.rho, js.alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
+        if not jacobian:
+            return u, None
+        g_rho, g_alpha = feedback_couple_gradient(js.rho, js.alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
+        b = chain.frames(theta)[1] if normals is None else normals
+        return u, joint_couple_jacobian(m, g_rho, g_alpha, js, b)
+
+
+@dataclass(frozen=True)
+class JointSensing:
+    """(rho, alpha) at the N joints (eq. rho_alpha_definition; alpha not wrapped: it is used in
+    differences and trigonometric functions), the outward normal at the foot (N, 2) and
+    ``foot_turn = kappa_o / (1 + rho kappa_o)`` (1/m), the rate at which the foot's tangent angle
+    turns per unit tangential motion of the joint (0 where ``1 + rho kappa_o`` is not safely
+    positive: there the closest point is degenerate, paper Sec. III ``nu_o``)."""
+
+    rho: np.ndarray
+    alpha: np.ndarray
+    normal_out: np.ndarray
+    foot_turn: np.ndarray
+
+
+def sense_joints(model: RodModel, obstacle: Obstacle, theta: np.ndarray, nodes: np.ndarray | None = None) -> JointSensing:
+    """Sensing at the joints ``s_k = k h``, k = 0..N-1 (see :class:`JointSensing`)."""
+    x = (chain.nodes(model, theta) if nodes is None else nodes)[:-1]
+    th_n = chain.node_angles(model, theta)[:-1]
+    pr = obstacle.project(x)
+    den = 1.0 + pr.signed_distance * pr.kappa_o
+    turn = np.where(den > 0.05, pr.kappa_o / np.where(den > 0.05, den, 1.0), 0.0)
+    return JointSensing(rho=pr.signed_distance, alpha=pr.phi + 0.5 * np.pi - th_n, normal_out=pr.normal_out, foot_turn=turn)
+
+
+def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarray, sensing: JointSensing,
+                          b: np.ndarray) -> np.ndarray:
+    """``du/dtheta`` (N, N) of a joint couple with partials ``g_rho``, ``g_alpha`` (N,).
+
+    Node k moves by ``h b_l`` per unit ``theta_l``, ``l < k``: ``d rho_k / d theta_l = h n_k . b_l``
+    and the foot's tangent angle turns by ``h foot_turn_k t_k . b_l`` (``t_k`` the boundary
+    tangent at the foot). The node angle is the mean of the adjacent elements:
+    ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2``.
+    """
+    n_out = sensing.normal_out
+    tangent = np.stack([-n_out[:, 1], n_out[:, 0]], axis=1)
+    direction = g_rho[:, None] * n_out + (g_alpha * sensing.foot_turn)[:, None] * tangent
+    du = model.h * np.tril(direction @ b.T, -1)
+    coef = -0.5 * g_alpha
+    k = np.arange(1, model.n_elements)
+    du[k, k] += coef[1:]
+    du[k, k - 1] += coef[1:]
+    return du
+
+
+@dataclass(frozen=True)
+class FeedbackExpansion:
+    """The feedback law at the N joints, expanded to first order about the sensed state:
+    ``u(rho, alpha) ~ u + g_rho (rho - rho_ref) + g_alpha (alpha - alpha_ref)`` (N m, N m/m, N m/rad)."""
+
+    u: Array
+    rho_ref: Array
+    alpha_ref: Array
+    g_rho: Array
+    g_alpha: Array
+
+
+def feedback_at_joints(model: RodModel, gains: FeedbackGains, rho: Array, alpha: Array) -> FeedbackExpansion:
+    """Couple of eq. dynamic_feedback at the N joints from (rho, alpha) sensed at the N+1 nodes,
+    with its partial derivatives ``du/drho = -EI sin(alpha) / l^2`` and
+    ``du/dalpha = -EI (mu1 sin(alpha) + (rho/l - mu2) cos(alpha)) / l`` (l the law's length unit)."""
+    rho, alpha = np.asarray(rho, dtype=float), np.asarray(alpha, dtype=float)
+    n = model.n_elements
+    if rho.shape != (n + 1,) or alpha.shape != (n + 1,):
+        raise InvalidParameterError(f"rho and alpha must be given at the {n + 1} nodes, got {rho.shape}, {alpha.shape}")
+    r, a = rho[:-1], alpha[:-1]
+    lu, ei = gains.length_unit, model.joint_ei
+    u = feedback_couple(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
+    g_rho, g_alpha = feedback_couple_gradient(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
+    return FeedbackExpansion(u=u, rho_ref=r, alpha_ref=a, g_rho=g_rho, g_alpha=g_alpha)
+
+
+@dataclass(frozen=True)
+class HeldExpansion:
+    """First-order hold of the feedback law in the STATE (not in time).
+
+    Between samples the integrator adds ``g_rho (rho(theta) - rho_ref) + g_alpha (alpha(theta) -
+    alpha_ref)`` to the held couple, with (rho, alpha)(theta) sensed on the rod at the new state
+    inside every Newton iteration, and its derivative to the Newton matrix. A plain zero-order
+    hold of this law is unstable at any practical control rate (the law acts like a stiffness at
+    the element scale, where the tapered tip's bending modes reach ~1000 rad/s; measured: the
+    arm crumples at a 1 kHz hold); holding the expansion keeps the continuous law's stability
+    while the controller still only runs once per control period.
+    """
+
+    model: RodModel
+    obstacle: Obstacle
+    expansion: FeedbackExpansion
+
+    def couple_and_jacobian(
+        self, theta: Array, *, jacobian: bool = True, nodes: Array | None = None, normals: Array | None = None
+    ) -> tuple[Array, Array | None]:
+        """Deviation of the couple from the held value (N,) and its derivative (N, N)."""
+        m, e = self.model, self.expansion
+        js = sense_joints(m, self.obstacle, theta, nodes)
+        d_alpha = np.mod(js.alpha - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
+        du = e.g_rho * (js.rho - e.rho_ref) + e.g_alpha * d_alpha
+        if not jacobian:
+            return du, None
+        b = chain.frames(theta)[1] if normals is None else normals
+        return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, js, b)
+
+
+def static_solution(res: "ClosedLoopResult", obstacle_radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The theoretical static closed loop (eq. rho_alpha_2 with eq. curvature_feedback) from the
+    rod's base state, for a circular object: (s, rho, alpha) on the rod nodes."""
+    m, g = res.model, res.gains
+    s = m.s_nodes
+    mu2 = np.asarray(g.mu2, dtype=float)
+    mu2_fn = (lambda si: np.interp(si, m.joint_s, mu2)) if mu2.ndim else float(mu2)
+    sol = closed_loop_kinematics(float(res.rho[-1][0]), float(res.alpha[-1][0]), s, g.mu1, mu2_fn,
+                                 1.0 / obstacle_radius, length_unit=g.length_unit)
+    return s, sol.rho, sol.alpha
