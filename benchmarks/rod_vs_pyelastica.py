@@ -45,7 +45,7 @@ from contgrasp_core.control.law import feedback_couple  # noqa: E402
 from contgrasp_core.rod import Obstacle, RodModel, RodSystem  # noqa: E402
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop  # noqa: E402
 from contgrasp_core.control import paper_gains  # noqa: E402
-from contgrasp_core.rod.scenario import paper_model  # noqa: E402
+from contgrasp_core.scenario import PAPER  # noqa: E402
 
 
 def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: float, *, check_only: bool = False,
@@ -228,7 +228,7 @@ def main() -> None:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
 
-    model = paper_model()
+    model = PAPER.rod
     obstacle = Obstacle(circle(0.025, (0.08, 0.08)))
     dts = [float(s) for s in args.pe_dts.split(",")]
     stiff = {"shear_ratio": args.shear_ratio, "stretch_ratio": args.shear_ratio}

@@ -30,31 +30,14 @@ from pathlib import Path
 
 import yaml
 
-from contgrasp_core.rod import Obstacle, RodModel, RodSystem
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig
-from contgrasp_core.control import paper_gains
-from contgrasp_core.rod.session import LoopSession, boundary_from_spec, sense_observation
-from contgrasp_core.control import feedback_at_joints
+from contgrasp_core.rod.session import run_sampled
+from contgrasp_core.scenario import Scenario
 from contgrasp_ros.launcher import default_params_file, load_params
 
 
 def core_only(params: dict) -> tuple[float, int]:
-    sim, ctl = params["rod_simulator"], params["grasp_controller"]
-    keys = ("length", "n_elements", "radius_base", "radius_tip", "density", "youngs_modulus", "damping",
-            "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction", "base_angle")
-    model = RodModel(base_position=(sim["base_x"], sim["base_y"]), **{k: sim[k] for k in keys})
-    boundary = boundary_from_spec(sim["object_kind"], sim["object_params"])
-    config = ClosedLoopConfig(duration=sim["duration"], control_period=sim["control_period"],
-                              settle_speed=sim["settle_speed"], settle_hold=sim["settle_hold"], min_time=sim["min_time"])
-    gains = paper_gains(model, ctl["object_radius"], mu1=ctl["mu1"], length_unit=ctl["length_unit"])
-    session = LoopSession(RodSystem(model, Obstacle(boundary)), config)
     t0 = time.perf_counter()
-    while True:
-        obs = session.observe()
-        if session.finished:
-            break
-        c = sense_observation(obs, boundary, params["boundary_sensor"]["contact_tolerance"])
-        session.advance(feedback_at_joints(model, gains, c.rho, c.alpha))
+    session = run_sampled(Scenario.from_ros_parameters(params))
     return time.perf_counter() - t0, session.k
 
 

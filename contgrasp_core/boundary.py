@@ -43,9 +43,16 @@ __all__ = [
     "deformed_circle",
     "from_points",
     "load_points",
+    "wrap_arclength",
 ]
 
 TWO_PI = 2.0 * np.pi
+
+
+def wrap_arclength(ds: ArrayLike, length: float) -> NDArray[np.float64]:
+    """A difference of arclengths on a closed curve of ``length``, wrapped into [-length/2, length/2)
+    (s_o and s_o + L_o are the same point: compare arclengths with this, never directly)."""
+    return np.mod(np.asarray(ds, dtype=float) + 0.5 * length, length) - 0.5 * length
 CurveFn = Callable[[NDArray[np.float64], int], NDArray[np.float64]]
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(16)
@@ -266,6 +273,7 @@ class Boundary:
         cross = d1[:, 0] * rel[:, 1] - d1[:, 1] * rel[:, 0]  # > 0: query on the left = inside
         side = -np.sign(cross).astype(int)
         s_o = np.mod(self._s_of_t(t_best), self.length)
+        s_o[s_o >= self.length] = 0.0  # mod of a tiny negative rounds to L_o: the seam is s_o = 0
         return Projection(
             foot=foot,
             s_o=s_o,
@@ -556,6 +564,8 @@ def load_points(path: str) -> NDArray[np.float64]:
             if rows:  # a header line before the data is fine; garbage after it is not
                 raise DegenerateBoundaryError(f"{path}:{line_no}: expected two numbers x, y, got {line!r}") from exc
             continue
+        if len(fields) != 2:
+            raise DegenerateBoundaryError(f"{path}:{line_no}: expected two columns x, y, got {len(fields)}: {line!r}")
         if not (np.isfinite(row[0]) and np.isfinite(row[1])):
             raise DegenerateBoundaryError(f"{path}:{line_no}: x, y must be finite numbers, got {line!r}")
         rows.append(row)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +28,7 @@ from ._validate import MAX_NODES, instance, integer, real
 from .arm import Arm, BasePose
 from .boundary import Boundary
 from .errors import ContgraspError, InvalidParameterError
-from .objects import paper_object
+from .objects import FIG2_SCALE, ObjectSpec
 from .quality import grasp_quality
 
 __all__ = [
@@ -54,7 +54,10 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class MapSpec:
-    """What to sweep: a paper object, the (psi, d) grid of D and the inner problem's settings.
+    """What to sweep: the object (an :class:`ObjectSpec`, or its text such as ``"ellipse"`` or
+    ``"circle:4"``, in the paper's dimensionless units), the (psi, d) grid of D and the inner
+    problem's settings. The object frame origin must lie inside the object (bases are placed on
+    rays from it).
 
     Paper defaults (Sec. IV-C): d in [3, 13], arm of constant unit radius and length L_o/2,
     rho_d = 1, alpha_d = pi/2, chi = 10. ``contact_tol`` is the contact tolerance of
@@ -63,7 +66,7 @@ class MapSpec:
     counts the tracked part of the arm as in contact. ``nodes`` is the inner grid size.
     """
 
-    object: str = "circle"
+    object: ObjectSpec = ObjectSpec.parse("circle")
     psi_steps: int = 24
     d_steps: int = 6
     d_min: float = 3.0
@@ -94,7 +97,8 @@ class MapSpec:
             real(name, getattr(self, name), lo=0.0, lo_open=True)
         real("alpha_d", self.alpha_d, lo=0.0, hi=np.pi, lo_open=True, hi_open=True)
         real("contact_tol", self.contact_tol, lo=0.0)
-        boundary = paper_object(self.object)  # validates the name
+        object.__setattr__(self, "object", ObjectSpec.coerce(self.object, FIG2_SCALE))
+        boundary = self.object.boundary()
         reach = self.length_fraction * boundary.length
         if d_max >= reach:
             raise InvalidParameterError(
@@ -103,7 +107,13 @@ class MapSpec:
             )
 
     def boundary(self) -> Boundary:
-        return paper_object(self.object)
+        return self.object.boundary()
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain types (the object as :meth:`ObjectSpec.to_dict`); ``MapSpec(**d)`` rebuilds it."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["object"] = self.object.to_dict()
+        return out
 
     @property
     def psi(self) -> Array:
@@ -268,7 +278,7 @@ class QualityMap:
             return [[None if not np.isfinite(v) else float(v) for v in row] for row in a]
 
         return {
-            "object": self.spec.object,
+            "object": self.spec.object.text(),
             "psi": self.psi.tolist(),
             "d": self.d.tolist(),
             "Q1": grid(self.Q[0]),
@@ -281,7 +291,7 @@ class QualityMap:
             "wall_time_s": self.wall_time,
             "n_solves": self.n_solves,
             "executor": self.executor,
-            "spec": asdict(self.spec),
+            "spec": self.spec.to_dict(),
         }
 
 
@@ -296,7 +306,7 @@ def _run_columns(spec: MapSpec, executor: str, workers: int | None, scheduler: s
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(psis), desc=f"quality map {spec.object}", unit="psi")
+        bar = tqdm(total=len(psis), desc=f"quality map {spec.object.text()}", unit="psi")
     out: list[list[PoseResult]] = []
     try:
         if executor == "serial":

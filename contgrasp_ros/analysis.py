@@ -37,6 +37,7 @@ from contgrasp_core.errors import ContgraspError, InvalidParameterError
 from contgrasp_core.rod.session import SettleDetector
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
+from contgrasp_core.scenario import PAPER
 from contgrasp_ros.convert import ContactArrays, RodArrays, boundary_from_msg, contact_arrays, rod_state_arrays, stamp_seconds
 from contgrasp_ros.evaluate import contact_quality, sense_rod_state
 
@@ -68,10 +69,11 @@ RUN_RECORD = "contgrasp_run"  # = contgrasp_ros.bag.writer.RUN_RECORD
 RECORDER_RECORD = "contgrasp_recorder"  # = contgrasp_ros.bag.writer.RECORDER_RECORD
 SIMULATOR = "rod_simulator"
 
-# node defaults (declared in contgrasp_ros/nodes/*.py) for parameters a run's file may omit
-_SIM_DEFAULTS = {"settle_speed": 2e-4, "settle_hold": 0.5, "min_time": 1.0}
-_QUALITY_DEFAULTS = {"contact_tolerance": -1.0, "reference_x": 0.0, "reference_y": 0.0}
-_SENSOR_DEFAULTS = {"contact_tolerance": 0.0}
+
+
+def _default(node: str, key: str) -> Any:
+    """A node's default (the scenario model's, as the nodes declare it) for a parameter a run omits."""
+    return PAPER.node_parameters(node)[key]
 
 
 @dataclass
@@ -325,15 +327,15 @@ def recompute_parameters(run: RunData) -> dict[str, Any]:
     if run.params is not None:
         return {
             "source": "run parameters",
-            "sensor_contact_tolerance": _param(run.params, "boundary_sensor", "contact_tolerance", _SENSOR_DEFAULTS["contact_tolerance"]),
-            "quality_contact_tolerance": _param(run.params, "grasp_quality", "contact_tolerance", _QUALITY_DEFAULTS["contact_tolerance"]),
-            "reference": [_param(run.params, "grasp_quality", k, _QUALITY_DEFAULTS[k]) for k in ("reference_x", "reference_y")],
+            "sensor_contact_tolerance": _param(run.params, "boundary_sensor", "contact_tolerance", _default("boundary_sensor", "contact_tolerance")),
+            "quality_contact_tolerance": _param(run.params, "grasp_quality", "contact_tolerance", _default("grasp_quality", "contact_tolerance")),
+            "reference": [_param(run.params, "grasp_quality", k, _default("grasp_quality", k)) for k in ("reference_x", "reference_y")],
         }
     return {
         "source": "recorded messages and node defaults (no run parameters in the recording)",
-        "sensor_contact_tolerance": float(run.contact.tol[0]) if run.contact is not None else _SENSOR_DEFAULTS["contact_tolerance"],
+        "sensor_contact_tolerance": float(run.contact.tol[0]) if run.contact is not None else _default("boundary_sensor", "contact_tolerance"),
         "quality_contact_tolerance": float(run.quality.contact_tolerance[0]) if run.quality is not None else -1.0,
-        "reference": [_QUALITY_DEFAULTS["reference_x"], _QUALITY_DEFAULTS["reference_y"]],
+        "reference": [_default("grasp_quality", "reference_x"), _default("grasp_quality", "reference_y")],
     }
 
 
@@ -470,7 +472,7 @@ def settle_recomputed(run: RunData) -> tuple[bool | None, float | None]:
     if run.params is None or not gaps["contiguous"] or gaps["first_step"] != 0:
         return None, None
     sim = run.params.get(SIMULATOR, {})
-    det = SettleDetector(*(float(sim.get(k, _SIM_DEFAULTS[k])) for k in ("settle_speed", "settle_hold", "min_time")))
+    det = SettleDetector(*(float(sim.get(k, _default(SIMULATOR, k))) for k in ("settle_speed", "settle_hold", "min_time")))
     for k, t, v in zip(run.rod.step, run.rod.t, run.rod.max_speed, strict=True):
         det.update(run.sim_time.get(int(k), float(t)), float(v))
     return det.settled, det.settle_time

@@ -21,7 +21,7 @@ from contgrasp_core.boundary import Boundary, from_points
 from contgrasp_core.contact import ContactState
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.quality import GraspQuality
-from contgrasp_core.rod.session import boundary_from_spec
+from contgrasp_core.objects import ObjectSpec
 from contgrasp_core.control import FeedbackExpansion
 
 if TYPE_CHECKING:
@@ -237,12 +237,13 @@ def quality_to_msg(q: GraspQuality, header: Header, step: int, tol: float) -> Gr
     )
 
 
-# parameter names of the analytic kinds, in the order of boundary_from_spec
+# parameter names of the analytic kinds (Boundary.kind), in ObjectSpec's order, and the ObjectSpec shape
 _PARAM_ORDER = {
     "circle": ("R", "center_x", "center_y"),
     "ellipse": ("a", "b", "center_x", "center_y", "angle"),
     "deformed_circle": ("R", "amplitude", "lobes", "phase", "center_x", "center_y"),
 }
+_SHAPE = {"circle": "circle", "ellipse": "ellipse", "deformed_circle": "deformed"}
 
 
 def boundary_to_msg(boundary: Boundary, header: Header, samples: int = 256) -> ObjectBoundary:
@@ -290,7 +291,10 @@ def boundary_from_msg(msg: ObjectBoundary) -> Boundary:
             missing = [k for k in _PARAM_ORDER[msg.kind] if k not in params]
             if missing:
                 raise MessageError(f"ObjectBoundary '{msg.kind}' lacks parameters {missing}", reason="bad object: missing parameters")
-            return boundary_from_spec(msg.kind, [params[k] for k in _PARAM_ORDER[msg.kind]])
+            v = [params[k] for k in _PARAM_ORDER[msg.kind]]
+            shape_params = [p for k, p in zip(_PARAM_ORDER[msg.kind], v, strict=True) if k not in ('center_x', 'center_y', 'angle')]
+            return ObjectSpec(_SHAPE[msg.kind], tuple(shape_params), (params['center_x'], params['center_y']),
+                              params.get('angle', 0.0)).boundary()
         if len(msg.x) != len(msg.y):
             raise MessageError("ObjectBoundary: x and y differ in length", reason="length mismatch")
         if len(msg.x) > MAX_SAMPLES:

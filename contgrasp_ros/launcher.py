@@ -19,6 +19,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -26,11 +27,13 @@ from typing import Any
 import numpy as np
 import yaml
 
+from contgrasp_core.cli.common import add_object_arguments, object_from_args
 from contgrasp_core.errors import ContgraspError, InvalidParameterError, one_line
+from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+from contgrasp_core.scenario import CONTROLLER, NODES, QUALITY, SIMULATOR, Scenario
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
 
-NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
 
 __all__ = ["main", "default_params_file", "load_params"]
 
@@ -59,10 +62,26 @@ def load_params(path: Path) -> dict[str, dict[str, Any]]:
     return out
 
 
+def _with_object(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> Path:
+    """Put ``obj`` into ``params`` (the simulator's object, the controller's adaptive-gain radius,
+    the quality evaluator's wrench reference) and write them to a parameter file for the nodes."""
+    if obj.shape == "outline":
+        obj = ObjectSpec.from_outline(Path(obj.source).resolve())  # the nodes may run elsewhere
+    scenario = Scenario.from_ros_parameters(params)
+    scenario = replace(scenario.with_object(obj), sensing=replace(scenario.sensing, reference=None))
+    new = scenario.to_ros_parameters()
+    for node in (SIMULATOR, CONTROLLER, QUALITY):
+        params[node].update(new[node])
+    path = Path(tempfile.mkdtemp(prefix="contgrasp_params_")) / "params.yaml"
+    path.write_text(yaml.safe_dump({node: {"ros__parameters": values} for node, values in params.items()}))
+    return path
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="contgrasp-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", type=Path, default=None, help="ROS 2 YAML parameter file (default: the packaged paper scenario)")
     p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID for the graph (default: a random free-looking id 1..101)")
+    add_object_arguments(p, ROD_SCALE)
     p.add_argument("--duration", type=float, default=None, help="simulated seconds to run at most (overrides the parameter file)")
     p.add_argument("--in-process", action="store_true", help="run all nodes in this process on one executor")
     p.add_argument("--executor", choices=("single", "events"), default=None,
@@ -125,6 +144,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
             print("contgrasp-launch: --duration must be > 0", file=sys.stderr)
             return 2
         params["rod_simulator"]["duration"] = float(args.duration)
+    if args.object is not None or args.outline is not None:
+        params_file = _with_object(params, object_from_args(args, ROD_SCALE))
     domain = args.domain_id if args.domain_id is not None else random.randint(1, 101)
     if not 0 <= domain <= 232:
         print("contgrasp-launch: --domain-id must be in 0..232", file=sys.stderr)

@@ -135,10 +135,12 @@ def test_validation_of_inputs():
 def test_feedback_expansion_gains_are_the_law_derivatives() -> None:
     """du/drho and du/dalpha of the controller's expansion against central differences."""
     from contgrasp_core.control import paper_gains
-    from contgrasp_core.rod.scenario import paper_model
+    from dataclasses import replace
+
+    from contgrasp_core.scenario import PAPER
     from contgrasp_core.control import feedback_at_joints
 
-    model = paper_model(20)
+    model = replace(PAPER.rod, n_elements=20)
     gains = paper_gains(model, 0.025)
     rng = np.random.default_rng(0)
     rho = rng.uniform(0.001, 0.08, 21)

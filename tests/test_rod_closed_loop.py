@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -14,7 +16,7 @@ from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import Obstacle, RodSystem, chain
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop, sense_nodes
 from contgrasp_core.control import paper_gains
-from contgrasp_core.rod.scenario import paper_model, paper_object
+from contgrasp_core.scenario import PAPER
 
 _wrap = lambda a: np.mod(a + np.pi, 2 * np.pi) - np.pi  # noqa: E731
 
@@ -33,9 +35,9 @@ def test_obstacle_projection_matches_boundary_project(b):
 
 
 def test_node_sensing_matches_foundation_sense():
-    m = paper_model(n_elements=40)
+    m = replace(PAPER.rod, n_elements=40)
     theta = np.linspace(0.0, 2.5, 40)
-    b = paper_object()
+    b = PAPER.object.boundary()
     sn = sense_nodes(m, Obstacle(b), theta)
     shape = ArmShape(s=m.s_nodes, r=chain.nodes(m, theta), theta=chain.node_angles(m, theta))
     cs = sense(shape, b, m.radius(m.s_nodes))
@@ -46,8 +48,8 @@ def test_node_sensing_matches_foundation_sense():
 
 @pytest.fixture(scope="module")
 def paper_run():
-    m = paper_model()
-    system = RodSystem(m, Obstacle(paper_object()))
+    m = PAPER.rod
+    system = RodSystem(m, Obstacle(PAPER.object.boundary()))
     return run_closed_loop(system, paper_gains(m, 0.025), ClosedLoopConfig(duration=6.0, dt=0.01, record_period=0.01))
 
 
@@ -90,8 +92,8 @@ def test_paper_scenario_matches_static_theory_where_unobstructed(paper_run):
 
 
 def test_sampled_feedback_agrees_with_continuous_over_short_horizon():
-    m = paper_model(n_elements=40)
-    system = RodSystem(m, Obstacle(paper_object()))
+    m = replace(PAPER.rod, n_elements=40)
+    system = RodSystem(m, Obstacle(PAPER.object.boundary()))
     g = paper_gains(m, 0.025)
     cont = run_closed_loop(system, g, ClosedLoopConfig(duration=0.02, dt=5e-4, min_time=1.0))
     zoh = run_closed_loop(system, g, ClosedLoopConfig(duration=0.02, control_period=5e-4, min_time=1.0))
@@ -107,7 +109,7 @@ def test_closed_loop_rejects_bad_config():
     with pytest.raises(InvalidParameterError):
         ClosedLoopConfig(control_period=0.01, dt=0.003)
     with pytest.raises(InvalidParameterError):
-        run_closed_loop(RodSystem(paper_model(n_elements=10)), paper_gains(paper_model(n_elements=10), 0.025))
+        run_closed_loop(RodSystem(replace(PAPER.rod, n_elements=10)), paper_gains(replace(PAPER.rod, n_elements=10), 0.025))
 
 
 def test_simulate_subcommand_json_and_plot(tmp_path):
@@ -138,11 +140,11 @@ def test_held_expansion_is_the_law_to_first_order() -> None:
     from contgrasp_core.rod import Obstacle, RodSystem
     from contgrasp_core.rod.closed_loop import ClosedLoopConfig
     from contgrasp_core.control import paper_gains
-    from contgrasp_core.rod.scenario import paper_model, paper_object
+    from contgrasp_core.scenario import PAPER
     from contgrasp_core.rod.session import LoopSession, sense_observation
     from contgrasp_core.control import feedback_at_joints, HeldExpansion
 
-    model, obj = paper_model(30), paper_object()
+    model, obj = replace(PAPER.rod, n_elements=30), PAPER.object.boundary()
     system = RodSystem(model, Obstacle(obj))
     gains = paper_gains(model, 0.025)
     session = LoopSession(system, ClosedLoopConfig(duration=1.0, control_period=0.002))

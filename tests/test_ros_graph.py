@@ -17,11 +17,8 @@ import yaml
 pytest.importorskip("contgrasp_msgs.msg")
 
 from contgrasp_core.errors import InvalidParameterError  # noqa: E402
-from contgrasp_core.rod import Obstacle, RodModel, RodSystem  # noqa: E402
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig  # noqa: E402
-from contgrasp_core.control import paper_gains  # noqa: E402
-from contgrasp_core.rod.session import LoopSession, boundary_from_spec, sense_observation  # noqa: E402
-from contgrasp_core.control import feedback_at_joints  # noqa: E402
+from contgrasp_core.rod.session import run_sampled  # noqa: E402
+from contgrasp_core.scenario import Scenario  # noqa: E402
 from contgrasp_ros.launcher import default_params_file, load_params  # noqa: E402
 
 from conftest import fresh_domain_id  # noqa: E402
@@ -43,22 +40,9 @@ def small_params(tmp_path: Path, duration: float = 0.1) -> Path:
 
 def core_run(params_file: Path) -> tuple[np.ndarray, int]:
     """The same scenario with the core functions only (no ROS)."""
-    p = load_params(params_file)
-    sim, ctl = p["rod_simulator"], p["grasp_controller"]
-    keys = ("length", "n_elements", "radius_base", "radius_tip", "density", "youngs_modulus", "damping",
-            "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction", "base_angle")
-    model = RodModel(base_position=(sim["base_x"], sim["base_y"]), **{k: sim[k] for k in keys})
-    boundary = boundary_from_spec(sim["object_kind"], sim["object_params"])
-    config = ClosedLoopConfig(duration=sim["duration"], control_period=sim["control_period"], dt=sim["dt"] or None,
-                              settle_speed=sim["settle_speed"], settle_hold=sim["settle_hold"], min_time=sim["min_time"])
-    gains = paper_gains(model, ctl["object_radius"], mu1=ctl["mu1"], length_unit=ctl["length_unit"])
-    session = LoopSession(RodSystem(model, Obstacle(boundary)), config)
-    while True:
-        obs = session.observe()
-        if session.finished:
-            return obs.x, obs.k
-        c = sense_observation(obs, boundary, p["boundary_sensor"]["contact_tolerance"])
-        session.advance(feedback_at_joints(model, gains, c.rho, c.alpha))
+    session = run_sampled(Scenario.from_ros_parameters(load_params(params_file)))
+    obs = session.observe()
+    return obs.x, obs.k
 
 
 def launch(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:

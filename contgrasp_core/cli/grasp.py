@@ -17,8 +17,9 @@ import numpy as np
 
 from .._validate import MAX_NODES
 from ..errors import InvalidParameterError
-from ..objects import PAPER_OBJECTS
-from ..optimal import PAPER_SETTINGS, GraspResult, paper_problem, solve, forward_backward
+from ..objects import FIG2_SCALE, PAPER_OBJECTS
+from ..optimal import GraspResult, forward_backward, paper_problem, solve
+from .common import add_object_arguments, object_from_args
 
 __all__ = ["add_parsers", "run_grasp", "run_figures"]
 
@@ -32,9 +33,10 @@ def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    g.add_argument("--object", choices=PAPER_OBJECTS, default="circle", help="paper object (default circle)")
-    g.add_argument("--rho0", type=float, default=None, help="initial contact distance (paper value per object)")
-    g.add_argument("--alpha0", type=float, default=None, help="initial contact angle in (0, pi) (paper value)")
+    add_object_arguments(g, FIG2_SCALE)
+    g.add_argument("--rho0", type=float, default=None,
+                   help="initial contact distance (paper value for the Fig. 2 objects, else the object's nominal radius)")
+    g.add_argument("--alpha0", type=float, default=None, help="initial contact angle in (0, pi) (paper value; else 1.6)")
     g.add_argument("--s-o0", dest="s_o0", type=float, default=0.0, help="initial shadow point arclength (default 0)")
     g.add_argument("--chi", type=float, default=10.0, help="tracking weight chi > 0 (default 10)")
     g.add_argument("--nodes", type=int, default=500, help="grid nodes along the arm (default 500)")
@@ -70,16 +72,8 @@ def _solve(args: argparse.Namespace) -> GraspResult:
         from ..figures.draw import check_figure_path
 
         check_figure_path(args.plot)
-    name = args.object
-    rho0, alpha0 = PAPER_SETTINGS[name]
-    problem = paper_problem(
-        name,
-        nodes=args.nodes,
-        rho0=rho0 if args.rho0 is None else args.rho0,
-        alpha0=alpha0 if args.alpha0 is None else args.alpha0,
-        s_o0=args.s_o0,
-        chi=args.chi,
-    )
+    given = {k: v for k, v in (("rho0", args.rho0), ("alpha0", args.alpha0)) if v is not None}
+    problem = paper_problem(object_from_args(args, FIG2_SCALE), nodes=args.nodes, s_o0=args.s_o0, chi=args.chi, **given)
     if args.max_iterations is not None and args.max_iterations < 1:
         raise InvalidParameterError(f"--max-iterations must be >= 1, got {args.max_iterations}")
     if args.solver == "fast":
@@ -104,7 +98,7 @@ def run_grasp(args: argparse.Namespace) -> dict[str, Any]:
     if args.plot:
         from ..figures.grasp import save_grasp_figure
 
-        out["plot"] = str(save_grasp_figure(result, args.plot, title=f"{args.object} ({result.solver})"))
+        out["plot"] = str(save_grasp_figure(result, args.plot, title=f"{object_from_args(args, FIG2_SCALE).text()} ({result.solver})"))
     return out
 
 

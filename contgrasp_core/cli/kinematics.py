@@ -19,10 +19,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..arm import Arm, shape_from_curvature
-from ..boundary import Boundary
+from ..boundary import Boundary, wrap_arclength
 from ..contact import base_pose, integrate_contact, offset_curvature, sense
 from ..errors import InvalidParameterError
-from ..objects import PAPER_OBJECTS, make_object
+from ..objects import FIG2_SCALE
+from .common import add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "curvature_profile", "run"]
 
@@ -96,9 +97,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--object", choices=(*PAPER_OBJECTS, "points"), default="circle")
-    p.add_argument("--outline", metavar="CSV", help="object outline file (x, y per row); implies --object points")
-    p.add_argument("--closed", action="store_true", help="the outline closes back to its first point implicitly")
+    add_object_arguments(p, FIG2_SCALE)
     p.add_argument("--rho0", type=float, default=1.0, help="initial contact distance (> 0), default 1")
     p.add_argument("--alpha0", type=float, default=1.55, help="initial contact angle in (0, pi), default 1.55")
     p.add_argument("--s-o0", dest="s_o0", type=float, default=0.0, help="initial shadow arclength, default 0")
@@ -121,7 +120,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         from ..figures.draw import check_figure_path
 
         check_figure_path(args.plot)
-    boundary = make_object(args.object, outline=args.outline, closed=args.closed)
+    obj = object_from_args(args, FIG2_SCALE)
+    boundary = obj.boundary()
     length = boundary.length / 2.0 if args.length is None else args.length
     arm = Arm.paper_tapered(length)
     s = arm.grid(args.nodes)
@@ -133,13 +133,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     geo = sense(shape, boundary, radius, tol=args.tol)
     d_rho = float(np.max(np.abs(ode.rho - geo.rho)))
     d_alpha = float(np.max(np.abs(ode.alpha - geo.alpha)))
-    d_so = float(np.max(np.abs(ode.s_o - geo.s_o)))
+    # arclengths on a closed curve are compared modulo its length (s_o = 0 and s_o = L_o are one point)
+    d_so = float(np.max(np.abs(wrap_arclength(ode.s_o - geo.s_o, boundary.length))))
     if args.plot:
         from ..figures.draw import kinematics_figure, save
 
         save(kinematics_figure(boundary, shape, radius, ode, geo, title=f"{boundary.kind}: contact kinematics"), args.plot)
     return {
-        "object": boundary.kind,
+        "object": obj.text(),
         "object_length": boundary.length,
         "length": length,
         "nodes": int(args.nodes),

@@ -7,8 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InvalidParameterError
-from ..objects import PAPER_OBJECTS
+from ..objects import FIG2_SCALE
 from ..quality_map import METRICS, MapSpec, load_map, quality_map, save_map
+from .common import add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run"]
 
@@ -21,7 +22,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
         help="grasp quality Q1..Q3 over base poses in the disc region D, with Nelder-Mead maxima (Fig. 3)",
         description=__doc__,
     )
-    p.add_argument("--object", choices=PAPER_OBJECTS, default="circle")
+    add_object_arguments(p, FIG2_SCALE)
     p.add_argument("--psi-steps", type=int, default=24, help="polar angles of the base (default 24)")
     p.add_argument("--d-steps", type=int, default=6, help="distances in [d_min, d_max] (default 6)")
     p.add_argument("--d-min", type=float, default=3.0)
@@ -68,7 +69,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         if args.workers is not None and args.workers < 1:
             raise InvalidParameterError("--workers must be >= 1")
         spec = MapSpec(
-            object=args.object, psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
+            object=object_from_args(args, FIG2_SCALE), psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
             d_max=args.d_max, nodes=args.nodes, contact_tol=args.contact_tol,
         )
         qm = quality_map(

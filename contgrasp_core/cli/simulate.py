@@ -8,45 +8,29 @@ Without ``parents`` the subcommand adds its own ``--json`` flag.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.control import paper_gains
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.rod import Obstacle, RodSystem
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
-from contgrasp_core.rod.scenario import PAPER_OBJECT_CENTER, PAPER_OBJECT_RADIUS, paper_model
+from contgrasp_core.objects import ROD_SCALE
+from contgrasp_core.scenario import PAPER
+
+from .common import add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run", "summarize"]
-
-
-def _object(spec: str) -> tuple[Boundary, float]:
-    """``circle[:R]``, ``ellipse:a,b`` or ``deformed`` centred at the paper's (8, 8) cm; returns
-    the boundary and the radius used by the adaptive mu2 (circle radius or mean radius)."""
-    kind, _, arg = spec.partition(":")
-    usage = f"--object must be circle[:R], ellipse:a,b or deformed[:R] (metres), got {spec!r}"
-    try:
-        vals = [float(v) for v in arg.split(",")] if arg else []
-    except ValueError:
-        raise InvalidParameterError(usage) from None
-    if kind in ("circle", "deformed") and len(vals) <= 1:
-        r = vals[0] if vals else PAPER_OBJECT_RADIUS
-        make = circle if kind == "circle" else deformed_circle
-        return make(r, center=PAPER_OBJECT_CENTER), r
-    if kind == "ellipse" and len(vals) in (0, 2):
-        a, b = vals if vals else (0.03, 0.02)
-        return ellipse(a, b, PAPER_OBJECT_CENTER), float(np.sqrt(a * b))
-    raise InvalidParameterError(usage)
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = None) -> argparse.ArgumentParser:
     """Register the ``simulate`` subcommand (``parents`` e.g. the CLI's common ``--json/--debug``)."""
     p = subparsers.add_parser("simulate", help="closed-loop grasp on the Cosserat rod engine (paper Sec. V-C)",
                               description=__doc__.splitlines()[0], parents=parents or [])
-    p.add_argument("--object", default="circle", help="circle[:R] | ellipse:a,b | deformed[:R] (m), centre (0.08, 0.08)")
+    add_object_arguments(p, ROD_SCALE)
     p.add_argument("--duration", type=float, default=10.0, help="max simulated time, s (stops earlier when settled)")
     p.add_argument("--control-period", type=float, default=None,
                    help="sample-and-hold period of the feedback, s (default: continuous implicit feedback)")
@@ -124,9 +108,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         check_figure_path(args.plot)
     if args.animate:
         _check_animation_path(args.animate)
-    boundary, r_obj = _object(args.object)
+    obj = object_from_args(args, ROD_SCALE)
+    boundary, r_obj = obj.boundary(), obj.radius
     overrides = {} if args.damping is None else {"damping": args.damping}
-    model = paper_model(n_elements=args.nodes - 1, **overrides)
+    model = replace(PAPER.rod, n_elements=args.nodes - 1, **overrides)
     cfg = ClosedLoopConfig(duration=args.duration, control_period=args.control_period,
                            dt=args.dt if args.control_period is None else None,
                            record_period=0.01)

@@ -18,7 +18,7 @@ from contgrasp_core.arm import ArmShape
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.control.law import adaptive_mu2, closed_loop_kinematics
 from contgrasp_core.figures.draw import draw_arm, draw_boundary, save
-from contgrasp_core.rod.session import boundary_from_spec
+from contgrasp_core.scenario import Scenario
 
 __all__ = ["run_figure", "quality_history_figure"]
 
@@ -26,8 +26,8 @@ __all__ = ["run_figure", "quality_history_figure"]
 def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path: str) -> None:
     """Draw the figure of ``summary['history']`` (the launcher's monitor samples) to ``path``."""
     hist = summary["history"]
-    sim, ctl = params["rod_simulator"], params["grasp_controller"]
-    boundary = boundary_from_spec(sim["object_kind"], sim["object_params"])
+    ctl = params["grasp_controller"]
+    boundary = Scenario.from_ros_parameters(params).object.boundary()
     # the motion happens early (the arm swings in within ~0.3 s): snapshots at the start, through
     # the swing, and at the end
     times = np.array([h["t"] for h in hist])

@@ -11,7 +11,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -22,6 +22,9 @@ from ..boundary import Boundary
 from ..contact import check_state, initial_state, shape_from_contact
 from ..errors import ContactValidityError, InvalidParameterError
 from .discrete import CurvatureTable, Discretisation
+
+if TYPE_CHECKING:
+    from ..objects import ObjectSpec
 
 __all__ = [
     "PAPER_SETTINGS",
@@ -229,21 +232,23 @@ def problem_from_base(boundary: Boundary, base: BasePose, **kwargs: Any) -> Gras
     return grasp_problem(boundary, rho0=rho0, alpha0=alpha0, s_o0=s_o0, **kwargs)
 
 
-def paper_problem(name: str, *, nodes: int = 500, **kwargs: Any) -> GraspProblem:
-    """The paper's Fig. 2 problem for 'circle', 'ellipse' or 'deformed' (Sec. III-B settings).
+def paper_problem(obj: str | ObjectSpec, *, nodes: int = 500, **kwargs: Any) -> GraspProblem:
+    """The paper's Sec. III-B optimal-grasp problem for an object.
 
-    Object from :func:`contgrasp_core.objects.paper_object`; L = 2 L_o / 3, tapered radius
-    L/20 -> L/200, rho_d = r(s), alpha_d = pi/2, chi = 10, (rho0, alpha0) from
-    :data:`PAPER_SETTINGS`, s_o0 = 0 unless given.
+    ``obj`` is an :class:`~contgrasp_core.objects.ObjectSpec` or its text (``'circle'``,
+    ``'ellipse:6,3'``, ...; paper units). Settings: L = 2 L_o / 3, tapered radius L/20 -> L/200,
+    rho_d = r(s), alpha_d = pi/2, chi = 10, s_o0 = 0 unless given; (rho0, alpha0) from
+    :data:`PAPER_SETTINGS` for the three Fig. 2 objects, otherwise (the object's nominal radius,
+    1.6), the paper circle's choice scaled to the object.
     """
-    from ..objects import paper_object
+    from ..objects import FIG2_SCALE, ObjectSpec
 
-    if not isinstance(name, str) or name not in PAPER_SETTINGS:
-        raise InvalidParameterError(f"unknown object {name!r}; choose one of {', '.join(PAPER_SETTINGS)}")
-    rho0, alpha0 = PAPER_SETTINGS[name]
+    spec = ObjectSpec.coerce(obj, FIG2_SCALE)
+    paper = spec.shape in PAPER_SETTINGS and spec == ObjectSpec.parse(spec.shape, FIG2_SCALE)
+    rho0, alpha0 = PAPER_SETTINGS[spec.shape] if paper else (spec.radius, PAPER_SETTINGS["circle"][1])
     kwargs.setdefault("rho0", rho0)
     kwargs.setdefault("alpha0", alpha0)
-    return grasp_problem(paper_object(name), nodes=nodes, **kwargs)
+    return grasp_problem(spec.boundary(), nodes=nodes, **kwargs)
 
 
 @dataclass(frozen=True)

@@ -27,9 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.arm import ArmShape
-from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse
+from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
+from contgrasp_core.scenario import Scenario
 from contgrasp_core.control.rod_feedback import FeedbackExpansion, HeldExpansion
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
@@ -41,7 +42,7 @@ __all__ = [
     "DivergenceLimits",
     "SimulationDivergedError",
     "sense_observation",
-    "boundary_from_spec",
+    "run_sampled",
 ]
 
 Array = NDArray[np.float64]
@@ -229,22 +230,21 @@ def sense_observation(obs: Observation, boundary: Boundary, tol: float = 0.0) ->
     return sense(ArmShape(s=obs.s, r=obs.x, theta=obs.theta), boundary, obs.radius, tol=tol)
 
 
-def boundary_from_spec(kind: str, params: list[float] | Array) -> Boundary:
-    """An object from a kind and a flat parameter list (how nodes and files name objects).
+def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSession:
+    """The scenario's sampled loop with the core functions only, stepped exactly as the ROS nodes
+    step it (observe, :func:`sense_observation` with the sensor's tolerance,
+    :func:`~contgrasp_core.control.feedback_at_joints`, advance): a lock-step ROS run of the same
+    scenario ends in the same state bit for bit. Returns the finished session."""
+    from contgrasp_core.control import feedback_at_joints
+    from contgrasp_core.rod.obstacle import Obstacle
 
-    ``circle`` [R, cx, cy]; ``ellipse`` [a, b, cx, cy, angle]; ``deformed_circle``
-    [R, amplitude, lobes, phase, cx, cy].
-    """
-    p = [float(v) for v in params]
-    n_expected = {"circle": 3, "ellipse": 5, "deformed_circle": 6}
-    if kind not in n_expected:
-        raise InvalidParameterError(f"object kind must be one of {sorted(n_expected)}, got {kind!r}")
-    if len(p) != n_expected[kind]:
-        raise InvalidParameterError(f"{kind} needs {n_expected[kind]} parameters, got {len(p)}")
-    if kind == "circle":
-        return circle(p[0], (p[1], p[2]))
-    if kind == "ellipse":
-        return ellipse(p[0], p[1], (p[2], p[3]), p[4])
-    if p[2] != int(p[2]):
-        raise InvalidParameterError(f"deformed_circle lobes must be an integer, got {p[2]}")
-    return deformed_circle(p[0], p[1], int(p[2]), p[3], (p[4], p[5]))
+    boundary = scenario.object.boundary()
+    system = RodSystem(scenario.rod, Obstacle(boundary)) if system is None else system
+    session = LoopSession(system, scenario.loop)
+    gains = scenario.feedback_gains
+    while True:
+        obs = session.observe()
+        if session.finished:
+            return session
+        c = sense_observation(obs, boundary, scenario.sensing.contact_tolerance)
+        session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha))

@@ -11,6 +11,7 @@ from __future__ import annotations
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
+from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, RodState
 from contgrasp_ros import qos
 from contgrasp_ros.convert import RodArrays, contact_to_msg, require_finite, rod_state_arrays
@@ -23,7 +24,7 @@ class BoundarySensor(Node):
 
     def __init__(self, **node_kwargs: object) -> None:
         super().__init__("boundary_sensor", **node_kwargs)  # type: ignore[arg-type]
-        declare(self, "contact_tolerance", 0.0, "contact where delta >= -tolerance [m]", lo=0.0, hi=1.0)
+        declare(self, "contact_tolerance", PAPER.sensing.contact_tolerance, "contact where delta >= -tolerance [m]", lo=0.0, hi=1.0)
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops)

@@ -16,7 +16,7 @@ import numpy as np
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
-from contgrasp_core.control.law import CENTIMETRE
+from contgrasp_core.scenario import PAPER
 from contgrasp_core.control import FeedbackGains, paper_gains
 from contgrasp_core.control import feedback_at_joints
 from contgrasp_msgs.msg import ContactState, CoupleControl
@@ -35,11 +35,12 @@ class GraspController(Node):
     def __init__(self, **node_kwargs: object) -> None:
         super().__init__("grasp_controller", **node_kwargs)  # type: ignore[arg-type]
         self.model = declare_rod_model(self)
-        declare(self, "mu1", 1.0, "gain mu1 > 0 of eq. dynamic_feedback", lo=1e-9, hi=1e6)
-        declare(self, "mu2", 0.0, "gain mu2 in law length units (used when adaptive_mu2 is false)", lo=-MU2_LIMIT, hi=MU2_LIMIT)
-        declare(self, "adaptive_mu2", True, "use mu2(s) = r(s) - 1/(r_obj + r(s)) (paper appendix)")
-        declare(self, "object_radius", 0.025, "object radius r_obj for the adaptive mu2 [m]", lo=1e-9, hi=1e3)
-        declare(self, "length_unit", CENTIMETRE, "metres per length unit of the law (paper: cm)", lo=1e-9, hi=1e3)
+        paper = PAPER.node_parameters("grasp_controller")
+        declare(self, "mu1", paper["mu1"], "gain mu1 > 0 of eq. dynamic_feedback", lo=1e-9, hi=1e6)
+        declare(self, "mu2", paper["mu2"], "gain mu2 in law length units (used when adaptive_mu2 is false)", lo=-MU2_LIMIT, hi=MU2_LIMIT)
+        declare(self, "adaptive_mu2", paper["adaptive_mu2"], "use mu2(s) = r(s) - 1/(r_obj + r(s)) (paper appendix)")
+        declare(self, "object_radius", paper["object_radius"], "object radius r_obj for the adaptive mu2 [m]", lo=1e-9, hi=1e3)
+        declare(self, "length_unit", paper["length_unit"], "metres per length unit of the law (paper: cm)", lo=1e-9, hi=1e3)
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops)

@@ -10,6 +10,7 @@ from __future__ import annotations
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
+from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, GraspQuality
 from contgrasp_ros import qos
 from contgrasp_ros.convert import contact_arrays, quality_to_msg, require_finite
@@ -22,10 +23,11 @@ class GraspQualityNode(Node):
 
     def __init__(self, **node_kwargs: object) -> None:
         super().__init__("grasp_quality", **node_kwargs)  # type: ignore[arg-type]
-        declare(self, "rate_hz", 20.0, "evaluations per simulated second (0 = every contact state)", lo=0.0, hi=1e6)
-        declare(self, "contact_tolerance", -1.0, "contact tolerance [m]; < 0 uses the sensor's", lo=-1.0, hi=1.0)
-        declare(self, "reference_x", 0.0, "wrench reference point x [m] (object frame origin)", lo=-1e6, hi=1e6)
-        declare(self, "reference_y", 0.0, "wrench reference point y [m]", lo=-1e6, hi=1e6)
+        paper = PAPER.node_parameters("grasp_quality")
+        declare(self, "rate_hz", paper["rate_hz"], "evaluations per simulated second (0 = every contact state)", lo=0.0, hi=1e6)
+        declare(self, "contact_tolerance", paper["contact_tolerance"], "contact tolerance [m]; < 0 uses the sensor's", lo=-1.0, hi=1.0)
+        declare(self, "reference_x", paper["reference_x"], "wrench reference point x [m] (object frame origin)", lo=-1e6, hi=1e6)
+        declare(self, "reference_y", paper["reference_y"], "wrench reference point y [m]", lo=-1e6, hi=1e6)
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops)

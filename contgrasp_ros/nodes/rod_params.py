@@ -5,11 +5,12 @@ from __future__ import annotations
 from rclpy.node import Node
 
 from contgrasp_core.rod.model import RodModel
+from contgrasp_core.scenario import PAPER
 from contgrasp_ros.runtime import declare
 
 __all__ = ["declare_rod_model"]
 
-_DEFAULTS = RodModel()
+_DEFAULTS = PAPER.rod  # a node started without a parameter file simulates the paper's arm
 
 
 def declare_rod_model(node: Node) -> RodModel:
@@ -31,8 +32,8 @@ def declare_rod_model(node: Node) -> RodModel:
         "contact_stiffness": declare(node, "contact_stiffness", m.contact_stiffness, "contact stiffness [N/m^2]", lo=0.0, hi=1e12, read_only=True),
         "contact_damping": declare(node, "contact_damping", m.contact_damping, "contact damping [N s/m^2]", lo=0.0, hi=1e12, read_only=True),
         "friction": declare(node, "friction", m.friction, "Coulomb friction coefficient", lo=0.0, hi=10.0, read_only=True),
-        "base_x": declare(node, "base_x", 0.0, "base position x [m]", lo=-1e6, hi=1e6, read_only=True),
-        "base_y": declare(node, "base_y", 0.0, "base position y [m]", lo=-1e6, hi=1e6, read_only=True),
+        "base_x": declare(node, "base_x", m.base_position[0], "base position x [m]", lo=-1e6, hi=1e6, read_only=True),
+        "base_y": declare(node, "base_y", m.base_position[1], "base position y [m]", lo=-1e6, hi=1e6, read_only=True),
         "base_angle": declare(node, "base_angle", m.base_angle, "base heading theta0 [rad]", lo=-100.0, hi=100.0, read_only=True),
     }
     base = (v.pop("base_x"), v.pop("base_y"))

@@ -34,7 +34,8 @@ from visualization_msgs.msg import MarkerArray
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.rod import Obstacle, RodSystem
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
-from contgrasp_core.rod.session import DivergenceLimits, LoopSession, boundary_from_spec
+from contgrasp_core.rod.session import DivergenceLimits, LoopSession
+from contgrasp_core.scenario import PAPER, object_from_parameters
 from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_ros import qos
@@ -53,7 +54,6 @@ from contgrasp_ros.runtime import (
 )
 
 FALLBACKS = ("hold", "zero")
-OBJECT_KINDS = ("circle", "ellipse", "deformed_circle")
 
 
 def _stamp(t: float) -> Time:
@@ -67,21 +67,25 @@ class RodSimulator(Node):
     def __init__(self, **node_kwargs: object) -> None:
         super().__init__("rod_simulator", **node_kwargs)  # type: ignore[arg-type]
         self.model = declare_rod_model(self)
-        kind = declare(self, "object_kind", "circle", "circle | ellipse | deformed_circle", read_only=True, choices=OBJECT_KINDS)
-        params = declare(
-            self, "object_params", [0.025, 0.08, 0.08],
-            "circle [R, cx, cy]; ellipse [a, b, cx, cy, angle]; deformed_circle [R, amplitude, lobes, phase, cx, cy] (m, rad)",
-            read_only=True,
+        paper = PAPER.node_parameters("rod_simulator")
+        obj = (
+            declare(self, "object", paper["object"], "NAME[:PARAMS] in metres: circle[:R], ellipse[:a,b], "
+                    "deformed[:R,amplitude,lobes,phase]; or 'outline' (with object_outline)", read_only=True),
+            declare(self, "object_outline", paper["object_outline"], "with object 'outline': a CSV file, rows x, y [m]",
+                    read_only=True),
+            declare(self, "object_center", paper["object_center"], "object centre [x, y] (m)", read_only=True),
+            declare(self, "object_angle", paper["object_angle"], "object orientation (rad, ellipse)", lo=-100.0, hi=100.0,
+                    read_only=True),
         )
         # The run's settings shape the session when it starts: read-only (a change could only
         # take effect at a reset, which would be surprising).
         self.config = ClosedLoopConfig(
-            duration=declare(self, "duration", 20.0, "simulated seconds at most [s]", lo=1e-6, hi=1e6, read_only=True),
-            control_period=declare(self, "control_period", 0.01, "control period [s]", lo=1e-6, hi=10.0, read_only=True),
-            dt=declare(self, "dt", 0.0, "integrator step [s]; 0 = the control period", lo=0.0, hi=10.0, read_only=True) or None,
-            settle_speed=declare(self, "settle_speed", 2e-4, "settled when every node is slower [m/s]", lo=1e-12, hi=1e3, read_only=True),
-            settle_hold=declare(self, "settle_hold", 0.5, "for this long [s]", lo=1e-9, hi=1e6, read_only=True),
-            min_time=declare(self, "min_time", 1.0, "never settled before [s]", lo=0.0, hi=1e6, read_only=True),
+            duration=declare(self, "duration", paper["duration"], "simulated seconds at most [s]", lo=1e-6, hi=1e6, read_only=True),
+            control_period=declare(self, "control_period", paper["control_period"], "control period [s]", lo=1e-6, hi=10.0, read_only=True),
+            dt=declare(self, "dt", paper["dt"], "integrator step [s]; 0 = the control period", lo=0.0, hi=10.0, read_only=True) or None,
+            settle_speed=declare(self, "settle_speed", paper["settle_speed"], "settled when every node is slower [m/s]", lo=1e-12, hi=1e3, read_only=True),
+            settle_hold=declare(self, "settle_hold", paper["settle_hold"], "for this long [s]", lo=1e-9, hi=1e6, read_only=True),
+            min_time=declare(self, "min_time", paper["min_time"], "never settled before [s]", lo=0.0, hi=1e6, read_only=True),
         )
         self.lockstep = declare(self, "lockstep", True, "advance only when the couple for the current step arrived", read_only=True)
         declare(self, "couple_timeout", 10.0, "lock-step: wall seconds to wait for a couple", lo=1e-3, hi=3600.0)
@@ -94,7 +98,7 @@ class RodSimulator(Node):
                 "the run fails when the rod surface is deeper inside the object than this [m]; 0 = the tip radius",
                 lo=0.0, hi=100.0)
         declare(self, "max_kinetic_energy", 10.0, "the run fails when the rod's kinetic energy exceeds this [J]", lo=1e-12, hi=1e12)
-        self.boundary = boundary_from_spec(kind, params)
+        self.boundary = object_from_parameters(*obj).boundary()
         self.system = RodSystem(self.model, Obstacle(self.boundary))
 
         self.drops = DropCounter(self)

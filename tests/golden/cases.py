@@ -28,13 +28,14 @@ def lockstep_paper_run() -> dict[str, Any]:
     from contgrasp_core.rod import Obstacle, RodModel, RodSystem
     from contgrasp_core.rod.closed_loop import ClosedLoopConfig
     from contgrasp_core.control import paper_gains
-    from contgrasp_core.rod.session import LoopSession, boundary_from_spec, sense_observation
+    from contgrasp_core.boundary import circle
+    from contgrasp_core.rod.session import LoopSession, sense_observation
     from contgrasp_core.control import feedback_at_joints
 
     model = RodModel(length=0.20, n_elements=100, radius_base=0.01, radius_tip=0.001, density=1042.0,
                      youngs_modulus=1.0e4, damping=1.0, drag_normal=5110.0, drag_tangential=25.55,
                      contact_stiffness=1.0e5, contact_damping=1.0)
-    boundary = boundary_from_spec("circle", [0.025, 0.08, 0.08])
+    boundary = circle(0.025, (0.08, 0.08))
     config = ClosedLoopConfig(duration=4.0, control_period=0.002, settle_speed=0.002, settle_hold=0.3, min_time=1.0)
     gains = paper_gains(model, 0.025)
     session = LoopSession(RodSystem(model, Obstacle(boundary)), config)
@@ -52,9 +53,9 @@ def closed_loop_continuous() -> dict[str, Any]:
     from contgrasp_core.rod import Obstacle, RodSystem
     from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
     from contgrasp_core.control import paper_gains
-    from contgrasp_core.rod.scenario import paper_model
+    from contgrasp_core.scenario import PAPER
 
-    model = paper_model(100)
+    model = PAPER.rod
     res = run_closed_loop(RodSystem(model, Obstacle(circle(0.025, (0.08, 0.08)))), paper_gains(model, 0.025),
                           ClosedLoopConfig(duration=10.0, dt=0.01))
     return {"steps": len(res.t), "settle_time": res.settle_time, "x": res.x[-1], "rho": res.rho[-1]}

@@ -1,0 +1,30 @@
+"""Arguments every subcommand that takes an object shares: ``--object NAME[:PARAMS]`` or
+``--outline FILE.csv`` (:class:`contgrasp_core.objects.ObjectSpec`, one syntax everywhere)."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..objects import SHAPES, ObjectScale, ObjectSpec
+
+__all__ = ["add_object_arguments", "object_from_args"]
+
+_SYNTAX = ", ".join(f"{name}[:{','.join(names)}]" for name, names in SHAPES.items())
+
+
+def add_object_arguments(parser: argparse.ArgumentParser, scale: ObjectScale) -> None:
+    """Register ``--object`` and ``--outline`` (mutually exclusive; default: the scale's circle)."""
+    defaults = "; ".join(f"{k} {','.join(f'{v:g}' for v in vals)}" for k, vals in scale.defaults.items())
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument(
+        "--object", metavar="NAME[:PARAMS]", default=None,
+        help=f"built-in object: {_SYNTAX} "
+        f"({scale.name}; defaults {defaults}; centre {scale.center[0]:g}, {scale.center[1]:g}). Default: circle")
+    group.add_argument("--outline", metavar="FILE.csv", default=None,
+                       help=f"your own object: a CSV outline, rows x, y in the same units ({scale.name}), "
+                       "closed implicitly")
+
+
+def object_from_args(args: argparse.Namespace, scale: ObjectScale) -> ObjectSpec:
+    """The object the parsed ``--object`` / ``--outline`` name."""
+    return ObjectSpec.from_cli(args.object, args.outline, scale)

@@ -1,0 +1,199 @@
+"""One model of a closed-loop grasp scenario (paper Sec. V-C and appendix D).
+
+A :class:`Scenario` is everything that decides what a closed-loop run computes: the rod
+(:class:`~contgrasp_core.rod.model.RodModel`), the object (:class:`~contgrasp_core.objects.ObjectSpec`),
+the loop (:class:`~contgrasp_core.rod.closed_loop.ClosedLoopConfig`), the feedback gains
+(:class:`GainSettings`) and what the sensor and the quality evaluator measure
+(:class:`SensingSettings`). :data:`PAPER` is the paper's scenario as the ROS graph runs it.
+
+The core runner, the ROS nodes (their parameter defaults), the launcher, the recorder's metadata
+and ``contgrasp analyze`` all read it from here: :meth:`Scenario.to_ros_parameters` gives the
+parameters per node (the layout of ``contgrasp_ros/config/default.yaml``, tested equal) and
+:meth:`Scenario.from_ros_parameters` reads them back.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from contgrasp_core.control.gains import FeedbackGains, paper_gains
+from contgrasp_core.control.law import CENTIMETRE
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig
+from contgrasp_core.rod.model import RodModel
+
+__all__ = ["GainSettings", "SensingSettings", "Scenario", "PAPER", "ROD_PARAMETERS", "NODES", "SIMULATOR", "SENSOR",
+           "CONTROLLER", "QUALITY", "object_from_parameters"]
+
+SIMULATOR, SENSOR, CONTROLLER, QUALITY = "rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"
+NODES = (SIMULATOR, SENSOR, CONTROLLER, QUALITY)
+"""The graph's nodes whose parameters the scenario sets."""
+
+ROD_PARAMETERS = ("length", "n_elements", "radius_base", "radius_tip", "density", "youngs_modulus", "damping",
+                  "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction",
+                  "base_x", "base_y", "base_angle")
+"""The rod's parameters (ROS names), shared by the simulator and the controller."""
+
+_LOOP_PARAMETERS = ("duration", "control_period", "dt", "settle_speed", "settle_hold", "min_time")
+
+
+@dataclass(frozen=True)
+class GainSettings:
+    """Gains of eq. dynamic_feedback: ``mu1``; ``mu2`` (law units) or, with ``adaptive_mu2``, the
+    appendix's ``mu2(s) = r(s) - 1/(r_obj + r(s))`` with ``object_radius`` (m; None = the
+    object's nominal radius); ``length_unit`` (metres per law unit, cm as in the paper)."""
+
+    mu1: float = 1.0
+    mu2: float = 0.0
+    adaptive_mu2: bool = True
+    object_radius: float | None = None
+    length_unit: float = CENTIMETRE
+
+    def gains(self, model: RodModel, obj: ObjectSpec) -> FeedbackGains:
+        """The gains at the rod's joints."""
+        if self.adaptive_mu2:
+            r = obj.radius if self.object_radius is None else self.object_radius
+            return paper_gains(model, r, mu1=self.mu1, length_unit=self.length_unit)
+        return FeedbackGains(mu1=self.mu1, mu2=self.mu2, length_unit=self.length_unit)
+
+
+@dataclass(frozen=True)
+class SensingSettings:
+    """The boundary sensor's ``contact_tolerance`` (m: a node is in contact where
+    ``delta >= -tolerance``, paper Definition 1); the quality evaluator's ``quality_tolerance`` (m)
+    and ``quality_rate_hz`` (evaluations per simulated second, 0 = every contact state) and the
+    wrench ``reference`` point (m; None = the object's centre, the object frame origin)."""
+
+    contact_tolerance: float = 0.0
+    quality_tolerance: float = 0.0005
+    quality_rate_hz: float = 20.0
+    reference: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A closed-loop grasp: rod, object, loop, gains and sensing (SI units)."""
+
+    rod: RodModel
+    object: ObjectSpec
+    loop: ClosedLoopConfig
+    gains: GainSettings = field(default_factory=GainSettings)
+    sensing: SensingSettings = field(default_factory=SensingSettings)
+
+    def __post_init__(self) -> None:
+        for name, cls in (("rod", RodModel), ("object", ObjectSpec), ("loop", ClosedLoopConfig),
+                          ("gains", GainSettings), ("sensing", SensingSettings)):
+            if not isinstance(getattr(self, name), cls):
+                raise InvalidParameterError(f"Scenario.{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
+
+    @property
+    def feedback_gains(self) -> FeedbackGains:
+        """The gains at the rod's joints (:meth:`GainSettings.gains`)."""
+        return self.gains.gains(self.rod, self.object)
+
+    @property
+    def reference(self) -> tuple[float, float]:
+        """The wrench reference point of the grasp map (m)."""
+        return self.object.center if self.sensing.reference is None else self.sensing.reference
+
+    # ------------------------------------------------------------------ ROS parameters
+    def to_ros_parameters(self) -> dict[str, dict[str, Any]]:
+        """Parameters per node, plain types: ``{"/**": rod, "rod_simulator": object + loop, ...}``
+        (the layout of a ROS 2 parameter file; ``/**`` applies to every node)."""
+        m = self.rod
+        rod = {name: _plain(getattr(m, name)) for name in ROD_PARAMETERS if name not in ("base_x", "base_y")}
+        rod["base_x"], rod["base_y"] = float(m.base_position[0]), float(m.base_position[1])
+        rod = {k: rod[k] for k in ROD_PARAMETERS}
+        o = self.object
+        sim: dict[str, Any] = {"object": o.text() if o.shape != "outline" else "outline",
+                               "object_outline": o.source if o.shape == "outline" else "",
+                               "object_center": [float(c) for c in o.center], "object_angle": float(o.angle)}
+        cfg = self.loop
+        sim.update({"duration": cfg.duration, "control_period": float(cfg.control_period or 0.0), "dt": float(cfg.dt or 0.0),
+                    "settle_speed": cfg.settle_speed, "settle_hold": cfg.settle_hold, "min_time": cfg.min_time})
+        g = self.gains
+        ctl = {"mu1": g.mu1, "mu2": g.mu2, "adaptive_mu2": g.adaptive_mu2,
+               "object_radius": float(o.radius if g.object_radius is None else g.object_radius),
+               "length_unit": g.length_unit}
+        s = self.sensing
+        ref = self.reference
+        quality = {"rate_hz": s.quality_rate_hz, "contact_tolerance": s.quality_tolerance,
+                   "reference_x": float(ref[0]), "reference_y": float(ref[1])}
+        return {"/**": rod, SIMULATOR: sim, SENSOR: {"contact_tolerance": s.contact_tolerance},
+                CONTROLLER: ctl, QUALITY: quality}
+
+    def node_parameters(self, node: str) -> dict[str, Any]:
+        """The parameters of one node (the shared rod parameters included where the node takes them)."""
+        p = self.to_ros_parameters()
+        if node not in p:
+            raise InvalidParameterError(f"unknown node {node!r}; the scenario sets {', '.join(NODES)}")
+        shared = p["/**"] if node in (SIMULATOR, CONTROLLER) else {}
+        return {**shared, **p[node]}
+
+    @classmethod
+    def from_ros_parameters(cls, params: dict[str, dict[str, Any]], base: Scenario | None = None) -> Scenario:
+        """The scenario of a parameter set (per node, as :meth:`to_ros_parameters` or a loaded
+        parameter file merged per node); what it omits comes from ``base`` (default :data:`PAPER`)."""
+        base = PAPER if base is None else base
+        default = base.to_ros_parameters()
+        sim = {**default["/**"], **default[SIMULATOR], **params.get("/**", {}), **params.get(SIMULATOR, {})}
+        ctl = {**default[CONTROLLER], **params.get(CONTROLLER, {})}
+        sen = {**default[SENSOR], **params.get(SENSOR, {})}
+        qual = {**default[QUALITY], **params.get(QUALITY, {})}
+        rod = RodModel(base_position=(float(sim["base_x"]), float(sim["base_y"])),
+                       **{k: sim[k] for k in ROD_PARAMETERS if k not in ("base_x", "base_y")})
+        obj = object_from_parameters(sim["object"], sim["object_outline"], sim["object_center"], sim["object_angle"])
+        loop = ClosedLoopConfig(duration=float(sim["duration"]), control_period=float(sim["control_period"]) or None,
+                                dt=float(sim["dt"]) or None, settle_speed=float(sim["settle_speed"]),
+                                settle_hold=float(sim["settle_hold"]), min_time=float(sim["min_time"]))
+        gains = GainSettings(mu1=float(ctl["mu1"]), mu2=float(ctl["mu2"]), adaptive_mu2=bool(ctl["adaptive_mu2"]),
+                             object_radius=float(ctl["object_radius"]), length_unit=float(ctl["length_unit"]))
+        sensing = SensingSettings(contact_tolerance=float(sen["contact_tolerance"]),
+                                  quality_tolerance=float(qual["contact_tolerance"]),
+                                  quality_rate_hz=float(qual["rate_hz"]),
+                                  reference=(float(qual["reference_x"]), float(qual["reference_y"])))
+        return cls(rod=rod, object=obj, loop=loop, gains=gains, sensing=sensing)
+
+    def with_object(self, obj: ObjectSpec) -> Scenario:
+        """The same scenario around another object (the adaptive gain follows its nominal radius)."""
+        return replace(self, object=obj, gains=replace(self.gains, object_radius=None))
+
+
+def object_from_parameters(text: str, outline: str, center: Any, angle: float) -> ObjectSpec:
+    """The object named by the simulator's parameters: ``object`` (``NAME[:PARAMS]`` in metres, or
+    ``outline`` with the CSV file ``object_outline``), ``object_center`` [x, y] and ``object_angle``
+    (rad, ellipses). An outline is placed by its own coordinates (centre and angle do not apply)."""
+    if text == "outline" or outline:
+        if text != "outline" or not outline:
+            raise InvalidParameterError("an outline object needs object:=outline and object_outline:=FILE.csv")
+        return ObjectSpec.from_outline(outline)
+    spec = ObjectSpec.parse(text, ROD_SCALE)
+    return ObjectSpec(spec.shape, spec.params, tuple(center), float(angle))
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+_PAPER_ROD = RodModel(length=0.20, n_elements=100, radius_base=0.01, radius_tip=0.001, density=1042.0,
+                      youngs_modulus=1.0e4, damping=1.0, drag_normal=5110.0, drag_tangential=25.55,
+                      contact_stiffness=1.0e5, contact_damping=1.0)
+
+PAPER = Scenario(
+    rod=_PAPER_ROD,
+    object=ObjectSpec.parse("circle", ROD_SCALE),
+    loop=ClosedLoopConfig(duration=4.0, control_period=0.002, settle_speed=0.002, settle_hold=0.3, min_time=1.0),
+    gains=GainSettings(object_radius=0.025),
+    sensing=SensingSettings(contact_tolerance=0.0, quality_tolerance=0.0005, quality_rate_hz=20.0, reference=(0.08, 0.08)),
+)
+"""The paper's closed-loop grasp (Sec. V-C, appendix D) as the ROS graph runs it: L = 20 cm tapered
+1 cm -> 1 mm, octopus material and drag (density 1042 kg/m^3, E = 10 kPa, drag 5110 / 25.55), a
+2.5 cm circle centred at (8, 8) cm, the adaptive mu2 of the appendix, a 2 ms control period
+(the law held to first order in the state). The damping ``zeta = 1 /s`` and the contact law are
+this project's choices (docs/rod.md)."""
