@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse
-from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.errors import InvalidParameterError, output_error
 from contgrasp_core.feedback import closed_loop_kinematics
 from contgrasp_core.rod import Obstacle, RodSystem
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, paper_gains, run_closed_loop
@@ -171,7 +171,7 @@ def plot_fig4(res: ClosedLoopResult, boundary: Boundary, path: str, obstacle_rad
     try:
         fig.savefig(path, dpi=150)
     except (OSError, ValueError) as exc:
-        raise InvalidParameterError(f"cannot write the figure {path}: {exc}") from exc
+        raise output_error(f"the figure {path}", exc) from exc
     finally:
         plt.close(fig)
 
@@ -204,7 +204,7 @@ def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 
     try:
         anim.save(path, writer=PillowWriter(fps=12))
     except (OSError, ValueError) as exc:
-        raise InvalidParameterError(f"cannot write the animation {path}: {exc}") from exc
+        raise output_error(f"the animation {path}", exc) from exc
     finally:
         plt.close(fig)
 

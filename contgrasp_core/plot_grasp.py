@@ -83,7 +83,7 @@ def save_grasp_figure(result: GraspResult, path: str | Path, title: str | None =
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    from .errors import InvalidParameterError
+    from .errors import output_error
 
     out = Path(path)
     fig = plot_grasp(result, title=title)
@@ -91,7 +91,7 @@ def save_grasp_figure(result: GraspResult, path: str | Path, title: str | None =
         out.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out, dpi=130)
     except (OSError, ValueError) as exc:
-        raise InvalidParameterError(f"cannot write the figure {out}: {exc}") from exc
+        raise output_error(f"the figure {out}", exc) from exc
     finally:
         plt.close(fig)
     return out

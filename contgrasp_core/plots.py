@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray  # noqa: E402
 from .arm import ArmShape  # noqa: E402
 from .boundary import Boundary  # noqa: E402
 from .contact import ContactKinematics, ContactState  # noqa: E402
-from .errors import InvalidParameterError  # noqa: E402
+from .errors import InvalidParameterError, output_error  # noqa: E402
 
 __all__ = ["draw_boundary", "draw_arm", "kinematics_figure", "save", "check_figure_path"]
 
@@ -115,6 +115,6 @@ def save(fig: Figure, path: str) -> None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=130)
     except (OSError, ValueError) as exc:
-        raise InvalidParameterError(f"cannot write the figure {path}: {exc}") from exc
+        raise output_error(f"the figure {path}", exc) from exc
     finally:
         plt.close(fig)

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from contgrasp_core.arm import ArmShape
 from contgrasp_core.boundary import Boundary, circle, deformed_circle, ellipse
 from contgrasp_core.contact import ContactState, sense
-from contgrasp_core.errors import ContgraspError, InvalidParameterError
+from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.feedback import feedback_couple, feedback_couple_gradient
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, FeedbackGains
@@ -72,7 +72,7 @@ class Observation:
     max_speed: float
 
 
-class SimulationDivergedError(ContgraspError):
+class SimulationDivergedError(RunFailure):
     """The simulated state is no longer trustworthy (NaN/Inf, deep penetration, energy blow-up)."""
 
 
