@@ -443,6 +443,8 @@ class GuardedSpin:
         try:
             self.executor.spin_once(timeout_sec=timeout_sec)
         except RuntimeError as exc:
+            if isinstance(exc, ContgraspError):  # a RunFailure (FatalNodeError) from a callback ends the node
+                raise
             if not self.executor.context.ok():
                 raise ExternalShutdownException() from exc
             self.streak += 1
