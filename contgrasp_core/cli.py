@@ -97,7 +97,10 @@ def _summary(result: dict[str, Any]) -> str:
 def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> int:
     """Entry point of the ``contgrasp`` command; returns the process exit code."""
     parser = build_parser(extra)
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    command = " ".join(c for c in (args.command, getattr(args, "bag_command", None)) if c)
+    if unknown:  # argparse would name the top-level parser; the subcommand's help is the one to read
+        ArgumentParser(prog=f"contgrasp {command}").error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
         result = args.func(args)
         if args.json:
@@ -107,7 +110,6 @@ def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> 
     except Exception as exc:  # noqa: BLE001 - the CLI turns every failure into one line
         if args.debug:
             raise
-        command = " ".join(c for c in (args.command, getattr(args, "bag_command", None)) if c)
         return report(f"contgrasp {command}", exc)
     print(text)
     return 0
