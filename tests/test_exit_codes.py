@@ -266,8 +266,12 @@ def test_core_main_maps_the_family_to_the_exit_code(monkeypatch: pytest.MonkeyPa
 
 
 # ----------------------------------------------------------------------------- contgrasp-launch
-def test_launcher_bad_input_and_usage_exit_2(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+def test_launcher_bad_input_and_usage_exit_2(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
     from contgrasp_ros import launcher
+
+    for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR"):  # the launcher sets them
+        monkeypatch.setenv(var, os.environ.get(var, "0"))
 
     for argv, start in ((["--duration", "-1", "--no-record"], "contgrasp-launch: error: --duration must be"),
                         (["--no-record", "--respawn", "-2"], "contgrasp-launch: error: --respawn takes N >= 0"),
