@@ -106,13 +106,16 @@ def random_scenario(rng: random.Random) -> dict[str, Any]:
             break
     bx, by, ba = rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), rng.uniform(-math.pi, math.pi)
     cx, cy = bx + u * math.cos(ba) - v * math.sin(ba), by + u * math.sin(ba) + v * math.cos(ba)
+    angle = 0.0
     if kind == "circle":
-        params = [size, cx, cy]
+        params = [size]
     elif kind == "ellipse":
-        params = [a, b, cx, cy, rng.uniform(-math.pi, math.pi)]
+        params, angle = [a, b], rng.uniform(-math.pi, math.pi)
     else:
-        params = [size, amplitude, float(lobes), rng.uniform(-math.pi, math.pi), cx, cy]
-    return {"object_kind": kind, "object_params": [round(p, 5) for p in params], "base": [round(bx, 5), round(by, 5), round(ba, 5)],
+        params = [size, amplitude, float(lobes), rng.uniform(-math.pi, math.pi)]
+    shape = "deformed" if kind == "deformed_circle" else kind
+    return {"object": f"{shape}:{','.join(f'{p:.5g}' for p in params)}", "object_angle": round(angle, 5),
+            "object_kind": kind, "base": [round(bx, 5), round(by, 5), round(ba, 5)],
             "object_radius": round(r_obj, 5), "centre": [round(cx, 5), round(cy, 5)]}
 
 
@@ -121,7 +124,7 @@ def write_params(path: Path, scenario: dict[str, Any], n_elements: int, couple_t
     common = data["/**"]["ros__parameters"]
     common.update(n_elements=n_elements, base_x=scenario["base"][0], base_y=scenario["base"][1], base_angle=scenario["base"][2])
     data["rod_simulator"]["ros__parameters"].update(
-        object_kind=scenario["object_kind"], object_params=scenario["object_params"],
+        object=scenario["object"], object_center=scenario["centre"], object_angle=scenario["object_angle"],
         duration=1e5, min_time=1e5,  # never finished or settled within a run: it lasts until our SIGINT
         couple_timeout=couple_timeout, timeout_fallback=fallback,
     )
@@ -554,7 +557,7 @@ def main(argv: list[str] | None = None) -> int:
             r["t_start_soak_s"] = round(t_run - t0, 1)
             overhead = max(overhead, r["wall_s"] - r.get("loop_wall_s", 0) + 5.0)
             runs.append(r)
-            log(f"  {r['object_kind']} {r['object_params']} base {r['base']}: exit {r['exit_code']}, error {r['error']!r}, "
+            log(f"  {r['object']} at {r['centre']} base {r['base']}: exit {r['exit_code']}, error {r['error']!r}, "
                 f"restarts {r['restarts']}, kills {r['kills_per_node']}, recovered {r['faults_recovered']}/{len(r['kills'])}, "
                 f"steps contiguous {r.get('steps_contiguous')} ({len(r.get('segments') or [])} segments), bag {r['bag']}")
             if r.get("recording_error"):

@@ -29,7 +29,7 @@ from scipy.integrate import solve_ivp
 from ._validate import float_array, instance, real
 from .arm import ArmShape, BasePose, curvature_spline
 from .boundary import Boundary
-from .errors import ContactValidityError, InvalidParameterError
+from .errors import ContactValidityError, IntegrationError, InvalidParameterError
 
 __all__ = [
     "ContactState",
@@ -286,10 +286,8 @@ def integrate_contact(
                 s=s_bad,
                 condition=name,
             )
-    if sol.status != 0:
-        raise ContactValidityError(
-            f"contact kinematics integration failed: {sol.message}", s=float(sol.t[-1]), condition="solver"
-        )
+    if sol.status != 0:  # the integrator gave up on an admissible state: a numerical failure, not bad input
+        raise IntegrationError(f"contact kinematics integration failed at s = {float(sol.t[-1]):.6g}: {sol.message}")
     rho, alpha, s_o = sol.y
     return ContactKinematics(s=ss, rho=rho, alpha=alpha, s_o=s_o)
 

@@ -1,11 +1,44 @@
-"""Exceptions raised at the library boundary.
+"""Exceptions raised at the library boundary, in two families.
 
-Every exception is a ``ValueError`` subclass so that generic callers can catch bad input
-uniformly, while the specific classes let scripts react to what exactly was wrong.
-The message always says what was wrong and what the valid range is.
+* :class:`InputError` (also a ``ValueError``): the caller's input is wrong - a parameter out
+  of range, a boundary that cannot be built, a contact state outside the admissible region, a
+  malformed or corrupt file given to read, an output path that cannot name a file. The same
+  call with the same input fails again; the message says what was wrong and the valid range.
+  The command-line tools exit with code 2.
+* :class:`RunFailure` (also a ``RuntimeError``): a computation on valid input did not succeed -
+  Newton did not converge, a simulation diverged, a linear system was singular, writing an
+  output failed (disk full, file size limit, I/O error), a node cannot go on. The command-line
+  tools exit with code 1.
+
+Both derive from :class:`ContgraspError`, so ``except ContgraspError`` still catches every
+error the library raises on purpose. As in python-control and mcap, an input error subclasses
+the matching builtin, so generic callers that catch ``ValueError`` keep working.
+
+Contact validity (:class:`ContactValidityError`) is an input error wherever it is raised: the
+contact kinematics are a deterministic function of the initial state and the curvature profile
+the caller chose, so leaving the admissible region mid-integration means that profile admits
+no grasp from that state (the message names the arclength and the violated inequality). A
+numerical failure of the integrator itself is a :class:`RunFailure`.
 """
 
 from __future__ import annotations
+
+__all__ = [
+    "ContgraspError",
+    "InputError",
+    "RunFailure",
+    "InvalidParameterError",
+    "InvalidBoundaryError",
+    "NotClosedError",
+    "SelfIntersectionError",
+    "DegenerateBoundaryError",
+    "ContactValidityError",
+    "WriteError",
+    "IntegrationError",
+    "output_error",
+    "one_line",
+    "exit_code",
+]
 
 
 def one_line(exc: BaseException) -> str:
@@ -14,15 +47,31 @@ def one_line(exc: BaseException) -> str:
     return " | ".join(line.strip() for line in str(exc).splitlines() if line.strip())
 
 
-class ContgraspError(ValueError):
-    """Base class of every error raised by :mod:`contgrasp_core` for bad input or state."""
+class ContgraspError(Exception):
+    """Root of every error :mod:`contgrasp_core` and :mod:`contgrasp_ros` raise on purpose;
+    every concrete class is in exactly one of :class:`InputError` and :class:`RunFailure`."""
 
 
-class InvalidParameterError(ContgraspError):
+class InputError(ContgraspError, ValueError):
+    """The input is wrong (exit code 2 in the command-line tools); the message says what was
+    wrong and the valid range."""
+
+
+class RunFailure(ContgraspError, RuntimeError):
+    """A computation on valid input failed (exit code 1 in the command-line tools)."""
+
+
+def exit_code(exc: BaseException) -> int:
+    """The command-line tools' exit code for an error: 2 for bad input (:class:`InputError`),
+    1 for anything else (:class:`RunFailure`, an unexpected exception)."""
+    return 2 if isinstance(exc, InputError) else 1
+
+
+class InvalidParameterError(InputError):
     """A scalar or array parameter is outside its valid range or has the wrong shape."""
 
 
-class InvalidBoundaryError(ContgraspError):
+class InvalidBoundaryError(InputError):
     """An object boundary cannot be built from the given data."""
 
 
@@ -38,15 +87,36 @@ class DegenerateBoundaryError(InvalidBoundaryError):
     """Too few distinct points, zero enclosed area, or non-finite coordinates."""
 
 
-class ContactValidityError(ContgraspError):
+class ContactValidityError(InputError):
     """The contact kinematics left their valid region (paper Sec. II-C).
 
     Valid states satisfy ``rho > 0``, ``0 < alpha < pi`` and ``1 + rho * kappa_o > 0``
     (eq. object_speed). ``s`` is the arm arclength where validity was lost and
-    ``condition`` names the violated inequality.
+    ``condition`` names the violated inequality. An input error also when raised mid-
+    integration: the initial state and curvature profile given determine the path (module
+    docstring).
     """
 
     def __init__(self, message: str, *, s: float, condition: str) -> None:
         super().__init__(message)
         self.s = float(s)
         self.condition = condition
+
+
+class IntegrationError(RunFailure):
+    """An ODE integrator stopped without reaching the end of the interval (step size
+    underflow and the like) although the state stayed admissible."""
+
+
+class WriteError(RunFailure):
+    """An output file could not be written although its name was valid (disk full, file size
+    limit, permission, I/O error); the message names the file and the operating system's reason."""
+
+
+def output_error(what: str, exc: BaseException) -> ContgraspError:
+    """The error for a failed write of ``what`` (e.g. ``"the figure out.png"``): an
+    :class:`OSError` is a :class:`WriteError`; anything else (matplotlib's ``ValueError`` for
+    a format it cannot write) is an :class:`InvalidParameterError`. Raise it ``from exc``."""
+    if isinstance(exc, OSError):
+        return WriteError(f"cannot write {what}: {exc.strerror or exc}")
+    return InvalidParameterError(f"cannot write {what}: {exc}")

@@ -27,7 +27,7 @@ from scipy.optimize import brentq, minimize
 from ._validate import MAX_NODES, instance, integer, real
 from .arm import Arm, BasePose
 from .boundary import Boundary
-from .errors import ContgraspError, InvalidParameterError
+from .errors import ContgraspError, InvalidParameterError, WriteError
 from .objects import FIG2_SCALE, ObjectSpec
 from .quality import grasp_quality
 
@@ -458,7 +458,7 @@ def save_map(qm: QualityMap, path: str | Path) -> Path:
         meta = {k: v for k, v in qm.to_dict().items() if k not in ("Q1", "Q2", "Q3", "valid")}
         p.with_suffix(".json").write_text(json.dumps(meta, indent=1))
     except OSError as exc:
-        raise InvalidParameterError(f"cannot save the quality map to {p}: {exc.strerror or exc}") from exc
+        raise WriteError(f"cannot save the quality map to {p}: {exc.strerror or exc}") from exc
     return p
 
 

@@ -33,9 +33,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.boundary import Boundary
-from contgrasp_core.errors import ContgraspError, InvalidParameterError
+from contgrasp_core.errors import ContgraspError, InvalidParameterError, WriteError, output_error
 from contgrasp_core.rod.session import SettleDetector
-from contgrasp_ros.bag import BagError
+from contgrasp_ros.bag import BagInputError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
 from contgrasp_core.scenario import PAPER
 from contgrasp_ros.convert import ContactArrays, RodArrays, boundary_from_msg, contact_arrays, rod_state_arrays, stamp_seconds
@@ -155,7 +155,7 @@ def _stack(rows: list[Any], what: str) -> Array:
     try:
         return np.stack([np.asarray(r, dtype=float) for r in rows])
     except ValueError as exc:
-        raise BagError(f"{what}: the recorded messages differ in their number of nodes ({exc})") from exc
+        raise BagInputError(f"{what}: the recorded messages differ in their number of nodes ({exc})") from exc
 
 
 def _json_values(record: dict[str, str]) -> dict[str, Any]:
@@ -176,9 +176,9 @@ def _rod_series(msgs: list[Any]) -> RodSeries:
             a = rod_state_arrays(msg)
             vx, vy = np.asarray(msg.vx, dtype=float), np.asarray(msg.vy, dtype=float)
             if vx.shape != a.s.shape or vy.shape != a.s.shape or not (np.all(np.isfinite(vx)) and np.all(np.isfinite(vy))):
-                raise ContgraspError("RodState: 'vx'/'vy' must be finite with one value per node")
+                raise InvalidParameterError("RodState: 'vx'/'vy' must be finite with one value per node")
         except ContgraspError as exc:
-            raise BagError(f"{TOPIC_ROD_STATE} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
+            raise BagInputError(f"{TOPIC_ROD_STATE} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
         steps.append(a.step)
         ts.append(a.t)
         pens.append(float(msg.max_penetration))
@@ -196,7 +196,7 @@ def _contact_series(msgs: list[Any]) -> ContactSeries | None:
         try:
             rows.append(contact_arrays(msg))
         except ContgraspError as exc:
-            raise BagError(f"{TOPIC_CONTACT} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
+            raise BagInputError(f"{TOPIC_CONTACT} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
     return ContactSeries(
         np.asarray([c.step for c in rows], dtype=np.int64),
         np.asarray([c.t for c in rows]),
@@ -213,7 +213,7 @@ def _quality_series(msgs: list[Any]) -> QualitySeries | None:
         return None
     w = [np.asarray(m.w, dtype=float) for m in msgs]
     if any(v.shape != (9,) for v in w):
-        raise BagError(f"{TOPIC_QUALITY}: a message's W does not have 9 entries")
+        raise BagInputError(f"{TOPIC_QUALITY}: a message's W does not have 9 entries")
     return QualitySeries(
         np.asarray([int(m.step) for m in msgs], dtype=np.int64),
         np.asarray([stamp_seconds(m.header) for m in msgs]),
@@ -232,14 +232,14 @@ def load_run(path: str | Path) -> RunData:
     counts = {t["name"]: t["count"] for t in topics}
     if not counts.get(TOPIC_ROD_STATE):
         have = ", ".join(f"{n} ({c})" for n, c in counts.items()) or "none"
-        raise BagError(f"{path}: no {TOPIC_ROD_STATE} messages to analyse (recorded topics: {have})")
+        raise BagInputError(f"{path}: no {TOPIC_ROD_STATE} messages to analyse (recorded topics: {have})")
     if not counts.get(TOPIC_OBJECT):
-        raise BagError(f"{path}: no {TOPIC_OBJECT} message (the object boundary is needed to recompute contact and quality)")
+        raise BagInputError(f"{path}: no {TOPIC_OBJECT} message (the object boundary is needed to recompute contact and quality)")
     records = rec.metadata_records()
     run_info = _json_values(records.get(RUN_RECORD, {}))
     params = run_info.pop("params", None)
     if params is not None and not (isinstance(params, dict) and all(isinstance(v, dict) for v in params.values())):
-        raise BagError(f"{path}: the {RUN_RECORD!r} metadata record's params are not per-node parameter mappings")
+        raise BagInputError(f"{path}: the {RUN_RECORD!r} metadata record's params are not per-node parameter mappings")
     recorder = _json_values(records[RECORDER_RECORD]) if RECORDER_RECORD in records else None
 
     by_topic: dict[str, list[Any]] = {TOPIC_ROD_STATE: [], TOPIC_CONTACT: [], TOPIC_QUALITY: [], TOPIC_OBJECT: []}
@@ -260,7 +260,7 @@ def load_run(path: str | Path) -> RunData:
     try:
         boundary = boundary_from_msg(by_topic[TOPIC_OBJECT][-1])
     except ContgraspError as exc:
-        raise BagError(f"{path}: the recorded object boundary is unusable: {exc}") from exc
+        raise BagInputError(f"{path}: the recorded object boundary is unusable: {exc}") from exc
     return RunData(
         path=Path(path),
         topics=topics,
@@ -620,7 +620,7 @@ def write_csv(run: RunData, rc: Recomputation, out_dir: str | Path) -> dict[str,
             )
             files["quality"] = {"path": str(d / "quality.csv"), "rows": rows}
     except OSError as exc:
-        raise ContgraspError(f"cannot write CSV files to {d}: {exc.strerror or exc}") from exc
+        raise WriteError(f"cannot write CSV files to {d}: {exc.strerror or exc}") from exc
     return files
 
 
@@ -657,7 +657,7 @@ def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: 
     except (OSError, ValueError) as exc:
         if isinstance(exc, ContgraspError):
             raise
-        raise ContgraspError(f"cannot write the plot {path}: {exc}") from exc
+        raise output_error(f"the plot {path}", exc) from exc
     return out
 
 

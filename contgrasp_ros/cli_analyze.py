@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from contgrasp_core.errors import ContgraspError
+from contgrasp_core.errors import InvalidParameterError
 from contgrasp_ros.analysis import analyze
 
 __all__ = ["add_parser", "run"]
@@ -46,5 +46,5 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
         check_figure_path(args.plot)
     if args.csv is not None and args.csv.exists() and not args.csv.is_dir():
-        raise ContgraspError(f"--csv {args.csv} exists and is not a directory")
+        raise InvalidParameterError(f"--csv {args.csv} exists and is not a directory")
     return analyze(args.bag, csv_dir=args.csv, plot=args.plot)

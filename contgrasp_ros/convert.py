@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from contgrasp_core.boundary import Boundary, from_points
 from contgrasp_core.contact import ContactState
-from contgrasp_core.errors import ContgraspError
+from contgrasp_core.errors import ContgraspError, InputError
 from contgrasp_core.quality import GraspQuality
 from contgrasp_core.objects import ObjectSpec
 from contgrasp_core.control import FeedbackExpansion
@@ -59,7 +59,7 @@ MAX_SAMPLES = 100_001
 MAX_ABS = 1e6
 
 
-class MessageError(ContgraspError):
+class MessageError(InputError):
     """A received message is malformed (wrong lengths, NaN/Inf, empty, bad grid, bad object).
 
     ``reason`` is a short category (``"length mismatch"``, ``"NaN/Inf"``, ...) that nodes use as

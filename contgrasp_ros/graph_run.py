@@ -29,7 +29,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from std_srvs.srv import SetBool
 
-from contgrasp_core.errors import ContgraspError
+from contgrasp_core.errors import ContgraspError, RunFailure, exit_code
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos
 from contgrasp_ros.analysis import contact_stats
@@ -344,6 +344,8 @@ def run_graph(
                 try:
                     nodes.append(cls(parameter_overrides=_overrides({**values, "use_sim_time": True})))
                 except (rclpy.exceptions.ParameterException, ContgraspError, TypeError) as exc:
+                    if isinstance(exc, RunFailure):  # as run_node exits: 1 for a failure, 2 for bad input
+                        return {"error": f"{name}: {exc}", "exit_codes": {}, "pids": {}}, 1
                     return {"error": f"{name}: invalid parameter: {exc}", "exit_codes": {}, "pids": {}}, 2
             if record is not None:
                 from contgrasp_ros.nodes.mcap_recorder import McapRecorder
@@ -351,7 +353,7 @@ def run_graph(
                 try:
                     nodes.append(McapRecorder(parameter_overrides=_overrides(recorder_params(record))))
                 except ContgraspError as exc:
-                    return {"error": f"{RECORDER}: {exc}", "exit_codes": {}, "pids": {}}, 1
+                    return {"error": f"{RECORDER}: {exc}", "exit_codes": {}, "pids": {}}, exit_code(exc)
         else:
             import os
 

@@ -27,8 +27,9 @@ from typing import Any
 import numpy as np
 import yaml
 
+from contgrasp_core.cli import ArgumentParser, report
 from contgrasp_core.cli.common import add_object_arguments, object_from_args
-from contgrasp_core.errors import ContgraspError, InvalidParameterError, one_line
+from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
 from contgrasp_core.scenario import CONTROLLER, NODES, QUALITY, SIMULATOR, Scenario
 from contgrasp_ros.bag import BagError
@@ -78,7 +79,7 @@ def _with_object(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> Path:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="contgrasp-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = ArgumentParser(prog="contgrasp-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", type=Path, default=None, help="ROS 2 YAML parameter file (default: the packaged paper scenario)")
     p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID for the graph (default: a random free-looking id 1..101)")
     add_object_arguments(p, ROD_SCALE)
@@ -115,46 +116,35 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``contgrasp-launch``; returns the exit code (a failing node's code propagates).
 
-    An unexpected exception becomes one line on stderr: exit code 2 for bad input
-    (:class:`~contgrasp_core.errors.ContgraspError`), 1 otherwise; ``--debug`` shows the traceback."""
+    An error of the launcher itself is one line on stderr, ``contgrasp-launch: error: ...``:
+    exit code 2 for bad usage or input (argparse, :class:`~contgrasp_core.errors.InputError`),
+    1 otherwise (:class:`~contgrasp_core.errors.RunFailure`, any other exception); ``--debug``
+    shows the traceback."""
     args = _parser().parse_args(argv)
     try:
         return _launch(args, argv)
-    except ContgraspError as exc:
-        if args.debug:
-            raise
-        print(f"contgrasp-launch: error: {one_line(exc)}", file=sys.stderr)
-        return 2
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback (--debug shows it)
         if args.debug:
             raise
-        print(f"contgrasp-launch: failed: {type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
-        return 1
+        return report("contgrasp-launch", exc)
 
 
 def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     params_file = args.params or default_params_file()
-    try:
-        params = load_params(params_file)
-    except InvalidParameterError as exc:
-        print(f"contgrasp-launch: {exc}", file=sys.stderr)
-        return 2
+    params = load_params(params_file)
     if args.duration is not None:
         if not (np.isfinite(args.duration) and args.duration > 0):
-            print("contgrasp-launch: --duration must be > 0", file=sys.stderr)
-            return 2
+            raise InvalidParameterError(f"--duration must be a finite number > 0 (simulated seconds), got {args.duration}")
         params["rod_simulator"]["duration"] = float(args.duration)
     if args.object is not None or args.outline is not None:
         params_file = _with_object(params, object_from_args(args, ROD_SCALE))
     domain = args.domain_id if args.domain_id is not None else random.randint(1, 101)
     if not 0 <= domain <= 232:
-        print("contgrasp-launch: --domain-id must be in 0..232", file=sys.stderr)
-        return 2
+        raise InvalidParameterError(f"--domain-id must be in 0..232, got {domain}")
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     if args.executor:
         if not args.in_process:
-            print("contgrasp-launch: --executor applies to --in-process runs only", file=sys.stderr)
-            return 2
+            raise InvalidParameterError("--executor applies to --in-process runs only")
         os.environ["CONTGRASP_EXECUTOR"] = args.executor
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "contgrasp_ros_log"))
@@ -166,23 +156,20 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         out = args.bag if args.bag is not None else Path(default_output())
         layout = args.bag_layout or ("file" if out.suffix == ".mcap" else "folder")
         if out.exists():
-            print(f"contgrasp-launch: --bag {out} already exists", file=sys.stderr)
-            return 2
+            raise InvalidParameterError(f"--bag {out} already exists (give a new folder or .mcap file name)")
         run_info = {"params": params, "params_file": str(params_file), "argv": list(sys.argv[1:] if argv is None else argv)}
         if not (np.isfinite(args.bag_decimate) and args.bag_decimate >= 0):
-            print("contgrasp-launch: --bag-decimate must be >= 0", file=sys.stderr)
-            return 2
+            raise InvalidParameterError(f"--bag-decimate must be a finite number >= 0 (seconds), got {args.bag_decimate}")
         try:
             check_split(layout, args.max_bag_duration, args.max_bag_size)
         except BagError as exc:
-            print(f"contgrasp-launch: --max-bag-duration / --max-bag-size: {exc}", file=sys.stderr)
-            return 2
+            raise InvalidParameterError(f"--max-bag-duration / --max-bag-size: {exc}") from exc
         record = {"output": out, "layout": layout, "run_info": run_info, "exclude_regex": args.bag_exclude,
                   "decimate_period": args.bag_decimate, "max_bag_duration": args.max_bag_duration,
                   "max_bag_size": args.max_bag_size}
     if args.respawn < 0 or (args.respawn and args.in_process):
-        print("contgrasp-launch: --respawn takes N >= 0 and applies to separate node processes only", file=sys.stderr)
-        return 2
+        raise InvalidParameterError(f"--respawn takes N >= 0 and applies to separate node processes only, got {args.respawn}"
+                                    + (" with --in-process" if args.in_process else ""))
     wall0 = time.perf_counter()
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
                               respawn=args.respawn, keep_history=args.plot is not None)

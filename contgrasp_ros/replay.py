@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from contgrasp_core.errors import ContgraspError, InvalidParameterError
+from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_ros.bag.reader import Recording, info, iter_raw, open_recording
 
 if TYPE_CHECKING:
@@ -43,7 +43,7 @@ def _message_class(type_name: str) -> Any:
     try:
         return getattr(importlib.import_module(pkg.replace("/", ".")), name)
     except (ImportError, AttributeError) as exc:
-        raise ContgraspError(f"cannot replay {type_name}: the message package is not installed ({exc})") from exc
+        raise RunFailure(f"cannot replay {type_name}: the message package is not installed ({exc})") from exc
 
 
 def replay(

@@ -37,7 +37,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Header
 
 from contgrasp_core.boundary import Boundary
-from contgrasp_core.errors import ContgraspError
+from contgrasp_core.errors import ContgraspError, RunFailure, exit_code, one_line
 
 __all__ = [
     "declare",
@@ -60,7 +60,7 @@ Check = Callable[[Any], str | None]
 JointCheck = Callable[[dict[str, Any]], str | None]
 
 
-class FatalNodeError(ContgraspError):
+class FatalNodeError(RunFailure):
     """Raised from a callback when the node cannot go on (e.g. the recorder's disk is full):
     :func:`run_node` cleans up and exits with code 1 and the message. The callback guard lets
     it through."""
@@ -443,6 +443,8 @@ class GuardedSpin:
         try:
             self.executor.spin_once(timeout_sec=timeout_sec)
         except RuntimeError as exc:
+            if isinstance(exc, ContgraspError):  # a RunFailure (FatalNodeError) from a callback ends the node
+                raise
             if not self.executor.context.ok():
                 raise ExternalShutdownException() from exc
             self.streak += 1
@@ -456,9 +458,14 @@ class GuardedSpin:
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
     """Init rclpy, build the node, spin until shutdown (SIGINT/SIGTERM), clean up.
 
-    A node that rejects its start-up parameters exits with code 2 and a one-line reason; a
-    :class:`FatalNodeError` while spinning ends it with code 1 (after the node's own clean-up).
+    Errors are one line on stderr, ``NAME: error: ...``, and the exit code follows the error's
+    family (:func:`contgrasp_core.errors.exit_code`): a node that rejects its start-up
+    parameters (rclpy's parameter exceptions, an :class:`~contgrasp_core.errors.InputError`)
+    exits with code 2; a :class:`~contgrasp_core.errors.RunFailure` (e.g. a
+    :class:`FatalNodeError`) while starting or spinning with code 1 (after the node's own
+    clean-up). Any other exception is a bug and propagates with its traceback (exit code 1).
     """
+    name = getattr(factory, "__name__", "node")
     rclpy.init(args=list(args) if args is not None else sys.argv)
     node = None
     code = 0
@@ -470,11 +477,9 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             rclpy.exceptions.ParameterException,
             ContgraspError,
         ) as exc:
-            if isinstance(exc, FatalNodeError):
-                print(f"{getattr(factory, '__name__', 'node')}: error: {exc}", file=sys.stderr)
-                return 1
-            print(f"{getattr(factory, '__name__', 'node')}: invalid parameter: {exc}", file=sys.stderr)
-            return 2
+            code = exit_code(exc) if isinstance(exc, ContgraspError) else 2
+            print(f"{name}: error: {'invalid parameter: ' if code == 2 else ''}{one_line(exc)}", file=sys.stderr)
+            return code
         executor = make_executor()
         executor.add_node(node)
         spin = GuardedSpin(executor, getattr(node, "drops", None) or DropCounter(node))
@@ -482,9 +487,9 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except FatalNodeError as exc:
-        print(f"{getattr(factory, '__name__', 'node')}: error: {exc}", file=sys.stderr)
-        code = 1
+    except ContgraspError as exc:  # a FatalNodeError from a callback, above all
+        print(f"{name}: error: {one_line(exc)}", file=sys.stderr)
+        code = exit_code(exc)
     finally:
         if node is not None:
             node.destroy_node()

@@ -659,7 +659,7 @@ BAD_AT_RUN_TIME = {
                    ("length_unit", 1e-9, "mu2 beyond"), ("n_elements", 50, "read-only"), ("radius_tip", 0.002, "read-only")],
     "quality": [("rate_hz", -1.0, "out of range"), ("contact_tolerance", 2.0, "out of range"), ("reference_x", "a", "type")],
     "simulator": [("timeout_fallback", "explode", "must be one of"), ("timeout_fallback", 3, "type"),
-                  ("couple_timeout", 0.0, "out of range"), ("duration", 5.0, "read-only"), ("object_kind", "ellipse", "read-only"),
+                  ("couple_timeout", 0.0, "out of range"), ("duration", 5.0, "read-only"), ("object", "ellipse", "read-only"),
                   ("lockstep", False, "read-only"), ("start_paused", True, "read-only"), ("max_kinetic_energy", 0.0, "out of range"),
                   ("max_penetration_limit", -1.0, "out of range"), ("marker_period", math.nan, "out of range"),
                   ("settle_speed", 1.0, "read-only")],
@@ -684,8 +684,9 @@ def test_invalid_parameters_are_refused_at_run_time(make, which) -> None:  # typ
 
 @pytest.mark.parametrize(("which", "params"), [
     ("simulator", {"timeout_fallback": "explode"}),
-    ("simulator", {"object_kind": "square"}),
-    ("simulator", {"object_params": [0.025, 0.08]}),
+    ("simulator", {"object": "square"}),
+    ("simulator", {"object_center": [0.08]}),
+    ("simulator", {"object": "outline"}),
     ("simulator", {"control_period": 0.01, "dt": 0.003}),
     ("simulator", {"max_kinetic_energy": -1.0}),
     ("controller", {"adaptive_mu2": True, "length_unit": 1e-9}),
@@ -776,7 +777,7 @@ def test_divergence_stops_the_simulation(make, case, params, inject, cause) -> N
 
 def test_deep_penetration_fails_the_run_at_once(make) -> None:  # type: ignore[no-untyped-def]
     """An object across the straight rod: the first state is already broken (t = 0)."""
-    sim = small_sim(make, object_params=[0.02, 0.1, 0.0])
+    sim = small_sim(make, object="circle:0.02", object_center=[0.1, 0.0])
     assert sim.failure.startswith("t = 0 s: simulation diverged: the rod surface is ")
     assert "max_penetration_limit" in sim.failure
     assert sim._status() == "failed" and not sim._can_step()

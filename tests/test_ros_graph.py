@@ -143,7 +143,7 @@ def test_launcher_keeps_running_when_the_recorder_cannot_write(tmp_path: Path) -
     assert "cannot record" in proc.stderr and "error" in out["bag"]
 
 
-@pytest.mark.parametrize(("exc", "code", "prefix"), [(RuntimeError("rmw said no\nsecond line"), 1, "failed: RuntimeError: "),
+@pytest.mark.parametrize(("exc", "code", "prefix"), [(RuntimeError("rmw said no\nsecond line"), 1, "error: RuntimeError: "),
                                                     (InvalidParameterError("n_elements must be >= 2"), 2, "error: ")])
 def test_launcher_turns_unexpected_errors_into_one_line(monkeypatch, capsys, exc, code, prefix) -> None:  # type: ignore[no-untyped-def]
     """An exception out of the graph run is one line on stderr (exit 1, or 2 for bad input);

@@ -1,9 +1,11 @@
 """The ``contgrasp`` command.
 
 Every computing subcommand accepts ``--json`` and then prints exactly one JSON object on
-stdout (keys documented in docs/cli.md). Errors become one line on stderr: exit code 2 for
-bad usage or input (:class:`~contgrasp_core.errors.ContgraspError`, argparse errors),
-1 for runtime failures; ``--debug`` shows the traceback instead.
+stdout (keys documented in docs/cli.md). Errors become one line on stderr,
+``contgrasp COMMAND: error: MESSAGE``: exit code 2 for bad usage or input (argparse errors,
+:class:`~contgrasp_core.errors.InputError`), 1 for a failed run
+(:class:`~contgrasp_core.errors.RunFailure`, any other exception); ``--debug`` shows the
+traceback instead.
 """
 
 from __future__ import annotations
@@ -12,15 +14,35 @@ import argparse
 import json
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
 from .. import __version__
+from ..errors import ContgraspError, exit_code, one_line
 from . import grasp, kinematics, quality, simulate
-from ..errors import ContgraspError, one_line
 
-__all__ = ["build_parser", "main"]
+__all__ = ["ArgumentParser", "build_parser", "main", "report"]
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with usage errors on one line, ``PROG: error: WHAT  (see 'PROG --help')``,
+    exit code 2 (argparse prints the whole usage, 7-9 lines for these commands). Subcommand
+    parsers inherit the class, so ``PROG`` names the subcommand (``contgrasp grasp``)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())}  (see '{self.prog} --help')\n")
+
+
+def report(prog: str, exc: BaseException) -> int:
+    """Print ``exc`` as the one line ``PROG: error: MESSAGE`` on stderr; return its exit code
+    (2 for an :class:`~contgrasp_core.errors.InputError`, else 1). An exception that is no
+    :class:`~contgrasp_core.errors.ContgraspError` is a bug: its type leads the message."""
+    text = one_line(exc)
+    if not isinstance(exc, ContgraspError):
+        text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+    print(f"{prog}: error: {text or type(exc).__name__}", file=sys.stderr)
+    return exit_code(exc)
 
 
 Registrar = Callable[[Any, list[argparse.ArgumentParser]], None]
@@ -29,10 +51,10 @@ Registrar = Callable[[Any, list[argparse.ArgumentParser]], None]
 def build_parser(extra: Sequence[Registrar] = ()) -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered; ``extra`` registrars add more
     (the recording commands of :mod:`contgrasp_ros.cli`, which keeps this package free of ROS)."""
-    common = argparse.ArgumentParser(add_help=False)
+    common = ArgumentParser(add_help=False)
     common.add_argument("--json", action="store_true", help="print one JSON object with the results on stdout")
     common.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="contgrasp",
         description="Kinematics of continuum planar grasping: kinematics, optimal grasps, quality, control.",
     )
@@ -76,23 +98,20 @@ def _summary(result: dict[str, Any]) -> str:
 def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> int:
     """Entry point of the ``contgrasp`` command; returns the process exit code."""
     parser = build_parser(extra)
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    command = " ".join(c for c in (args.command, getattr(args, "bag_command", None)) if c)
+    if unknown:  # argparse would name the top-level parser; the subcommand's help is the one to read
+        ArgumentParser(prog=f"contgrasp {command}").error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
         result = args.func(args)
         if args.json:
             text = json.dumps(_to_jsonable(result), allow_nan=False)
         else:
             text = getattr(args, "format_text", _summary)(result)
-    except ContgraspError as exc:
-        if args.debug:
-            raise
-        print(f"contgrasp {args.command}: error: {one_line(exc)}", file=sys.stderr)
-        return 2
     except Exception as exc:  # noqa: BLE001 - the CLI turns every failure into one line
         if args.debug:
             raise
-        print(f"contgrasp {args.command}: failed: {type(exc).__name__}: {one_line(exc)}", file=sys.stderr)
-        return 1
+        return report(f"contgrasp {command}", exc)
     print(text)
     return 0
 

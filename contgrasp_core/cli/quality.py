@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ..errors import InvalidParameterError
+from ..errors import InvalidParameterError, output_error
 from ..objects import FIG2_SCALE
 from ..quality_map import METRICS, MapSpec, load_map, quality_map, save_map
 from .common import add_object_arguments, object_from_args
@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         try:
             fig.savefig(args.plot, dpi=120)
         except (OSError, ValueError) as exc:
-            raise InvalidParameterError(f"cannot write the figure {args.plot}: {exc}") from exc
+            raise output_error(f"the figure {args.plot}", exc) from exc
         out["plot"] = args.plot
     out["saved"] = args.out
     return out

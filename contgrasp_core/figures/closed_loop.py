@@ -11,7 +11,7 @@ from matplotlib.figure import Figure
 
 from ..boundary import Boundary
 from ..control import static_solution
-from ..errors import InvalidParameterError
+from ..errors import output_error
 from ..rod.closed_loop import ClosedLoopResult
 from .draw import save
 
@@ -104,4 +104,4 @@ def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 
     try:
         anim.save(path, writer=PillowWriter(fps=12))
     except (OSError, ValueError) as exc:
-        raise InvalidParameterError(f"cannot write the animation {path}: {exc}") from exc
+        raise output_error(f"the animation {path}", exc) from exc

@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..arm import ArmShape
 from ..boundary import Boundary
 from ..contact import ContactKinematics, ContactState
-from ..errors import InvalidParameterError
+from ..errors import InvalidParameterError, output_error
 
 __all__ = ["draw_boundary", "draw_arm", "kinematics_figure", "save", "check_figure_path"]
 
@@ -114,4 +114,4 @@ def save(fig: Figure, path: str, dpi: int = 130) -> None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=dpi)
     except (OSError, ValueError) as exc:
-        raise InvalidParameterError(f"cannot write the figure {path}: {exc}") from exc
+        raise output_error(f"the figure {path}", exc) from exc

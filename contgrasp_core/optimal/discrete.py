@@ -39,6 +39,7 @@ from scipy.interpolate import CubicSpline
 from scipy.linalg import get_lapack_funcs
 
 from ..boundary import Boundary
+from ..errors import RunFailure
 
 __all__ = [
     "CurvatureTable",
@@ -306,7 +307,7 @@ def residual(d: Discretisation, x: Array, u: Array) -> Array:
 _GBSV, _GBTRF, _GBTRS = get_lapack_funcs(("gbsv", "gbtrf", "gbtrs"), (np.zeros((1, 1)),))
 
 
-class SingularSystemError(RuntimeError):
+class SingularSystemError(RunFailure):
     """A banded linear system of the discrete problem is singular."""
 
 
@@ -368,7 +369,7 @@ def _state_jacobian_band(d: Discretisation, A: Array, transpose: bool) -> tuple[
     return _band_matrix(buf, rows), kl, ku
 
 
-class ForwardSolveError(RuntimeError):
+class ForwardSolveError(RunFailure):
     """The implicit trapezoidal steps could not be solved (state left the domain of f)."""
 
 

@@ -40,7 +40,7 @@ from typing import Protocol
 
 import numpy as np
 
-from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.loads import contact_forces, contact_frame, contact_tensors, drag_forces
 from contgrasp_core.rod.model import RodModel
@@ -49,8 +49,9 @@ from contgrasp_core.rod.obstacle import Obstacle
 __all__ = ["RodState", "RodLoads", "StepOptions", "RodSystem", "StepFailedError"]
 
 
-class StepFailedError(InvalidParameterError):
-    """Newton did not converge even after the allowed step halvings (dt too large)."""
+class StepFailedError(RunFailure):
+    """Newton did not converge even after the allowed step halvings (dt too large): a run
+    failure (exit code 1), not bad input - the same parameters may succeed from another state."""
 
 
 @dataclass(frozen=True)

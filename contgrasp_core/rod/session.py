@@ -29,9 +29,9 @@ from numpy.typing import NDArray
 from contgrasp_core.arm import ArmShape
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import ContactState, sense
-from contgrasp_core.errors import ContgraspError, InvalidParameterError
-from contgrasp_core.scenario import Scenario
 from contgrasp_core.control.rod_feedback import FeedbackExpansion, HeldExpansion
+from contgrasp_core.errors import InvalidParameterError, RunFailure
+from contgrasp_core.scenario import Scenario
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
@@ -67,7 +67,7 @@ class Observation:
     max_speed: float
 
 
-class SimulationDivergedError(ContgraspError):
+class SimulationDivergedError(RunFailure):
     """The simulated state is no longer trustworthy (NaN/Inf, deep penetration, energy blow-up)."""
 
 

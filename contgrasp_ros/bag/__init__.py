@@ -9,6 +9,6 @@
 Nothing in this package imports rclpy: recordings can be read and analysed without ROS.
 """
 
-from .errors import BagError
+from .errors import BagError, BagInputError, BagIOError
 
-__all__ = ["BagError"]
+__all__ = ["BagError", "BagInputError", "BagIOError"]

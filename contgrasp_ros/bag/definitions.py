@@ -16,7 +16,7 @@ import sys
 from functools import lru_cache
 from pathlib import Path
 
-from .errors import BagError
+from .errors import BagInputError
 
 __all__ = ["SEPARATOR", "full_text", "msg_dependencies", "split_type", "share_dirs"]
 
@@ -33,7 +33,7 @@ def split_type(type_name: str) -> tuple[str, str, str]:
     """``pkg/msg/Type`` or ``pkg/Type`` -> (pkg, namespace, Type)."""
     m = _TYPE.match(type_name)
     if m is None:
-        raise BagError(f"not a ROS 2 message type name: {type_name!r}")
+        raise BagInputError(f"not a ROS 2 message type name: {type_name!r}")
     return m.group(1), m.group(2) or "msg", m.group(3)
 
 
@@ -50,7 +50,7 @@ def _msg_text(pkg: str, ns: str, name: str) -> str:
         path = share / pkg / ns / f"{name}.msg"
         if path.is_file():
             return path.read_text()
-    raise BagError(f"no definition {pkg}/{ns}/{name}.msg in {', '.join(map(str, share_dirs()))}")
+    raise BagInputError(f"no definition {pkg}/{ns}/{name}.msg in {', '.join(map(str, share_dirs()))}")
 
 
 def msg_dependencies(text: str, package: str) -> list[str]:
@@ -70,7 +70,7 @@ def full_text(type_name: str) -> str:
 
     def append(name: str, depth: int) -> str:
         if depth <= 0:
-            raise BagError(f"definition of {type_name} nests too deeply")
+            raise BagInputError(f"definition of {type_name} nests too deeply")
         pkg, ns, base = split_type(name)
         text = _msg_text(pkg, ns, base)
         out = text

@@ -27,7 +27,7 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from .errors import BagError
+from .errors import BagError, BagInputError, read_error
 
 __all__ = [
     "MAGIC",
@@ -85,7 +85,7 @@ class Recording:
                     for m in make_reader(stream).iter_metadata():
                         out[m.name] = dict(m.metadata)
                 except Exception as exc:  # noqa: BLE001 - any parser failure is a corrupt file
-                    raise BagError(f"{f}: corrupt metadata records ({type(exc).__name__}: {exc})") from exc
+                    raise BagInputError(f"{f}: corrupt metadata records ({type(exc).__name__}: {exc})") from exc
         return out
 
 
@@ -93,12 +93,12 @@ def _opened(path: Path) -> io.BufferedReader:
     try:
         return open(path, "rb")  # noqa: SIM115 - used as a context manager by the callers
     except OSError as exc:
-        raise BagError(f"cannot open recording {path}: {exc.strerror or exc}") from exc
+        raise read_error(f"cannot open recording {path}: {exc.strerror or exc}", exc) from exc
 
 
 def _path(path: Any, what: str = "recording") -> Path:
     if not isinstance(path, str | Path) or not str(path) or "\0" in str(path):
-        raise BagError(f"the {what} must be a file or folder path, got {path!r}")
+        raise BagInputError(f"the {what} must be a file or folder path, got {path!r}")
     return Path(path)
 
 
@@ -110,7 +110,7 @@ def _file_order(path: Path) -> tuple[str, int, str]:
 
 def _mcap_files(path: Path) -> tuple[list[Path], dict[str, Any] | None]:
     if not path.exists():
-        raise BagError(f"no recording at {path}")
+        raise BagInputError(f"no recording at {path}")
     if path.is_file():
         return [path], None
     meta_path = path / "metadata.yaml"
@@ -120,16 +120,16 @@ def _mcap_files(path: Path) -> tuple[list[Path], dict[str, Any] | None]:
             info_ = meta["rosbag2_bagfile_information"]
             files = [path / str(p) for p in info_["relative_file_paths"]]
         except Exception as exc:  # noqa: BLE001 - a malformed YAML file in any way
-            raise BagError(f"{meta_path} is not a rosbag2 metadata file ({type(exc).__name__}: {exc})") from exc
+            raise BagInputError(f"{meta_path} is not a rosbag2 metadata file ({type(exc).__name__}: {exc})") from exc
         if info_.get("storage_identifier") != "mcap":
-            raise BagError(f"{path} uses storage {info_.get('storage_identifier')!r}, only 'mcap' is supported")
+            raise BagInputError(f"{path} uses storage {info_.get('storage_identifier')!r}, only 'mcap' is supported")
         missing = [str(f) for f in files if not f.is_file()]
         if missing:
-            raise BagError(f"{path}: metadata.yaml lists missing files {missing}")
+            raise BagInputError(f"{path}: metadata.yaml lists missing files {missing}")
         return files, info_
     files = sorted(path.glob("*.mcap"), key=_file_order)
     if not files:
-        raise BagError(f"{path} holds no metadata.yaml and no .mcap file")
+        raise BagInputError(f"{path} holds no metadata.yaml and no .mcap file")
     return files, None
 
 
@@ -137,35 +137,35 @@ def check_file(path: Path) -> Any:
     """Validate one MCAP file's framing and CRCs; return its summary."""
     data = _read_all(path)
     if len(data) < 2 * len(MAGIC) or not data.startswith(MAGIC):
-        raise BagError(f"{path} is not an MCAP file (bad or missing magic)")
+        raise BagInputError(f"{path} is not an MCAP file (bad or missing magic)")
     if not data.endswith(MAGIC):
-        raise BagError(
+        raise BagInputError(
             f"{path} is incomplete: it ends without the MCAP footer (the recorder was killed or the file was "
             f"truncated); `contgrasp bag recover {path} OUT` copies every complete chunk into a new file"
         )
     if len(data) < 2 * len(MAGIC) + _FOOTER.size:
-        raise BagError(f"{path} is corrupt: {len(data)} bytes are too few for an MCAP file with a footer")
+        raise BagInputError(f"{path} is corrupt: {len(data)} bytes are too few for an MCAP file with a footer")
     end = len(data) - len(MAGIC)
     op, length, summary_start, summary_offset_start, summary_crc = _FOOTER.unpack_from(data, end - _FOOTER.size)
     if op != _OP_FOOTER or length != 20:
-        raise BagError(f"{path} is corrupt: no valid footer record")
+        raise BagInputError(f"{path} is corrupt: no valid footer record")
     footer_at = end - _FOOTER.size
     if not (len(MAGIC) < summary_start <= footer_at) or not (summary_offset_start == 0 or summary_start <= summary_offset_start <= footer_at):
-        raise BagError(f"{path} is corrupt: the footer points outside the file")
+        raise BagInputError(f"{path} is corrupt: the footer points outside the file")
     if summary_crc and zlib.crc32(data[summary_start : end - 4]) != summary_crc:
-        raise BagError(f"{path} is corrupt: summary section CRC mismatch")
+        raise BagInputError(f"{path} is corrupt: summary section CRC mismatch")
     de = summary_start - 13
     if de < len(MAGIC) or data[de] != _OP_DATA_END or struct.unpack_from("<Q", data, de + 1)[0] != 4:
-        raise BagError(f"{path} is corrupt: no data-end record before the summary")
+        raise BagInputError(f"{path} is corrupt: no data-end record before the summary")
     data_crc = struct.unpack_from("<I", data, de + 9)[0]
     if data_crc and zlib.crc32(data[:de]) != data_crc:
-        raise BagError(f"{path} is corrupt: data section CRC mismatch (damaged bytes in the recorded messages)")
+        raise BagInputError(f"{path} is corrupt: data section CRC mismatch (damaged bytes in the recorded messages)")
     try:
         summary = make_reader(io.BytesIO(data), validate_crcs=True).get_summary()
     except Exception as exc:  # noqa: BLE001 - any parser failure means a corrupt file
-        raise BagError(f"{path} is corrupt: cannot read its summary ({type(exc).__name__}: {exc})") from exc
+        raise BagInputError(f"{path} is corrupt: cannot read its summary ({type(exc).__name__}: {exc})") from exc
     if summary is None:
-        raise BagError(f"{path} has no summary section")
+        raise BagInputError(f"{path} has no summary section")
     return summary
 
 
@@ -174,7 +174,7 @@ def _read_all(path: Path) -> bytes:
         try:
             return f.read()
         except OSError as exc:
-            raise BagError(f"cannot read {path}: {exc.strerror or exc}") from exc
+            raise read_error(f"cannot read {path}: {exc.strerror or exc}", exc) from exc
 
 
 def open_recording(path: str | Path) -> Recording:
@@ -198,7 +198,7 @@ def iter_raw(rec: Recording, topics: Iterable[str] | None = None, start_ns: int 
             except BagError:
                 raise
             except Exception as exc:  # noqa: BLE001 - any parser failure means a corrupt file
-                raise BagError(f"{f} is corrupt: {type(exc).__name__}: {exc}") from exc
+                raise BagInputError(f"{f} is corrupt: {type(exc).__name__}: {exc}") from exc
 
 
 def iter_decoded(rec: Recording, topics: Iterable[str] | None = None) -> Iterator[tuple[RawMessage, Any]]:
@@ -213,11 +213,11 @@ def iter_decoded(rec: Recording, topics: Iterable[str] | None = None) -> Iterato
         if key not in decoders:
             decoders[key] = factory.decoder_for(m.channel.message_encoding, m.schema)
             if decoders[key] is None:
-                raise BagError(f"no decoder for {m.topic} ({m.channel.message_encoding}, schema {m.schema.encoding})")
+                raise BagInputError(f"no decoder for {m.topic} ({m.channel.message_encoding}, schema {m.schema.encoding})")
         try:
             yield m, decoders[key](m.data)
         except Exception as exc:  # noqa: BLE001 - undecodable payload
-            raise BagError(f"message on {m.topic} at {m.log_time_ns} ns does not decode as {m.type}: {exc}") from exc
+            raise BagInputError(f"message on {m.topic} at {m.log_time_ns} ns does not decode as {m.type}: {exc}") from exc
 
 
 def info(rec: Recording) -> dict[str, Any]:
@@ -303,10 +303,15 @@ def recover(src: str | Path, dst: str | Path, *, layout: str | None = None) -> d
 
     src_p, dst_p = _path(src), _path(dst, "output")
     files, _ = _mcap_files(src_p)
+    for parent in dst_p.parents:  # an output path through a regular file is bad input, found before any work
+        if parent.exists():
+            if not parent.is_dir():
+                raise BagInputError(f"cannot record to {dst_p}: {parent} is not a folder")
+            break
     for f in files:  # before the output is created: a wrong input leaves nothing behind
         with _opened(f) as stream:
             if stream.read(len(MAGIC)) != MAGIC:
-                raise BagError(f"{f} is not an MCAP file (bad or missing magic)")
+                raise BagInputError(f"{f} is not an MCAP file (bad or missing magic)")
     layout = layout or ("file" if dst_p.suffix == ".mcap" else "folder")
     stats = {"chunks_kept": 0, "chunks_lost": 0, "records_lost": 0, "messages": 0, "messages_without_channel": 0, "truncated": False}
     out = BagWriter(dst_p, layout=layout)
@@ -314,7 +319,7 @@ def recover(src: str | Path, dst: str | Path, *, layout: str | None = None) -> d
         for f in files:
             data = _read_all(f)
             if not data.startswith(MAGIC):
-                raise BagError(f"{f} is not an MCAP file (bad or missing magic)")
+                raise BagInputError(f"{f} is not an MCAP file (bad or missing magic)")
             schemas: dict[int, Schema] = {}
             channels: dict[int, Channel] = {}
             for raw in _records(data, len(MAGIC)):

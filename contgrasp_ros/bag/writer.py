@@ -28,7 +28,7 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from .definitions import full_text
-from .errors import BagError
+from .errors import BagInputError, BagIOError
 from .rosbag2 import TopicRecord, bag_metadata, metadata_yaml, offered_qos_yaml
 
 __all__ = ["BagWriter", "COMPRESSIONS", "LAYOUTS", "RUN_RECORD", "RECORDER_RECORD", "check_split"]
@@ -53,11 +53,11 @@ def check_split(layout: str, max_bag_duration: float, max_bag_size: int) -> None
     """Validate the split options (the one rule the writer, the recorder node and the launcher
     apply); raises :class:`BagError` saying what is wrong."""
     if not _is_real(max_bag_duration) or not 0.0 <= max_bag_duration <= 1e9:
-        raise BagError(f"max_bag_duration must be in [0, 1e9] s (0 = no split), got {max_bag_duration!r}")
+        raise BagInputError(f"max_bag_duration must be in [0, 1e9] s (0 = no split), got {max_bag_duration!r}")
     if not _is_int(max_bag_size) or not (max_bag_size == 0 or MIN_BAG_SIZE <= max_bag_size <= 1 << 50):
-        raise BagError(f"max_bag_size must be 0 (no split) or an integer in [{MIN_BAG_SIZE}, 2**50] bytes, got {max_bag_size!r}")
+        raise BagInputError(f"max_bag_size must be 0 (no split) or an integer in [{MIN_BAG_SIZE}, 2**50] bytes, got {max_bag_size!r}")
     if layout == "file" and (max_bag_duration or max_bag_size):
-        raise BagError("max_bag_duration / max_bag_size split a bag folder; a single .mcap file cannot be split: "
+        raise BagInputError("max_bag_duration / max_bag_size split a bag folder; a single .mcap file cannot be split: "
                        "use layout 'folder'")
 
 
@@ -99,17 +99,17 @@ class BagWriter:
     def __post_init__(self) -> None:
         self.path = Path(self.path)
         if not isinstance(self.layout, str) or self.layout not in LAYOUTS:
-            raise BagError(f"layout must be one of {LAYOUTS}, got {self.layout!r}")
+            raise BagInputError(f"layout must be one of {LAYOUTS}, got {self.layout!r}")
         if not isinstance(self.compression, str) or self.compression not in COMPRESSIONS:
-            raise BagError(f"compression must be one of {tuple(COMPRESSIONS)}, got {self.compression!r}")
+            raise BagInputError(f"compression must be one of {tuple(COMPRESSIONS)}, got {self.compression!r}")
         if not _is_int(self.chunk_size) or not 1024 <= self.chunk_size <= 1 << 30:
-            raise BagError(f"chunk_size must be an integer in [1 KiB, 1 GiB], got {self.chunk_size!r}")
+            raise BagInputError(f"chunk_size must be an integer in [1 KiB, 1 GiB], got {self.chunk_size!r}")
         check_split(self.layout, self.max_bag_duration, self.max_bag_size)
         self.split = bool(self.max_bag_duration or self.max_bag_size)
         if self.layout == "file" and self.path.suffix != ".mcap":
-            raise BagError(f"a single-file recording must end in .mcap, got {self.path}")
+            raise BagInputError(f"a single-file recording must end in .mcap, got {self.path}")
         if self.path.exists():
-            raise BagError(f"cannot record to {self.path}: it already exists")
+            raise BagInputError(f"cannot record to {self.path}: it already exists")
         self.topics: dict[str, _Topic] = {}
         self.records: dict[str, dict[str, str]] = {}  # extra MCAP metadata records written at close
         self.files: list[_File] = []
@@ -126,7 +126,7 @@ class BagWriter:
             self.file.parent.mkdir(parents=True, exist_ok=True)
             self._stream = open(self.file, "xb")  # noqa: SIM115 - closed in _finish_file()
         except OSError as exc:
-            raise BagError(f"cannot record to {self.file}: {exc.strerror or exc}") from exc
+            raise BagIOError(f"cannot record to {self.file}: {exc.strerror or exc}") from exc
         self._mcap = Writer(
             self._stream, chunk_size=int(self.chunk_size), compression=COMPRESSIONS[self.compression], enable_data_crcs=True
         )
@@ -170,7 +170,7 @@ class BagWriter:
         try:
             return op()
         except OSError as exc:
-            raise BagError(f"writing {self.file} failed: {exc.strerror or exc}") from exc
+            raise BagIOError(f"writing {self.file} failed: {exc.strerror or exc}") from exc
 
     def add_topic(
         self,
@@ -194,7 +194,7 @@ class BagWriter:
         """Append one serialized (CDR) message of a registered topic."""
         t = self.topics.get(topic)
         if t is None:
-            raise BagError(f"topic {topic!r} was not registered with add_topic")
+            raise BagInputError(f"topic {topic!r} was not registered with add_topic")
         pub = log_time_ns if publish_time_ns is None else publish_time_ns
         if self._due_for_split(log_time_ns):
             self._finish_file(self.metadata())
@@ -229,5 +229,5 @@ class BagWriter:
             try:
                 (self.path / "metadata.yaml").write_text(metadata_yaml(info))
             except OSError as exc:
-                raise BagError(f"cannot write {self.path / 'metadata.yaml'}: {exc.strerror or exc}") from exc
+                raise BagIOError(f"cannot write {self.path / 'metadata.yaml'}: {exc.strerror or exc}") from exc
         return info

@@ -15,10 +15,9 @@ from typing import Any
 import numpy as np
 from rclpy.node import Node
 
-from contgrasp_core.errors import ContgraspError
+from contgrasp_core.control import FeedbackGains, feedback_at_joints, paper_gains
+from contgrasp_core.errors import ContgraspError, InvalidParameterError
 from contgrasp_core.scenario import PAPER
-from contgrasp_core.control import FeedbackGains, paper_gains
-from contgrasp_core.control import feedback_at_joints
 from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros import qos
 from contgrasp_ros.convert import MessageError, contact_arrays, couple_to_msg, require_finite
@@ -56,7 +55,7 @@ class GraspController(Node):
         else:
             gains = FeedbackGains(mu1=p["mu1"], mu2=p["mu2"], length_unit=p["length_unit"])
         if not np.all(np.abs(gains.mu2) <= MU2_LIMIT):
-            raise ContgraspError(f"mu2 beyond +-{MU2_LIMIT:g} law units (adaptive with object_radius "
+            raise InvalidParameterError(f"mu2 beyond +-{MU2_LIMIT:g} law units (adaptive with object_radius "
                                  f"{p['object_radius']} m, length_unit {p['length_unit']} m?)")
         return gains
 

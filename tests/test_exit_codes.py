@@ -1,0 +1,338 @@
+"""Errors mean what the README says: two families, two exit codes.
+
+* every error class is in exactly one family: :class:`InputError` (a ``ValueError``) or
+  :class:`RunFailure` (a ``RuntimeError``);
+* every entry point - ``contgrasp`` (each subcommand), ``contgrasp-launch`` and the node mains
+  (:func:`contgrasp_ros.runtime.run_node`) - exits 2 with one line ``PROG: error: ...`` on bad
+  input or bad usage, and 1 with one such line when a run on valid input fails.
+
+The run failures are real where the system offers one: a Newton failure (``simulate --dt 5``),
+an I/O error (``bag info /proc/self/mem`` reads EIO), a write beyond the file-size limit
+(RLIMIT_FSIZE in a child process: EFBIG instead of a full disk), a message package that is not
+installed (``replay``). Only the launcher's and run_node's start-up failures are injected.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from contgrasp_core.errors import (
+    ContactValidityError,
+    ContgraspError,
+    DegenerateBoundaryError,
+    InputError,
+    IntegrationError,
+    InvalidBoundaryError,
+    InvalidParameterError,
+    NotClosedError,
+    RunFailure,
+    SelfIntersectionError,
+    WriteError,
+    exit_code,
+    output_error,
+)
+from contgrasp_core.optimal.discrete import ForwardSolveError, SingularSystemError
+from contgrasp_core.rod.integrator import StepFailedError
+from contgrasp_core.rod.session import SimulationDivergedError
+from contgrasp_ros.bag import BagError, BagInputError, BagIOError
+
+ROOT = Path(__file__).resolve().parents[1]
+BAG = ROOT / "bags" / "paper_grasp.mcap"
+
+INPUT_ERRORS = [InvalidParameterError, InvalidBoundaryError, NotClosedError, SelfIntersectionError, DegenerateBoundaryError,
+                ContactValidityError, BagInputError]
+RUN_FAILURES = [StepFailedError, SimulationDivergedError, SingularSystemError, ForwardSolveError, IntegrationError, WriteError,
+                BagIOError]
+
+
+def _ros_classes() -> tuple[list[type], list[type]]:
+    from contgrasp_ros.convert import MessageError
+    from contgrasp_ros.runtime import FatalNodeError
+
+    return [MessageError], [FatalNodeError]
+
+
+# ----------------------------------------------------------------------------- the families
+@pytest.mark.parametrize("cls", INPUT_ERRORS)
+def test_input_errors_are_value_errors(cls: type) -> None:
+    assert issubclass(cls, InputError) and issubclass(cls, ValueError) and issubclass(cls, ContgraspError)
+    assert not issubclass(cls, RuntimeError) and not issubclass(cls, RunFailure)
+
+
+@pytest.mark.parametrize("cls", RUN_FAILURES)
+def test_run_failures_are_runtime_errors(cls: type) -> None:
+    assert issubclass(cls, RunFailure) and issubclass(cls, RuntimeError) and issubclass(cls, ContgraspError)
+    assert not issubclass(cls, ValueError) and not issubclass(cls, InputError)
+
+
+def test_ros_error_classes_are_in_their_family() -> None:
+    inputs, failures = _ros_classes()
+    assert all(issubclass(c, InputError) and not issubclass(c, RuntimeError) for c in inputs)
+    assert all(issubclass(c, RunFailure) and not issubclass(c, ValueError) for c in failures)
+
+
+def test_every_error_class_is_in_exactly_one_family() -> None:
+    """No class below the root is in neither family (it would exit 1 unexplained) or both;
+    the only exception is BagError, the catch-all of the two bag classes (never raised)."""
+    _ros_classes()  # import every module that defines an error class
+    import contgrasp_ros.analysis  # noqa: F401
+    import contgrasp_ros.replay  # noqa: F401
+
+    seen, todo = [], [ContgraspError]
+    while todo:
+        cls = todo.pop()
+        for sub in cls.__subclasses__():
+            if sub not in seen:
+                seen.append(sub)
+                todo.append(sub)
+    concrete = [c for c in seen if c not in (InputError, RunFailure, BagError)]
+    assert len(concrete) >= len(INPUT_ERRORS) + len(RUN_FAILURES) + 2
+    for cls in concrete:
+        assert issubclass(cls, InputError) != issubclass(cls, RunFailure), cls
+    assert issubclass(BagInputError, BagError) and issubclass(BagIOError, BagError)
+    assert ContgraspError.__mro__[1] is Exception
+
+
+def test_exit_code_and_output_error() -> None:
+    assert exit_code(InvalidParameterError("x")) == 2 and exit_code(StepFailedError("x")) == 1
+    assert exit_code(ZeroDivisionError()) == 1
+    full = output_error("the figure a.png", OSError(28, "No space left on device"))
+    assert isinstance(full, WriteError) and str(full) == "cannot write the figure a.png: No space left on device"
+    assert isinstance(output_error("the figure a.png", ValueError("Format 'xyz' is not supported")), InvalidParameterError)
+
+
+def test_library_raises_run_failures_and_input_errors_for_real() -> None:
+    """The classes are what the library really raises: a Newton failure is a RuntimeError,
+    a bad parameter of the same call a ValueError."""
+    from contgrasp_ros.bag.reader import open_recording
+
+    with pytest.raises(RuntimeError, match="Input/output error"):
+        open_recording("/proc/self/mem")
+    with pytest.raises(ValueError, match="no recording"):
+        open_recording(ROOT / "no such bag")
+
+
+# ----------------------------------------------------------------------------- contgrasp
+def run_cli(capsys: pytest.CaptureFixture[str], argv: list[str]) -> tuple[int, str]:
+    """``contgrasp ARGV`` in-process: (exit code, the one stderr line)."""
+    from contgrasp_ros.cli import main
+
+    capsys.readouterr()
+    try:
+        code = main(argv)
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, (argv, err)
+    assert "Traceback" not in err and out == "", (argv, out)
+    return code, lines[0]
+
+
+BAD_INPUT = [
+    (["kinematics", "--rho0", "-1"], "contgrasp kinematics: error: "),
+    (["grasp", "--chi", "0", "--nodes", "40"], "contgrasp grasp: error: "),
+    (["quality-map", "--nodes", "1", "--executor", "serial"], "contgrasp quality-map: error: "),
+    (["figures", "--nodes", "2", "--no-maps"], "contgrasp figures: error: "),
+    (["simulate", "--duration", "-1"], "contgrasp simulate: error: "),
+    (["bag", "info", "/no/such/bag"], "contgrasp bag info: error: no recording at /no/such/bag"),
+    (["bag", "recover", "/no/such/bag", "/tmp/never.mcap"], "contgrasp bag recover: error: no recording at /no/such/bag"),
+    (["analyze", "/no/such/bag"], "contgrasp analyze: error: no recording at /no/such/bag"),
+    (["replay", str(BAG), "--rate", "-1"], "contgrasp replay: error: "),
+]
+
+
+@pytest.mark.parametrize(("argv", "start"), BAD_INPUT, ids=[" ".join(a[:2]) for a, _ in BAD_INPUT])
+def test_bad_input_exits_2_with_one_line(capsys: pytest.CaptureFixture[str], argv: list[str], start: str) -> None:
+    code, line = run_cli(capsys, argv)
+    assert code == 2 and line.startswith(start), line
+
+
+@pytest.mark.parametrize("argv", [["grasp", "--rho0", "x"], ["kinematics", "--no-such-option"], ["bag", "info"], [],
+                                  ["quality-map", "--metric", "Q4"]])
+def test_usage_errors_are_one_line_with_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    code, line = run_cli(capsys, argv)
+    prog = " ".join(["contgrasp", *[a for a in argv[:2] if not a.startswith("-")]])
+    assert code == 2 and line.startswith(f"{prog}: error: ") and line.endswith(f"(see '{prog} --help')"), line
+    assert "usage:" not in line
+
+
+def test_help_still_works(capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_ros.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["grasp", "--help"])
+    assert info.value.code == 0 and capsys.readouterr().out.startswith("usage: contgrasp grasp")
+
+
+def test_newton_failure_in_simulate_exits_1(capsys: pytest.CaptureFixture[str]) -> None:
+    """A step the integrator cannot take even after its halvings: a failed run, not bad input."""
+    code, line = run_cli(capsys, ["simulate", "--dt", "5", "--duration", "2", "--nodes", "21"])
+    assert code == 1 and line.startswith("contgrasp simulate: error: Newton failed to converge"), line
+
+
+def test_io_error_reading_a_recording_exits_1(capsys: pytest.CaptureFixture[str]) -> None:
+    code, line = run_cli(capsys, ["bag", "info", "/proc/self/mem"])
+    assert code == 1 and line == "contgrasp bag info: error: cannot read /proc/self/mem: Input/output error", line
+
+
+def _limited(size: int) -> Callable[[], None]:
+    def limit() -> None:  # Python ignores SIGXFSZ: a write beyond the limit fails with EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (size, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+
+    return limit
+
+
+def _child(argv: list[str], *, fsize: int | None = None, module: str = "contgrasp_ros.cli",
+           timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]), MPLBACKEND="Agg")
+    return subprocess.run([sys.executable, "-m", module, *argv], capture_output=True, text=True, timeout=timeout, env=env,
+                          preexec_fn=None if fsize is None else _limited(fsize), cwd=ROOT)
+
+
+WRITE_FAILURES = [
+    (["kinematics", "--plot", "{tmp}/k.png"], "cannot write the figure"),
+    (["grasp", "--nodes", "40", "--max-iterations", "3", "--plot", "{tmp}/g.png"], "cannot write the figure"),
+    (["quality-map", "--psi-steps", "1", "--d-steps", "1", "--nodes", "40", "--executor", "serial", "--out", "{tmp}/m"],
+     "cannot save the quality map"),
+    (["figures", "--nodes", "40", "--no-maps", "--out", "{tmp}/figs"], "cannot write the figure"),
+    (["analyze", str(BAG), "--csv", "{tmp}/csv"], "cannot write CSV files"),
+    (["bag", "recover", str(BAG), "{tmp}/rec.mcap"], "failed: File too large"),
+]
+
+
+@pytest.mark.parametrize(("argv", "needle"), WRITE_FAILURES, ids=[" ".join(a[:2]) for a, _ in WRITE_FAILURES])
+def test_a_failing_write_exits_1(tmp_path: Path, argv: list[str], needle: str) -> None:
+    """Valid arguments, but the output cannot be written (the file-size limit stands in for a
+    full disk): exit 1 and one error line naming the file and the reason."""
+    proc = _child([a.format(tmp=tmp_path) for a in argv], fsize=2048)
+    errors = [line for line in proc.stderr.splitlines() if ": error: " in line]
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    assert len(errors) == 1 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    command = " ".join(a for a in argv[:2] if not a.startswith("-") and "/" not in a)
+    assert proc.stderr.strip().splitlines()[-1] == errors[0]  # (a progress bar may precede it)
+    assert errors[0].startswith(f"contgrasp {command}: error: ") and needle in errors[0] and "File too large" in errors[0]
+
+
+def test_the_same_commands_succeed_without_the_limit(tmp_path: Path) -> None:
+    """Control for the test above: the limit, not the arguments, made them fail."""
+    proc = _child(["bag", "recover", str(BAG), str(tmp_path / "rec.mcap"), "--json"])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    proc = _child(["kinematics", "--plot", str(tmp_path / "k.png"), "--json"])
+    assert proc.returncode == 0 and (tmp_path / "k.png").stat().st_size > 2048, proc.stderr[-2000:]
+
+
+def test_replay_of_a_type_that_is_not_installed_exits_1(tmp_path: Path) -> None:
+    """A valid recording whose message package this installation lacks: the run fails (1)."""
+    from contgrasp_ros.bag.writer import BagWriter
+
+    w = BagWriter(tmp_path / "alien.mcap", layout="file")
+    w.add_topic("/alien", "alien_msgs/msg/Probe", definition="int32 x\n")
+    w.write("/alien", b"\x00\x01\x00\x00\x07\x00\x00\x00", 1_000)
+    w.close()
+    proc = _child(["replay", str(tmp_path / "alien.mcap"), "--delay", "0"], timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 1 and len(lines) == 1, proc.stderr[-2000:]
+    assert lines[0].startswith("contgrasp replay: error: cannot replay alien_msgs/msg/Probe"), lines
+
+
+@pytest.mark.parametrize(("exc", "code"), [(StepFailedError("Newton failed"), 1), (WriteError("disk full"), 1),
+                                           (ZeroDivisionError("a bug"), 1), (InvalidParameterError("rho0 must be > 0"), 2),
+                                           (ContactValidityError("rho > 0 violated", s=0.1, condition="rho > 0"), 2)])
+def test_core_main_maps_the_family_to_the_exit_code(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+                                                    exc: Exception, code: int) -> None:
+    """contgrasp_core.cli.main: a RunFailure (or any other exception) raised inside a
+    subcommand exits 1, an InputError 2; one line; --debug re-raises."""
+    from contgrasp_core import cli, cli_kinematics
+
+    def broken(_args: object) -> None:
+        raise exc
+
+    monkeypatch.setattr(cli_kinematics, "run", broken)
+    capsys.readouterr()
+    assert cli.main(["kinematics"]) == code
+    err = capsys.readouterr().err
+    prefix = "" if isinstance(exc, ContgraspError) else f"{type(exc).__name__}: "
+    assert err == f"contgrasp kinematics: error: {prefix}{exc}\n"
+    with pytest.raises(type(exc)):
+        cli.main(["kinematics", "--debug"])
+
+
+# ----------------------------------------------------------------------------- contgrasp-launch
+def test_launcher_bad_input_and_usage_exit_2(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    from contgrasp_ros import launcher
+
+    for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR"):  # the launcher sets them
+        monkeypatch.setenv(var, os.environ.get(var, "0"))
+
+    for argv, start in ((["--duration", "-1", "--no-record"], "contgrasp-launch: error: --duration must be"),
+                        (["--no-record", "--respawn", "-2"], "contgrasp-launch: error: --respawn takes N >= 0"),
+                        (["--bag", str(tmp_path), "--domain-id", "5"], f"contgrasp-launch: error: --bag {tmp_path} already exists"),
+                        (["--params", str(tmp_path / "none.yaml")], "contgrasp-launch: error: cannot read parameter file")):
+        capsys.readouterr()
+        assert launcher.main(argv) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and err[0].startswith(start), err
+    with pytest.raises(SystemExit) as info:
+        launcher.main(["--duration", "soon"])
+    err = capsys.readouterr().err.splitlines()
+    assert info.value.code == 2 and len(err) == 1
+    assert err[0] == ("contgrasp-launch: error: argument --duration: invalid float value: 'soon'  "
+                      "(see 'contgrasp-launch --help')")
+
+
+def test_launcher_run_failure_exits_1(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """A RunFailure out of the graph run (injected: a real one needs a whole graph) exits 1."""
+    import contgrasp_ros.graph_run
+    from contgrasp_ros import launcher
+
+    def diverged(*_a: object, **_k: object) -> None:
+        raise SimulationDivergedError("simulation diverged: NaN/Inf in the rod state")
+
+    monkeypatch.setattr(contgrasp_ros.graph_run, "run_graph", diverged)
+    monkeypatch.setenv("ROS_DOMAIN_ID", os.environ.get("ROS_DOMAIN_ID", "0"))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    capsys.readouterr()
+    assert launcher.main(["--no-record", "--domain-id", "7"]) == 1
+    assert capsys.readouterr().err == "contgrasp-launch: error: simulation diverged: NaN/Inf in the rod state\n"
+
+
+# ----------------------------------------------------------------------------- node mains
+@pytest.mark.parametrize(("exc", "code", "line"), [
+    (InvalidParameterError("rate_hz must be > 0, got -5"), 2, "broken_node: error: invalid parameter: rate_hz must be > 0, got -5"),
+    (StepFailedError("Newton failed"), 1, "broken_node: error: Newton failed"),
+])
+def test_run_node_start_up_errors(capsys: pytest.CaptureFixture[str], exc: Exception, code: int, line: str) -> None:
+    from contgrasp_ros.runtime import run_node
+
+    def broken_node() -> None:
+        raise exc
+
+    capsys.readouterr()
+    assert run_node(broken_node, args=[]) == code  # type: ignore[arg-type]
+    assert capsys.readouterr().err.splitlines() == [line]
+
+
+def test_node_with_bad_parameter_exits_2_and_recorder_with_failing_disk_exits_1(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Real node processes: a bad start-up parameter exits 2; a recorder whose writes fail
+    (file-size limit) stops with exit 1 and one error line - the FatalNodeError must not be
+    swallowed by the executor's guard against rclpy's own RuntimeErrors."""
+    from conftest import fresh_domain_id
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(fresh_domain_id()))
+    bad = _child(["--ros-args", "-p", "layout:=tape", "-p", f"output:={tmp_path / 'a'}"],
+                 module="contgrasp_ros.nodes.mcap_recorder", timeout=60)
+    assert bad.returncode == 2 and "McapRecorder: error: invalid parameter: layout must be one of" in bad.stderr, bad.stderr[-2000:]
+    full = _child(["--ros-args", "-p", f"output:={tmp_path / 'b'}", "-p", "flush_period:=0.1"],
+                  module="contgrasp_ros.nodes.mcap_recorder", fsize=100, timeout=60)
+    assert full.returncode == 1, full.stderr[-2000:]
+    errors = [line for line in full.stderr.splitlines() if line.startswith("McapRecorder: error: ")]
+    assert len(errors) == 1 and "File too large" in errors[0], full.stderr[-2000:]
