@@ -123,7 +123,8 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
     if not 3 <= args.nodes <= MAX_NODES:
         raise InvalidParameterError(f"--nodes must be in [3, {MAX_NODES}], got {args.nodes}")
     MapSpec("circle", psi_steps=args.psi_steps, d_steps=args.d_steps)  # checks both before any solve
-    files, summary = [], {}
+    files: list[str] = []
+    summary: dict[str, dict[str, object]] = {}
     for name in PAPER_OBJECTS:
         result = solve(paper_problem(name, nodes=args.nodes))
         path = save_grasp_figure(result, out_dir / f"fig2_{name}.png", title=name)

@@ -8,7 +8,7 @@ Without ``parents`` the subcommand adds its own ``--json`` flag.
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,6 +18,9 @@ from contgrasp_core.feedback import closed_loop_kinematics
 from contgrasp_core.rod import Obstacle, RodSystem
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, paper_gains, run_closed_loop
 from contgrasp_core.rod.scenario import PAPER_OBJECT_CENTER, PAPER_OBJECT_RADIUS, paper_model
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = ["add_parser", "run", "summarize", "static_solution", "snapshot_indices", "plot_fig4", "animate"]
 
@@ -104,7 +107,7 @@ def summarize(res: ClosedLoopResult, contact_tol: float = 0.5) -> dict[str, Any]
     }
 
 
-def _draw_arm(ax, x: np.ndarray, r: np.ndarray, **kw) -> None:
+def _draw_arm(ax: Axes, x: np.ndarray, r: np.ndarray, **kw: Any) -> None:
     t = np.gradient(x, axis=0)
     t /= np.hypot(t[:, 0], t[:, 1])[:, None]
     nrm = np.stack([-t[:, 1], t[:, 0]], axis=1)

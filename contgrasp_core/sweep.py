@@ -18,7 +18,7 @@ import json
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +30,9 @@ from .boundary import Boundary
 from .errors import ContgraspError, InvalidParameterError
 from .objects import paper_object
 from .quality import grasp_quality
+
+if TYPE_CHECKING:  # (imported lazily at run time)
+    from .optimal import GraspProblem
 
 __all__ = [
     "MapSpec",
@@ -160,7 +163,7 @@ def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
     return BasePose(float(lam * u[0]), float(lam * u[1]), float(psi + 0.5 * np.pi))
 
 
-def _problem(spec: MapSpec, boundary: Boundary, base: BasePose):  # type: ignore[no-untyped-def]
+def _problem(spec: MapSpec, boundary: Boundary, base: BasePose) -> GraspProblem:
     from .optimal import problem_from_base
 
     arm = Arm(spec.length_fraction * boundary.length, spec.arm_radius)

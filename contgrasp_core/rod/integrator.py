@@ -36,13 +36,13 @@ Newton iterate is extrapolated from the previous step's rate change.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import chain
-from contgrasp_core.rod.control import StateFeedback
-from contgrasp_core.rod.loads import contact_forces, contact_frame, contact_tensors, drag_forces
+from contgrasp_core.rod.loads import ContactFrame, contact_forces, contact_frame, contact_tensors, drag_forces
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
@@ -62,6 +62,15 @@ class RodState:
     omega: np.ndarray
 
 
+class ImplicitFeedback(Protocol):
+    """A couple law evaluated at the new state inside every Newton iteration, with its Jacobian:
+    :class:`~contgrasp_core.rod.control.StateFeedback` or the held expansion of
+    :class:`~contgrasp_core.rod.session.LoopSession`."""
+
+    def couple_and_jacobian(self, theta: np.ndarray, *, jacobian: bool = True, nodes: np.ndarray | None = None,
+                            normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]: ...
+
+
 @dataclass(frozen=True)
 class RodLoads:
     """Applied loads: internal couple control ``couple`` at the joints ``s_k = k h`` (N,) in N m
@@ -71,7 +80,7 @@ class RodLoads:
 
     couple: np.ndarray | None = None
     node_forces: np.ndarray | None = None
-    feedback: StateFeedback | None = None
+    feedback: ImplicitFeedback | None = None
 
 
 @dataclass(frozen=True)
@@ -141,7 +150,8 @@ class RodSystem:
         return self.kinetic_energy(state) + self.elastic_energy(state, loads)
 
     # ---------------------------------------------------------------- forces
-    def _evaluate(self, theta: np.ndarray, omega: np.ndarray, loads: RodLoads, frame, delta: np.ndarray) -> _Eval:
+    def _evaluate(self, theta: np.ndarray, omega: np.ndarray, loads: RodLoads, frame: ContactFrame | None,
+                  delta: np.ndarray) -> _Eval:
         """Generalised force ``q`` at (``theta``, ``omega``) and the derivatives for the Newton
         matrix: ``jac_w = -dq/domega``, ``jac_q = -dq/dtheta`` and ``jac_m = d(M delta)/dtheta``
         (``delta`` the rate increment of the step). Exact for the model as stepped (the contact
@@ -219,7 +229,8 @@ class RodSystem:
         if loads.couple is not None:
             mom = mom + loads.couple
         if loads.feedback is not None:
-            u, du = loads.feedback.couple_and_jacobian(theta, nodes=x, normals=b)
+            u, du = loads.feedback.couple_and_jacobian(theta, jacobian=True, nodes=x, normals=b)
+            assert du is not None  # asked for with jacobian=True
             mom = mom + u
             jac_q += du
             jac_q[:-1] -= du[1:]
@@ -270,7 +281,7 @@ class RodSystem:
         return state, info
 
     def newton_system(self, state: RodState, w1: np.ndarray, dt: float, loads: RodLoads = RodLoads(),
-                      frame=None) -> tuple[np.ndarray, np.ndarray, _Eval]:
+                      frame: ContactFrame | None = None) -> tuple[np.ndarray, np.ndarray, _Eval]:
         """Residual and Newton matrix of the implicit step from ``state`` over ``dt`` at the
         iterate ``w1`` (the new rates): backward Euler ``R = M(theta_1)(w1 - w0) - dt q(theta_1,
         w1)`` with ``theta_1 = theta_0 + dt w1``, or the implicit midpoint rule with both evaluated
@@ -285,7 +296,7 @@ class RodSystem:
         res = ev.mass @ (w1 - w0) - dt * ev.q
         return res, ev.mass + dt * cw * ev.jac_w + cq * (dt * ev.jac_q + ev.jac_m), ev
 
-    def contact_frame(self, state: RodState, dt: float):
+    def contact_frame(self, state: RodState, dt: float) -> ContactFrame | None:
         """The tangent-line contact model frozen over a step of ``dt`` from ``state`` (None
         without an obstacle or with no centre near it)."""
         if self.obstacle is None:

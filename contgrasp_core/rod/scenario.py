@@ -9,6 +9,7 @@ octopus material and drag (density 1042 kg/m^3, E = 10 kPa, drag 5110 / 25.55). 
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 from contgrasp_core.boundary import Boundary, circle
 from contgrasp_core.rod.model import RodModel
@@ -23,8 +24,8 @@ _PAPER = RodModel(length=0.20, n_elements=100, radius_base=0.01, radius_tip=0.00
                   contact_stiffness=1.0e5, contact_damping=1.0)
 
 
-def paper_model(n_elements: int = 100, **overrides: float) -> RodModel:
-    """The paper's arm as a :class:`RodModel` (any field can be overridden)."""
+def paper_model(n_elements: int = 100, **overrides: Any) -> RodModel:
+    """The paper's arm as a :class:`RodModel` (any field can be overridden, with a value of its type)."""
     return replace(_PAPER, n_elements=n_elements, **overrides)
 
 
