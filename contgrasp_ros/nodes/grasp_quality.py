@@ -7,6 +7,8 @@ dropped and counted (``/diagnostics``).
 
 from __future__ import annotations
 
+from typing import Any
+
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
@@ -20,8 +22,8 @@ from contgrasp_ros.runtime import Diagnostics, DropCounter, ObjectTracker, Stamp
 class GraspQualityNode(Node):
     """Evaluates Q1..Q3 of the sensed contact set, at most ``rate_hz`` times per sim second."""
 
-    def __init__(self, **node_kwargs: object) -> None:
-        super().__init__("grasp_quality", **node_kwargs)  # type: ignore[arg-type]
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("grasp_quality", **node_kwargs)
         declare(self, "rate_hz", 20.0, "evaluations per simulated second (0 = every contact state)", lo=0.0, hi=1e6)
         declare(self, "contact_tolerance", -1.0, "contact tolerance [m]; < 0 uses the sensor's", lo=-1.0, hi=1.0)
         declare(self, "reference_x", 0.0, "wrench reference point x [m] (object frame origin)", lo=-1e6, hi=1e6)
