@@ -2,7 +2,8 @@
 # contgrasp developer entry point: set everything up, then run the main job or the tests.
 #
 #   bash contgrasp.sh run    # set up (idempotent) and run the main job (the ROS closed loop) -> results/
-#   bash contgrasp.sh test   # set up (idempotent) and run the whole test suite
+#   bash contgrasp.sh test   # set up (idempotent), run ruff and mypy, then the whole test suite
+#                            # (extra arguments go to pytest: bash contgrasp.sh test -k boundary)
 #   bash contgrasp.sh setup  # only set up
 #
 # Set-up creates .venv/ inside the checkout with Python 3.11, installs the project with its
@@ -90,7 +91,18 @@ run_main() {
     done
 }
 
+run_checks() {
+    # Static checks first (a few seconds): any finding fails the test command. Configured in
+    # pyproject.toml ([tool.ruff], [tool.mypy]); the versions are pinned in the test extra.
+    echo "== ruff check ."
+    # (explicit returns: errexit does not reach into a function called from an && list)
+    "$py" -m ruff check . || return 1
+    echo "== mypy (contgrasp_core, contgrasp_ros)"
+    "$py" -m mypy || return 1
+}
+
 run_tests() {
+    run_checks || return 1
     # A distinct DDS domain per test run keeps concurrent runs apart (ROS tests pick their own too).
     export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( ($$ % 90) + 10 ))}"
     "$py" -m pytest "$@"

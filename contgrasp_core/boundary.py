@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Callable
+from typing import Any, cast
 from dataclasses import dataclass
 from math import comb
 
@@ -100,7 +101,7 @@ class Boundary:
         breakpoints: ArrayLike,
         *,
         kind: str,
-        params: dict[str, object],
+        params: dict[str, Any],
     ) -> None:
         self._c = curve
         self.kind = kind
@@ -397,7 +398,7 @@ def fourier_polar(
         )
 
     def curve(t: NDArray[np.float64], k: int) -> NDArray[np.float64]:
-        out = sum(comb(k, j) * radius(t, j)[:, None] * _rot(k - j, t) for j in range(k + 1))
+        out = sum((comb(k, j) * radius(t, j)[:, None] * _rot(k - j, t) for j in range(k + 1)), np.zeros((t.size, 2)))
         return out + c0 if k == 0 else out
 
     panels = max(64, 8 * n)
@@ -521,14 +522,17 @@ def from_points(
     s_fit = smoothing * len(p) * size**2 if smoothing >= 1e-12 else 0.0
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
-        tck, _ = splprep(closed_pts.T, u=u, per=1, k=5, s=s_fit, quiet=2)
+        tck, _ = splprep(closed_pts.T, u=u, per=1, k=5, s=s_fit, quiet=True)
     if s_fit > 0.0 and any(issubclass(w.category, RuntimeWarning) for w in caught):
         # FITPACK cannot reach a smoothing this small ("s too small"): its limit is interpolation
-        tck, _ = splprep(closed_pts.T, u=u, per=1, k=5, s=0.0, quiet=2)
+        tck, _ = splprep(closed_pts.T, u=u, per=1, k=5, s=0.0, quiet=True)
+    # splprep returns the list [knots, [coefficients of x, of y], degree]; its stub types the
+    # items as one union, so name the actual layout for splev
+    spline = cast("tuple[NDArray[np.float64], list[NDArray[np.float64]], int]", tuple(tck))
 
     def curve(t: NDArray[np.float64], k: int) -> NDArray[np.float64]:
         uu = np.mod(t, TWO_PI) / TWO_PI
-        vals = np.asarray(splev(uu, tck, der=k))
+        vals = np.asarray(splev(uu, spline, der=k))
         return vals.T / TWO_PI**k
 
     knots = np.unique(np.clip(tck[0], 0.0, 1.0)) * TWO_PI
@@ -553,7 +557,7 @@ def load_points(path: str) -> NDArray[np.float64]:
         raise InvalidParameterError(f"cannot read outline file {path!r}: {exc.strerror or exc}") from exc
     except UnicodeDecodeError as exc:
         raise DegenerateBoundaryError(f"outline file {path!r} is not a text file: {exc}") from exc
-    rows = []
+    rows: list[list[float]] = []
     for line_no, line in enumerate(text.splitlines(), start=1):
         fields = [f for f in line.replace(",", " ").split() if f]
         if not fields or line.lstrip().startswith("#"):

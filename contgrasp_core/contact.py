@@ -191,7 +191,7 @@ def check_state(boundary: Boundary, rho: float, alpha: float, s_o: float, *, s: 
 
 _MAX_TURNING = 1e9  # largest |kappa| L integrate_contact accepts (radians of total turning)
 
-KappaProfile = Callable[[NDArray[np.float64]], NDArray[np.float64]] | ArrayLike
+KappaProfile = Callable[[float], float] | ArrayLike  # samples on s, or kappa(s) called at one s
 
 
 def integrate_contact(
@@ -264,6 +264,7 @@ def integrate_contact(
 
     events = [ev_rho, ev_alpha_lo, ev_alpha_hi, ev_speed]
     for ev in events:
+        # solve_ivp reads a `terminal` attribute of an event function; no callable type declares it
         ev.terminal = True  # type: ignore[attr-defined]
     sol = solve_ivp(
         rhs,
@@ -276,6 +277,7 @@ def integrate_contact(
         events=events,
     )
     names = ["rho > 0", "0 < alpha < pi", "0 < alpha < pi", "1 + rho kappa_o > 0"]
+    assert sol.t_events is not None  # (set whenever events are given)
     for name, t_ev in zip(names, sol.t_events, strict=True):
         if len(t_ev):
             s_bad = float(t_ev[0])

@@ -20,6 +20,7 @@ the grid spacing. Because ``W = sum_i w_i G_i G_i^T`` the discretised continuum 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -84,7 +85,16 @@ def discrete_grasp_map(gamma: ArrayLike, phi: ArrayLike, ref: ArrayLike = (0.0, 
     return np.concatenate(list(maps), axis=1) if len(maps) else np.zeros((3, 0))
 
 
-def singular_value_metrics(grasp_map: ArrayLike) -> dict[str, float]:
+class SingularValueMetrics(TypedDict):
+    """What :func:`singular_value_metrics` returns (a plain dict)."""
+
+    sigma_min: float
+    volume: float
+    isotropy: float
+    singular_values: list[float]
+
+
+def singular_value_metrics(grasp_map: ArrayLike) -> SingularValueMetrics:
     """Classical metrics of a grasp map of any shape (m, k): its min(m, k) singular values.
 
     ``sigma_min``, ``volume = prod sigma_i`` and ``isotropy = sigma_min / sigma_max`` (0 for a

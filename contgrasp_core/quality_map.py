@@ -18,7 +18,7 @@ import json
 import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +30,9 @@ from .boundary import Boundary
 from .errors import ContgraspError, InvalidParameterError, WriteError
 from .objects import FIG2_SCALE, ObjectSpec
 from .quality import grasp_quality
+
+if TYPE_CHECKING:  # (imported lazily at run time)
+    from .optimal import GraspProblem
 
 __all__ = [
     "MapSpec",
@@ -170,7 +173,7 @@ def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
     return BasePose(float(lam * u[0]), float(lam * u[1]), float(psi + 0.5 * np.pi))
 
 
-def _problem(spec: MapSpec, boundary: Boundary, base: BasePose):  # type: ignore[no-untyped-def]
+def _problem(spec: MapSpec, boundary: Boundary, base: BasePose) -> GraspProblem:
     from .optimal import problem_from_base
 
     arm = Arm(spec.length_fraction * boundary.length, spec.arm_radius)

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import csv
 import json
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -197,10 +197,11 @@ def _contact_series(msgs: list[Any]) -> ContactSeries | None:
             rows.append(contact_arrays(msg))
         except ContgraspError as exc:
             raise BagInputError(f"{TOPIC_CONTACT} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
+    s, rho, alpha, delta, s_o = (_stack([getattr(c, k) for c in rows], TOPIC_CONTACT) for k in ("s", "rho", "alpha", "delta", "s_o"))
     return ContactSeries(
         np.asarray([c.step for c in rows], dtype=np.int64),
         np.asarray([c.t for c in rows]),
-        *(_stack([getattr(c, k) for c in rows], TOPIC_CONTACT) for k in ("s", "rho", "alpha", "delta", "s_o")),
+        s, rho, alpha, delta, s_o,
         _stack([c.shadow[:, 0] for c in rows], TOPIC_CONTACT),
         _stack([c.shadow[:, 1] for c in rows], TOPIC_CONTACT),
         np.stack([c.in_contact for c in rows]),
@@ -214,11 +215,14 @@ def _quality_series(msgs: list[Any]) -> QualitySeries | None:
     w = [np.asarray(m.w, dtype=float) for m in msgs]
     if any(v.shape != (9,) for v in w):
         raise BagInputError(f"{TOPIC_QUALITY}: a message's W does not have 9 entries")
+    q1, q2, q3, length, tol = (
+        np.asarray([float(getattr(m, k)) for m in msgs]) for k in ("q1", "q2", "q3", "contact_length", "contact_tolerance")
+    )
     return QualitySeries(
         np.asarray([int(m.step) for m in msgs], dtype=np.int64),
         np.asarray([stamp_seconds(m.header) for m in msgs]),
         np.stack(w),
-        *(np.asarray([float(getattr(m, k)) for m in msgs]) for k in ("q1", "q2", "q3", "contact_length", "contact_tolerance")),
+        q1, q2, q3, length, tol,
         np.asarray([bool(m.valid) for m in msgs]),
     )
 
@@ -472,7 +476,8 @@ def settle_recomputed(run: RunData) -> tuple[bool | None, float | None]:
     if run.params is None or not gaps["contiguous"] or gaps["first_step"] != 0:
         return None, None
     sim = run.params.get(SIMULATOR, {})
-    det = SettleDetector(*(float(sim.get(k, _default(SIMULATOR, k))) for k in ("settle_speed", "settle_hold", "min_time")))
+    speed, hold, min_time = (float(sim.get(k, _default(SIMULATOR, k))) for k in ("settle_speed", "settle_hold", "min_time"))
+    det = SettleDetector(speed, hold, min_time)
     for k, t, v in zip(run.rod.step, run.rod.t, run.rod.max_speed, strict=True):
         det.update(run.sim_time.get(int(k), float(t)), float(v))
     return det.settled, det.settle_time
@@ -554,18 +559,7 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
     return out
 
 
-def _write_rows(path: Path, header: list[str], rows: Any) -> int:
-    n = 0
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(header)
-        for row in rows:
-            w.writerow(row)
-            n += 1
-    return n
-
-
-def _long_rows(t: Array, steps: IntArray, cols: list[Any], extra: list[Any] = ()) -> Iterator[list[Any]]:
+def _long_rows(t: Array, steps: IntArray, cols: list[Any], extra: Sequence[Any] = ()) -> Iterator[list[Any]]:
     """One row per state and node: t, step, i, the node's values of ``cols``, then ``extra``
     columns (per-node arrays or per-state scalars)."""
     n = cols[0].shape[1]
@@ -675,9 +669,9 @@ def analyze(
     for name, value in (("sensor_tolerance", sensor_tolerance), ("quality_tolerance", quality_tolerance)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value)):
             raise InvalidParameterError(f"{name} must be a finite number, got {value!r}")
-    for name, value in (("csv_dir", csv_dir), ("plot", plot)):
-        if value is not None and not isinstance(value, str | Path):
-            raise InvalidParameterError(f"{name} must be a path, got {value!r}")
+    for name, where in (("csv_dir", csv_dir), ("plot", plot)):
+        if where is not None and not isinstance(where, str | Path):
+            raise InvalidParameterError(f"{name} must be a path, got {where!r}")
     run = load_run(path)
     rc = recompute(run, sensor_tolerance=sensor_tolerance, quality_tolerance=quality_tolerance)
     out = summarize(run, rc)

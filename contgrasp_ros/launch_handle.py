@@ -39,7 +39,9 @@ class LaunchHandle:
         self._reader.start()
         # stdout (the JSON summary) is drained by its own thread: communicate() would also read
         # stderr and steal lines from the log reader
-        self._out_reader = threading.Thread(target=lambda: self._stdout.append(self.proc.stdout.read()), daemon=True)  # type: ignore[union-attr]
+        stdout = self.proc.stdout
+        assert stdout is not None  # (stdout=PIPE)
+        self._out_reader = threading.Thread(target=lambda: self._stdout.append(stdout.read()), daemon=True)
         self._out_reader.start()
 
     def _read(self) -> None:

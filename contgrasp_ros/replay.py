@@ -90,7 +90,7 @@ def replay(
     import rclpy  # only now: everything above works (and fails cleanly) without ROS
 
     own = node is None
-    if own:
+    if node is None:
         rclpy.init(args=[])
         node = rclpy.create_node("contgrasp_replay")
     published = dict.fromkeys(chosen, 0)

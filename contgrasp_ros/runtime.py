@@ -24,13 +24,14 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.context import Context
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -66,7 +67,7 @@ class FatalNodeError(RunFailure):
     it through."""
 
 
-def make_executor(context: object | None = None) -> Executor:
+def make_executor(context: Context | None = None) -> Executor:
     """The executor named by ``CONTGRASP_EXECUTOR``: ``single`` (default, SingleThreadedExecutor)
     or ``events`` (rclpy.experimental.EventsExecutor, lower latency). The multi-threaded
     executor is deliberately not offered: on 2 cores its tail latency is large (DESIGN.md)."""
@@ -110,7 +111,9 @@ class _ParameterChecks:
                 if reason:
                     return SetParametersResult(successful=False, reason=f"{p.name}: {reason}")
             if self.joint:
-                values = {name: p.value for name, p in self._node.get_parameters_by_prefix("").items()}
+                # (rclpy annotates the values as parameter values; they are Parameter objects)
+                current = cast("dict[str, Parameter]", self._node.get_parameters_by_prefix(""))
+                values = {name: p.value for name, p in current.items()}
                 values.update({p.name: p.value for p in params})
                 for joint in self.joint:
                     if reason := joint(values):
@@ -217,7 +220,7 @@ class DropCounter:
         def wrapper(*args: Any, **kwargs: Any) -> Any:
             return _call_guarded(self, where, fn, args, kwargs, on_error)
 
-        return wrapper  # type: ignore[return-value]
+        return cast(F, wrapper)
 
     def key_values(self) -> dict[str, str]:
         """``dropped_messages`` (total) and one ``dropped: <topic>: <reason>`` entry per key."""
@@ -261,7 +264,7 @@ def guarded(where: str, on_error: Callable[[BaseException, tuple[Any, ...]], Any
         def wrapper(self: Any, *args: Any, **kwargs: Any) -> Any:
             return _call_guarded(self.drops, where, functools.partial(method, self), args, kwargs, on_error)
 
-        return wrapper  # type: ignore[return-value]
+        return cast(F, wrapper)
 
     return deco
 

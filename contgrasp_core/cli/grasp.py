@@ -17,7 +17,7 @@ import numpy as np
 
 from .._validate import MAX_NODES
 from ..errors import InvalidParameterError
-from ..objects import FIG2_SCALE, PAPER_OBJECTS
+from ..objects import FIG2_SCALE, PAPER_OBJECTS, ObjectSpec
 from ..optimal import GraspResult, forward_backward, paper_problem, solve
 from .common import add_object_arguments, object_from_args
 
@@ -116,8 +116,9 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
             break
     if not 3 <= args.nodes <= MAX_NODES:
         raise InvalidParameterError(f"--nodes must be in [3, {MAX_NODES}], got {args.nodes}")
-    MapSpec("circle", psi_steps=args.psi_steps, d_steps=args.d_steps)  # checks both before any solve
-    files, summary = [], {}
+    MapSpec(ObjectSpec.parse("circle"), psi_steps=args.psi_steps, d_steps=args.d_steps)  # checks both before any solve
+    files: list[str] = []
+    summary: dict[str, dict[str, object]] = {}
     for name in PAPER_OBJECTS:
         result = solve(paper_problem(name, nodes=args.nodes))
         path = save_grasp_figure(result, out_dir / f"fig2_{name}.png", title=name)
@@ -134,7 +135,7 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
         from ..quality_map import MapSpec, quality_map
 
         for name in PAPER_OBJECTS:
-            qm = quality_map(MapSpec(name, psi_steps=args.psi_steps, d_steps=args.d_steps), progress=not args.json)
+            qm = quality_map(MapSpec(ObjectSpec.parse(name), psi_steps=args.psi_steps, d_steps=args.d_steps), progress=not args.json)
             path = out_dir / f"fig3_{name}.png"
             quality_map_figure(qm).savefig(path, dpi=110)
             files.append(str(path))

@@ -236,7 +236,7 @@ class ClosedLoopKinematics:
 
 def _as_profile(g: Gain, name: str) -> Callable[[float], float]:
     if callable(g):
-        return lambda s: float(np.asarray(g(np.asarray(s))))  # type: ignore[misc]
+        return lambda s: float(np.asarray(g(np.asarray(s))))
     arr = float_array(name, g)
     if arr.ndim == 0:
         v = real(name, arr)

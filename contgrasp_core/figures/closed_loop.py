@@ -3,9 +3,12 @@ along the arm against the static solution) and its animation."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from matplotlib import colormaps
 from matplotlib.animation import FuncAnimation, PillowWriter
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
@@ -18,7 +21,7 @@ from .draw import save
 __all__ = ["snapshot_indices", "plot_fig4", "animate"]
 
 
-def _draw_arm(ax, x: np.ndarray, r: np.ndarray, **kw) -> None:
+def _draw_arm(ax: Axes, x: np.ndarray, r: np.ndarray, **kw: Any) -> None:
     t = np.gradient(x, axis=0)
     t /= np.hypot(t[:, 0], t[:, 1])[:, None]
     nrm = np.stack([-t[:, 1], t[:, 0]], axis=1)

@@ -7,14 +7,20 @@ One panel per object: (top) the arm drawn with its tapered radius around the obj
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
+from ..errors import InvalidParameterError
 from ..optimal import GraspResult
 from .draw import save
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = ["plot_grasp", "save_grasp_figure"]
 
@@ -23,13 +29,16 @@ _BLUE = "#1f77b4"
 _ORANGE = "#ff7f0e"
 
 
-def plot_grasp(result: GraspResult, axes=None, title: str | None = None):  # type: ignore[no-untyped-def]
+def plot_grasp(result: GraspResult, axes: Sequence[Axes] | None = None, title: str | None = None) -> Figure:
     """Draw one Fig. 2 column for ``result`` into three axes (created if None); returns the figure."""
     if axes is None:
         fig = Figure(figsize=(4.2, 7.2))
         axes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [1.7, 1, 1]})
     else:
-        fig = axes[0].figure
+        parent = axes[0].figure
+        if not isinstance(parent, Figure):  # (tight_layout below needs the top-level figure)
+            raise InvalidParameterError("plot_grasp: the axes must belong to a top-level figure, not a subfigure")
+        fig = parent
     ax_arm, ax_ra, ax_k = axes
     p = result.problem
     s = result.s

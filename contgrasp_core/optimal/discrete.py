@@ -32,11 +32,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Literal, overload
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
-from scipy.linalg import get_lapack_funcs
+from scipy.linalg import lapack
 
 from ..boundary import Boundary
 from ..errors import RunFailure
@@ -69,6 +70,7 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+IndexArray = NDArray[np.int64]
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,7 +137,7 @@ class Discretisation:
         return len(self.s)
 
     @cached_property
-    def kkt_pattern(self) -> tuple[Array, Array, Array, Array, Array]:
+    def kkt_pattern(self) -> tuple[IndexArray, Array, IndexArray, IndexArray]:
         """Index layout of the banded KKT matrix (computed once per discretisation)."""
         return _kkt_pattern(self)
 
@@ -304,7 +306,7 @@ def residual(d: Discretisation, x: Array, u: Array) -> Array:
 
 
 # ----------------------------------------------------------------------------- banded linear algebra
-_GBSV, _GBTRF, _GBTRS = get_lapack_funcs(("gbsv", "gbtrf", "gbtrs"), (np.zeros((1, 1)),))
+_GBSV, _GBTRF, _GBTRS = lapack.dgbsv, lapack.dgbtrf, lapack.dgbtrs  # the float64 banded routines
 
 
 class SingularSystemError(RunFailure):
@@ -666,7 +668,7 @@ def lagrangian_hessian_blocks(
     return H
 
 
-def _kkt_pattern(d: Discretisation) -> tuple[Array, Array, Array, Array]:
+def _kkt_pattern(d: Discretisation) -> tuple[IndexArray, Array, IndexArray, IndexArray]:
     """Layout of the banded KKT matrix with the controls eliminated (19 band rows, see
     :func:`kkt_solve`).
 
@@ -693,7 +695,7 @@ def _kkt_pattern(d: Discretisation) -> tuple[Array, Array, Array, Array]:
     rows = np.concatenate([ix[1:, a].ravel(), lr, xc])
     cols = np.concatenate([ix[1:, b].ravel(), xc, lr])
 
-    def flat(r: Array, c: Array) -> Array:
+    def flat(r: IndexArray, c: IndexArray) -> IndexArray:
         return (12 + r - c) + 19 * c
 
     # c_i depends on u_i and u_{i+1} through -h/2 df/du = (0, h/2, 0); eliminating
@@ -714,6 +716,20 @@ class KKTFactor:
 
     lu: Array
     piv: Array
+
+
+@overload
+def kkt_solve(
+    d: Discretisation, lin: Linearisation, H: Array, r_u: Array, r_x: Array, r_c: Array,
+    *, keep_factor: Literal[False] = False,
+) -> tuple[Array, Array, Array]: ...
+
+
+@overload
+def kkt_solve(
+    d: Discretisation, lin: Linearisation, H: Array, r_u: Array, r_x: Array, r_c: Array,
+    *, keep_factor: Literal[True],
+) -> tuple[Array, Array, Array, KKTFactor]: ...
 
 
 def kkt_solve(

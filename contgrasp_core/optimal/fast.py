@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 from .._validate import MAX_NODES, instance, integer, real
 from ..errors import InvalidParameterError
 from .discrete import (
+    Discretisation,
     ForwardSolveError,
     KKTFactor,
     Linearisation,
@@ -120,7 +121,7 @@ def solve(
     n = d.nodes
     n_coarse = max(41, n // 8) if coarse == -1 else int(coarse or 0)
     coarse_its = coarse_sqp = sqp_steps = 0
-    opts = dict(
+    opts: _NewtonOptions = dict(
         tol=tol,
         max_iterations=max_iterations,
         max_outer=max_outer,
@@ -155,7 +156,8 @@ def solve(
             # globalise with the damped reduced Newton iterations, then SQP again; the coarse
             # solution only seeds the fine solve (its discretisation error O(h_c^2) is far above
             # coarse_tol), so the coarse problem is not solved more tightly than that
-            pre = _newton(cp, u_c, x_c, pen_c, **{**opts, "tol": max(tol, coarse_tol), "cost_tol": None})
+            coarse_opts: _NewtonOptions = {**opts, "tol": max(tol, coarse_tol), "cost_tol": None}
+            pre = _newton(cp, u_c, x_c, pen_c, **coarse_opts)
             coarse_its = pre.iterations
             p0 = pre.traj
             u_c, x_c, lam_c, coarse_sqp, _, _ = (
@@ -174,7 +176,7 @@ def solve(
             # certification below is expected to pass
             switch = FINE_SWITCH if cost_tol is None else min(np.sqrt(cost_tol), 1e-3)
             u, guess, _, sqp_steps, ok, last = _sqp_steps(problem, u, guess, lam, pen, switch=switch, keep_factor=cost_tol is not None)
-            if ok:
+            if ok and last is not None:  # (last is set exactly when ok)
                 start_traj, chord = last
     out = _newton(problem, u, guess, pen, **opts, start=start_traj, chord=chord)
     wall = time.perf_counter() - t_start
@@ -211,6 +213,17 @@ class _NewtonOutcome:
     converged: bool
     message: str
     history: dict[str, list[float]]
+
+
+class _NewtonOptions(TypedDict):
+    """The keyword options :func:`solve` passes on to :func:`_newton`."""
+
+    tol: float
+    max_iterations: int
+    max_outer: int
+    constraint_tol: float
+    hessian: str
+    cost_tol: float | None
 
 
 def _newton(
@@ -395,7 +408,9 @@ def _sqp_steps(
     return u0, x0, lam0, 0, False, None
 
 
-def _line_search(d, traj, du, dx, slope, pen):  # type: ignore[no-untyped-def]
+def _line_search(
+    d: Discretisation, traj: Trajectory, du: Array, dx: Array, slope: float, pen: PenaltyState
+) -> tuple[float, Trajectory | None]:
     """Armijo backtracking on the reduced cost; returns (step, trajectory) or (0, None)."""
     f0 = traj.total
     t = 1.0

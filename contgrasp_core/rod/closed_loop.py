@@ -142,7 +142,7 @@ def _speeds(model: RodModel, st: RodState) -> float:
     return float(np.hypot(v[:, 0], v[:, 1]).max())
 
 
-def _single_thread_blas():
+def _single_thread_blas() -> contextlib.AbstractContextManager[object]:
     """Small dense solves are fastest on one BLAS thread (and oversubscription on a busy machine
     costs 10x); scoped to the run when :mod:`threadpoolctl` is available."""
     try:
@@ -159,10 +159,11 @@ def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     if system.obstacle is None:
         raise InvalidParameterError("the closed loop needs an obstacle to sense (RodSystem.obstacle is None)")
     with _single_thread_blas():
-        return _run(system, gains, config, state)
+        return _run(system, system.obstacle, gains, config, state)
 
 
-def _run(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig, state: RodState | None) -> ClosedLoopResult:
+def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: ClosedLoopConfig,
+         state: RodState | None) -> ClosedLoopResult:
     m = system.model
     ei = m.joint_ei
     st = system.straight_state() if state is None else state
@@ -171,7 +172,7 @@ def _run(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig, stat
     dt = period / config.substeps
     rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / period)))
     continuous = config.control_period is None
-    fb = StateFeedback(m, system.obstacle, gains) if continuous else None
+    fb = StateFeedback(m, obstacle, gains) if continuous else None
     r_nodes = m.radius(m.s_nodes)
     rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
     iters = 0
@@ -180,7 +181,7 @@ def _run(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig, stat
     settled = False
     wall0 = time.perf_counter()
     for k in range(n_ctrl + 1):
-        sn = sense_nodes(m, system.obstacle, st.theta)
+        sn = sense_nodes(m, obstacle, st.theta)
         u = feedback_couple(sn.rho[:-1], sn.alpha[:-1], ei, gains.mu1, gains.mu2, length_unit=gains.length_unit)
         speed = _speeds(m, st)
         done = False
@@ -190,7 +191,7 @@ def _run(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig, stat
         else:
             quiet_since = None
         if k % rec_every == 0 or done or k == n_ctrl:
-            pen_c = m.r_centres - system.obstacle.project(chain.centres(m, st.theta)).signed_distance
+            pen_c = m.r_centres - obstacle.project(chain.centres(m, st.theta)).signed_distance
             pen = max(float(sn.delta.max()), float(pen_c.max()), 0.0)
             ratio = max(float((sn.delta / r_nodes).max()), float((pen_c / m.r_centres).max()), 0.0)
             for key, val in (("t", st.t), ("x", chain.nodes(m, st.theta)), ("theta", chain.node_angles(m, st.theta)),

@@ -42,7 +42,7 @@ import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.rod import chain
-from contgrasp_core.rod.loads import contact_forces, contact_frame, contact_tensors, drag_forces
+from contgrasp_core.rod.loads import ContactFrame, contact_forces, contact_frame, contact_tensors, drag_forces
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
@@ -152,7 +152,8 @@ class RodSystem:
         return self.kinetic_energy(state) + self.elastic_energy(state, loads)
 
     # ---------------------------------------------------------------- forces
-    def _evaluate(self, theta: np.ndarray, omega: np.ndarray, loads: RodLoads, frame, delta: np.ndarray) -> _Eval:
+    def _evaluate(self, theta: np.ndarray, omega: np.ndarray, loads: RodLoads, frame: ContactFrame | None,
+                  delta: np.ndarray) -> _Eval:
         """Generalised force ``q`` at (``theta``, ``omega``) and the derivatives for the Newton
         matrix: ``jac_w = -dq/domega``, ``jac_q = -dq/dtheta`` and ``jac_m = d(M delta)/dtheta``
         (``delta`` the rate increment of the step). Exact for the model as stepped (the contact
@@ -230,7 +231,8 @@ class RodSystem:
         if loads.couple is not None:
             mom = mom + loads.couple
         if loads.feedback is not None:
-            u, du = loads.feedback.couple_and_jacobian(theta, nodes=x, normals=b)
+            u, du = loads.feedback.couple_and_jacobian(theta, jacobian=True, nodes=x, normals=b)
+            assert du is not None  # asked for with jacobian=True
             mom = mom + u
             jac_q += du
             jac_q[:-1] -= du[1:]
@@ -281,7 +283,7 @@ class RodSystem:
         return state, info
 
     def newton_system(self, state: RodState, w1: np.ndarray, dt: float, loads: RodLoads = RodLoads(),
-                      frame=None) -> tuple[np.ndarray, np.ndarray, _Eval]:
+                      frame: ContactFrame | None = None) -> tuple[np.ndarray, np.ndarray, _Eval]:
         """Residual and Newton matrix of the implicit step from ``state`` over ``dt`` at the
         iterate ``w1`` (the new rates): backward Euler ``R = M(theta_1)(w1 - w0) - dt q(theta_1,
         w1)`` with ``theta_1 = theta_0 + dt w1``, or the implicit midpoint rule with both evaluated
@@ -296,7 +298,7 @@ class RodSystem:
         res = ev.mass @ (w1 - w0) - dt * ev.q
         return res, ev.mass + dt * cw * ev.jac_w + cq * (dt * ev.jac_q + ev.jac_m), ev
 
-    def contact_frame(self, state: RodState, dt: float):
+    def contact_frame(self, state: RodState, dt: float) -> ContactFrame | None:
         """The tangent-line contact model frozen over a step of ``dt`` from ``state`` (None
         without an obstacle or with no centre near it)."""
         if self.obstacle is None:

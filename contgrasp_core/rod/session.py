@@ -35,6 +35,7 @@ from contgrasp_core.scenario import Scenario
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
+from contgrasp_core.rod.obstacle import Obstacle
 
 __all__ = [
     "Observation",
@@ -128,6 +129,7 @@ class LoopSession:
         if config.control_period is None:
             raise InvalidParameterError("a sampled control loop needs config.control_period (the couple is held over it)")
         self.system = system
+        self.obstacle: Obstacle = system.obstacle
         self.config = config
         self.state = system.straight_state() if state is None else state
         self.k = 0
@@ -158,8 +160,8 @@ class LoopSession:
         np.cumsum(m.h * b * st.omega[:, None], axis=0, out=v[1:])
         speed = float(np.hypot(v[:, 0], v[:, 1]).max())
         radius = m.radius(m.s_nodes)
-        gap_nodes = self.system.obstacle.project(x).signed_distance - radius
-        gap_c = self.system.obstacle.project(chain.centres(m, st.theta)).signed_distance - m.r_centres
+        gap_nodes = self.obstacle.project(x).signed_distance - radius
+        gap_c = self.obstacle.project(chain.centres(m, st.theta)).signed_distance - m.r_centres
         pen = max(float(-gap_nodes.min()), float(-gap_c.min()), 0.0)
         self.max_penetration = max(self.max_penetration, pen)
         obs = Observation(
@@ -215,7 +217,7 @@ class LoopSession:
                 raise InvalidParameterError(f"the feedback expansion needs {n} finite values per field")
         if self.finished:
             raise InvalidParameterError("the run is finished; reset to start again")
-        held = None if expansion is None else HeldExpansion(self.system.model, self.system.obstacle, expansion)
+        held = None if expansion is None else HeldExpansion(self.system.model, self.obstacle, expansion)
         loads = RodLoads(couple=u, feedback=held)
         st = self.state
         for _ in range(self.config.substeps):
@@ -236,7 +238,6 @@ def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSess
     :func:`~contgrasp_core.control.feedback_at_joints`, advance): a lock-step ROS run of the same
     scenario ends in the same state bit for bit. Returns the finished session."""
     from contgrasp_core.control import feedback_at_joints
-    from contgrasp_core.rod.obstacle import Obstacle
 
     boundary = scenario.object.boundary()
     system = RodSystem(scenario.rod, Obstacle(boundary)) if system is None else system

@@ -56,7 +56,7 @@ class RawMessage:
     sequence: int
     data: bytes
     channel: Channel
-    schema: Schema
+    schema: Schema | None  # None: a schemaless channel (MCAP allows them)
 
 
 @dataclass
@@ -209,6 +209,8 @@ def iter_decoded(rec: Recording, topics: Iterable[str] | None = None) -> Iterato
     factory = DecoderFactory()
     decoders: dict[int, Any] = {}
     for m in iter_raw(rec, topics):
+        if m.schema is None:
+            raise BagError(f"no decoder for {m.topic} ({m.channel.message_encoding}): its channel has no schema")
         key = m.schema.id
         if key not in decoders:
             decoders[key] = factory.decoder_for(m.channel.message_encoding, m.schema)

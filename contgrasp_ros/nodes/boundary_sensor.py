@@ -8,6 +8,8 @@ reason (``/diagnostics``); see :mod:`contgrasp_ros.runtime`.
 
 from __future__ import annotations
 
+from typing import Any
+
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
@@ -22,8 +24,8 @@ from contgrasp_ros.runtime import Diagnostics, DropCounter, ObjectTracker, Stamp
 class BoundarySensor(Node):
     """Senses the contact kinematics of every rod state against the current object."""
 
-    def __init__(self, **node_kwargs: object) -> None:
-        super().__init__("boundary_sensor", **node_kwargs)  # type: ignore[arg-type]
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("boundary_sensor", **node_kwargs)
         declare(self, "contact_tolerance", PAPER.sensing.contact_tolerance, "contact where delta >= -tolerance [m]", lo=0.0, hi=1.0)
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
@@ -54,8 +56,10 @@ class BoundarySensor(Node):
         self._sense(msg, rod)
 
     def _sense(self, msg: RodState, rod: RodArrays) -> None:
+        boundary = self.object.boundary
+        assert boundary is not None  # (sensed only once the object is known)
         try:
-            state = sense_rod_state(rod, self.object.boundary, self.get_parameter("contact_tolerance").value)  # type: ignore[arg-type]
+            state = sense_rod_state(rod, boundary, float(self.get_parameter("contact_tolerance").value))
             require_finite("the sensed contact state", state.rho, state.alpha, state.delta, state.s_o, state.foot)
         except ContgraspError as exc:
             self.drops.drop_error(qos.TOPIC_ROD_STATE, exc)

@@ -31,8 +31,8 @@ MU2_LIMIT = 1e6  # |mu2| in law units, given or adaptive
 class GraspController(Node):
     """Evaluates the feedback law on every contact state and publishes the couple."""
 
-    def __init__(self, **node_kwargs: object) -> None:
-        super().__init__("grasp_controller", **node_kwargs)  # type: ignore[arg-type]
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("grasp_controller", **node_kwargs)
         self.model = declare_rod_model(self)
         paper = PAPER.node_parameters("grasp_controller")
         declare(self, "mu1", paper["mu1"], "gain mu1 > 0 of eq. dynamic_feedback", lo=1e-9, hi=1e6)

@@ -7,6 +7,8 @@ dropped and counted (``/diagnostics``).
 
 from __future__ import annotations
 
+from typing import Any
+
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
@@ -21,8 +23,8 @@ from contgrasp_ros.runtime import Diagnostics, DropCounter, ObjectTracker, Stamp
 class GraspQualityNode(Node):
     """Evaluates Q1..Q3 of the sensed contact set, at most ``rate_hz`` times per sim second."""
 
-    def __init__(self, **node_kwargs: object) -> None:
-        super().__init__("grasp_quality", **node_kwargs)  # type: ignore[arg-type]
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("grasp_quality", **node_kwargs)
         paper = PAPER.node_parameters("grasp_quality")
         declare(self, "rate_hz", paper["rate_hz"], "evaluations per simulated second (0 = every contact state)", lo=0.0, hi=1e6)
         declare(self, "contact_tolerance", paper["contact_tolerance"], "contact tolerance [m]; < 0 uses the sensor's", lo=-1.0, hi=1.0)

@@ -32,6 +32,7 @@ ones are counted as ``decimated`` (received = written + decimated).
 
 from __future__ import annotations
 
+import functools
 import importlib
 import json
 import re
@@ -88,8 +89,8 @@ def _message_class(type_name: str) -> Any:
 class McapRecorder(Node):
     """Records raw messages of the selected topics; see the module docstring."""
 
-    def __init__(self, **node_kwargs: object) -> None:
-        super().__init__("mcap_recorder", **node_kwargs)  # type: ignore[arg-type]
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("mcap_recorder", **node_kwargs)
         out = declare(self, "output", "", "bag folder, or .mcap file with layout 'file' ('' = bags/run_<time>)", read_only=True)
         layout = declare(self, "layout", "folder", f"one of {LAYOUTS}", read_only=True)
         compression = declare(self, "compression", "zstd", f"chunk compression, one of {tuple(COMPRESSIONS)}", read_only=True)
@@ -197,9 +198,9 @@ class McapRecorder(Node):
                 else:
                     self.get_logger().warn(f"not decimating {topic}: {types[0]} does not start with a stamp")
             checked = self.no_sequence_check is None or not self.no_sequence_check.fullmatch(topic)
-            events = SubscriptionEventCallbacks(matched=lambda m, t=topic: self.on_matched(t, m)) if checked else None
+            events = SubscriptionEventCallbacks(matched=functools.partial(self.on_matched, topic)) if checked else None
             self._subs[topic] = self.create_subscription(
-                cls, topic, lambda data, info, t=topic: self.on_message(t, data, info), self._request_qos(offers),
+                cls, topic, functools.partial(self.on_message, topic), self._request_qos(offers),
                 event_callbacks=events, raw=True,
             )
             self.get_logger().info(f"recording {topic} [{types[0]}]")

@@ -20,6 +20,7 @@ goes out after every state, every second of wall time and at once on the first d
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -64,8 +65,8 @@ def _stamp(t: float) -> Time:
 class RodSimulator(Node):
     """Owns the rod engine and the object; drives the closed loop in simulated time."""
 
-    def __init__(self, **node_kwargs: object) -> None:
-        super().__init__("rod_simulator", **node_kwargs)  # type: ignore[arg-type]
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("rod_simulator", **node_kwargs)
         self.model = declare_rod_model(self)
         paper = PAPER.node_parameters("rod_simulator")
         obj = (
@@ -118,7 +119,9 @@ class RodSimulator(Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._reset_session()
         self.paused = bool(self.start_paused)
-        period = self.config.control_period if not self.lockstep else 0.005
+        control_period = self.config.control_period
+        assert control_period is not None  # (LoopSession, built above, requires it)
+        period = control_period if not self.lockstep else 0.005
         self.create_timer(period, self.on_tick, clock=self._steady)
         if not self.paused:
             self._publish_observation()
