@@ -45,6 +45,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         from contgrasp_core.figures.draw import check_figure_path
 
         check_figure_path(args.plot)
-    if args.csv is not None and args.csv.exists() and not args.csv.is_dir():
-        raise InvalidParameterError(f"--csv {args.csv} exists and is not a directory")
+    if args.csv is not None:
+        for d in (args.csv, *args.csv.parents):  # the nearest existing ancestor must be a directory
+            if d.exists():
+                if not d.is_dir():
+                    raise InvalidParameterError(f"--csv {args.csv}: {d} exists and is not a directory")
+                break
     return analyze(args.bag, csv_dir=args.csv, plot=args.plot)

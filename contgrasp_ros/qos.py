@@ -1,4 +1,4 @@
-"""Quality-of-service profiles of the contgrasp graph (DESIGN.md section 4).
+"""Quality-of-service profiles of the contgrasp graph (docs/design.md, section 4).
 
 Streams (rod state, contact, couple, quality) are reliable with a small keep-last depth so the
 lock-step loop never loses a step; the object boundary is transient-local so late joiners

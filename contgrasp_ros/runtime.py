@@ -70,7 +70,7 @@ class FatalNodeError(RunFailure):
 def make_executor(context: Context | None = None) -> Executor:
     """The executor named by ``CONTGRASP_EXECUTOR``: ``single`` (default, SingleThreadedExecutor)
     or ``events`` (rclpy.experimental.EventsExecutor, lower latency). The multi-threaded
-    executor is deliberately not offered: on 2 cores its tail latency is large (DESIGN.md)."""
+    executor is deliberately not offered: on 2 cores its tail latency is large (docs/design.md)."""
     kind = os.environ.get("CONTGRASP_EXECUTOR", "single")
     if kind == "events":
         from rclpy.experimental import EventsExecutor

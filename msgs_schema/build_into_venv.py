@@ -1,7 +1,7 @@
 """Build and install the contgrasp_msgs interface package into the running virtual environment.
 
 Run with the venv's interpreter (``.venv/bin/python msgs_schema/build_into_venv.py``); the
-project's set-up does it. Steps (DESIGN.md section 6):
+project's set-up does it. Steps (docs/design.md, section 1):
 
 1. point the ROS wheels' exported CMake files, which hard-code the wheel builder's Python and
    numpy include directories, at this interpreter's (idempotent text replacement);

@@ -36,10 +36,8 @@ def test_kinematics_user_outline_and_constant_profile(tmp_path, capsys) -> None:
     th = np.linspace(0, 2 * np.pi, 50, endpoint=False)
     csv = tmp_path / "blob.csv"
     csv.write_text("x,y\n" + "\n".join(f"{3 * np.cos(t)},{2 * np.sin(t)}" for t in th))
-    # the outline does not repeat its first point: it is open unless --closed is given
-    assert main(["kinematics", "--outline", str(csv), "--json"]) == 2
-    assert "open polyline" in capsys.readouterr().err
-    code = main(["kinematics", "--outline", str(csv), "--closed", "--rho0", "0.5", "--alpha0", "1.5708",
+    # the outline does not repeat its first point: it is closed implicitly (one object syntax everywhere)
+    code = main(["kinematics", "--outline", str(csv), "--rho0", "0.5", "--alpha0", "1.5708",
                  "--length", "3", "--curvature", "parallel", "--json"])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
@@ -55,7 +53,8 @@ def test_kinematics_user_outline_and_constant_profile(tmp_path, capsys) -> None:
         (["kinematics", "--nodes", "1"], "nodes"),
         (["kinematics", "--curvature", "wobbly"], "unknown curvature profile"),
         (["kinematics", "--curvature", "const:0", "--alpha0", "0.5", "--length", "20"], "left the admissible region"),
-        (["kinematics", "--object", "points"], "outline file"),
+        (["kinematics", "--object", "points"], "unknown object"),
+        (["kinematics", "--object", "circle", "--outline", "x.csv"], "not allowed with argument"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(args: list[str], needle: str) -> None:
@@ -68,6 +67,6 @@ def test_bad_input_is_one_line_exit_2(args: list[str], needle: str) -> None:
 
 
 def test_argparse_usage_error_is_exit_2() -> None:
-    proc = run_cli("kinematics", "--object", "square")
+    proc = run_cli("kinematics", "--nodes", "many")
     assert proc.returncode == 2
-    assert "invalid choice" in proc.stderr
+    assert "invalid int value" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1

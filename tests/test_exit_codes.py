@@ -250,7 +250,8 @@ def test_core_main_maps_the_family_to_the_exit_code(monkeypatch: pytest.MonkeyPa
                                                     exc: Exception, code: int) -> None:
     """contgrasp_core.cli.main: a RunFailure (or any other exception) raised inside a
     subcommand exits 1, an InputError 2; one line; --debug re-raises."""
-    from contgrasp_core import cli, cli_kinematics
+    from contgrasp_core import cli
+    from contgrasp_core.cli import kinematics as cli_kinematics
 
     def broken(_args: object) -> None:
         raise exc

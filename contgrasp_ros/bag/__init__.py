@@ -1,4 +1,4 @@
-"""Recordings: MCAP bags written the way rosbag2's MCAP storage writes them (DESIGN.md section 5).
+"""Recordings: MCAP bags written the way rosbag2's MCAP storage writes them (docs/design.md, section 5).
 
 * :mod:`.definitions` - full message-definition text from the installed ``.msg`` files
 * :mod:`.rosbag2` - rosbag2's conventions: QoS YAML, ``metadata.yaml``, the ``rosbag2`` record
