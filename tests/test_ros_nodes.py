@@ -19,6 +19,7 @@ from contgrasp_core.arm import Arm, BasePose, shape_from_curvature  # noqa: E402
 from contgrasp_core.boundary import circle, ellipse  # noqa: E402
 from contgrasp_core.contact import sense  # noqa: E402
 from contgrasp_core.quality import quality_of_state  # noqa: E402
+from contgrasp_core.scenario import PAPER, QUALITY  # noqa: E402
 from contgrasp_msgs.msg import ContactState, GraspQuality, ObjectBoundary, RodState  # noqa: E402
 from contgrasp_ros import qos  # noqa: E402
 from contgrasp_ros.convert import boundary_to_msg, contact_to_msg  # noqa: E402
@@ -139,7 +140,8 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
     assert spin_until(ex, lambda: len(got) == 2)
     spin_until(ex, lambda: len(got) > 2, timeout=0.3)
     assert [m.step for m in got] == [0, 2]
-    ref = quality_of_state(state, obj)
+    paper = PAPER.node_parameters(QUALITY)  # the node's defaults: the paper's tolerance and reference point
+    ref = quality_of_state(state, obj, tol=paper["contact_tolerance"], ref=(paper["reference_x"], paper["reference_y"]))
     np.testing.assert_allclose(np.reshape(got[0].w, (3, 3)), ref.W, rtol=1e-12, atol=1e-15)
     assert got[0].q1 == pytest.approx(ref.Q1, rel=1e-10) and got[0].valid
     bad = contact_to_msg(state, Header(), 9)
@@ -150,9 +152,10 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
 
 
 def _paper_model(n: int = 12):  # type: ignore[no-untyped-def]
-    from contgrasp_core.rod import RodModel
+    """The paper's rod (the nodes' defaults), coarser."""
+    from dataclasses import replace
 
-    return RodModel(n_elements=n, damping=2.0, drag_normal=5110.0, drag_tangential=25.55)
+    return replace(PAPER.rod, n_elements=n)
 
 
 def test_grasp_controller_matches_core_and_takes_new_gains(graph) -> None:  # type: ignore[no-untyped-def]
@@ -200,7 +203,8 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
     from std_srvs.srv import SetBool, Trigger
 
     from contgrasp_core.rod import Obstacle, RodSystem
-    from contgrasp_core.rod.closed_loop import ClosedLoopConfig
+    from dataclasses import replace
+
     from contgrasp_core.rod.session import LoopSession
     from contgrasp_msgs.msg import CoupleControl
     from contgrasp_ros.convert import couple_to_msg
@@ -209,8 +213,8 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
     ctx, ex, add = graph
     model = _paper_model()
     over = [Parameter(k, value=v) for k, v in dict(
-        n_elements=model.n_elements, damping=2.0, drag_normal=5110.0, drag_tangential=25.55,
-        start_paused=True, couple_timeout=0.3, timeout_fallback="zero", duration=1.0).items()]
+        n_elements=model.n_elements, control_period=0.01, start_paused=True, couple_timeout=0.3,
+        timeout_fallback="zero", duration=1.0).items()]
     sim = add(RodSimulator(context=ctx, parameter_overrides=over))
     probe = add(rclpy.create_node("probe", context=ctx))
     states: list[RodState] = []
@@ -227,7 +231,7 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
     assert states == []  # paused: nothing published yet
     fut = pause.call_async(SetBool.Request(data=False))
     assert spin_until(ex, lambda: fut.done() and len(states) == 1)
-    ref = LoopSession(RodSystem(model, Obstacle(circle(0.025, (0.08, 0.08)))), ClosedLoopConfig(duration=1.0, control_period=0.01))
+    ref = LoopSession(RodSystem(model, Obstacle(PAPER.object.boundary())), replace(PAPER.loop, duration=1.0, control_period=0.01))
     np.testing.assert_array_equal(states[0].x, ref.observe().x[:, 0])
     u = np.linspace(-1e-4, 1e-4, model.n_elements)
     u_pub.publish(couple_to_msg(model.joint_s, u, states[0].header, 0))
