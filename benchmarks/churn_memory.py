@@ -38,11 +38,11 @@ SECTION = "churn_memory"
 PEER = """
 import sys, rclpy
 from contgrasp_msgs.msg import ContactState, RodState
-from contgrasp_ros import qos
+from contgrasp_ros import qos, topics
 rclpy.init()
 node = rclpy.create_node("churn_peer")
-pub = node.create_publisher(RodState, "/contgrasp/rod_state", qos.STREAM)
-node.create_subscription(ContactState, "/contgrasp/contact", lambda m: None, qos.STREAM)
+pub = node.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)
+node.create_subscription(ContactState, topics.CONTACT, lambda m: None, qos.STREAM)
 while pub.get_subscription_count() < 1:
     rclpy.spin_once(node, timeout_sec=0.05)
 print("matched", flush=True)

@@ -41,10 +41,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+from contgrasp_ros import topics
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
 SECTION = "recorder"
-TOPIC = "/contgrasp/rod_state"
+TOPIC = topics.ROD_STATE
 N_NODES = 101
 REAL_CONTROL_HZ = 500.0  # contgrasp_ros/config/default.yaml: control_period 0.002
 DEFAULT_RATES = "500,1000,2000,5000,7500,10000,20000,max"
@@ -103,7 +105,7 @@ def publisher(rate: float, count: int, match_timeout: float, settle: float, drai
                 v = {kv.key: kv.value for kv in st.values}
                 diag.update(received=int(v["received"]), written=int(v["written"]), t=time.perf_counter(), n=diag["n"] + 1)
 
-    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, qos.STREAM)
+    node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, qos.STREAM)
     msgs = _states()
     payload = len(serialize_message(msgs[0]))
     result: dict[str, Any] = {"rate_target": rate, "count": count, "payload_bytes": payload}

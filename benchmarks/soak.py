@@ -67,6 +67,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from contgrasp_ros import topics  # noqa: E402
 from contgrasp_ros.launch_handle import LaunchHandle  # noqa: E402
 from contgrasp_ros.launcher import default_params_file  # noqa: E402
 
@@ -76,9 +77,9 @@ RECORDER = "mcap_recorder"
 ROLES = ("launcher", RECORDER, SIM, *KILLABLE)
 SHORT = {"launcher": "launch", RECORDER: "rec", SIM: "sim", "boundary_sensor": "sens", "grasp_controller": "ctrl",
          "grasp_quality": "qual"}
-COUPLE = "/contgrasp/couple"
-OUTPUT_TOPIC = {SIM: "/contgrasp/rod_state", "boundary_sensor": "/contgrasp/contact",
-                "grasp_controller": "/contgrasp/couple", "grasp_quality": "/contgrasp/quality"}
+COUPLE = topics.COUPLE
+OUTPUT_TOPIC = {SIM: topics.ROD_STATE, "boundary_sensor": topics.CONTACT,
+                "grasp_controller": topics.COUPLE, "grasp_quality": topics.QUALITY}
 ARM_LENGTH = 0.20
 ARM_RADIUS = 0.01  # radius at the base [m] (default.yaml)
 RUNNING = r"graph connected; the simulator is running"
@@ -285,10 +286,10 @@ def check_recording(bag: Path, kills: list[dict[str, Any]]) -> dict[str, Any]:
     try:
         rec = open_recording(bag)
         out["bag_files"] = len(rec.files)
-        states = [(raw.log_time_ns, m.step) for raw, m in iter_decoded(rec, ["/contgrasp/rod_state"])]
+        states = [(raw.log_time_ns, m.step) for raw, m in iter_decoded(rec, [topics.ROD_STATE])]
         steps = [s for _, s in states]
         missed_total, missed_current, last = 0, 0, -1
-        for _, m in iter_decoded(rec, ["/diagnostics"]):
+        for _, m in iter_decoded(rec, [topics.DIAGNOSTICS]):
             for st in m.status:
                 if st.name != SIM:
                     continue

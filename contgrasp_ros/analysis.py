@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import ContgraspError, InvalidParameterError, WriteError, output_error
 from contgrasp_core.rod.session import SettleDetector
+from contgrasp_ros import topics
 from contgrasp_ros.bag import BagInputError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
 from contgrasp_core.scenario import PAPER
@@ -60,11 +61,6 @@ Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 # topic names as in contgrasp_ros.qos (not imported: that module imports rclpy)
-TOPIC_OBJECT = "/contgrasp/object"
-TOPIC_ROD_STATE = "/contgrasp/rod_state"
-TOPIC_CONTACT = "/contgrasp/contact"
-TOPIC_QUALITY = "/contgrasp/quality"
-TOPIC_DIAGNOSTICS = "/diagnostics"
 RUN_RECORD = "contgrasp_run"  # = contgrasp_ros.bag.writer.RUN_RECORD
 RECORDER_RECORD = "contgrasp_recorder"  # = contgrasp_ros.bag.writer.RECORDER_RECORD
 SIMULATOR = "rod_simulator"
@@ -178,13 +174,13 @@ def _rod_series(msgs: list[Any]) -> RodSeries:
             if vx.shape != a.s.shape or vy.shape != a.s.shape or not (np.all(np.isfinite(vx)) and np.all(np.isfinite(vy))):
                 raise InvalidParameterError("RodState: 'vx'/'vy' must be finite with one value per node")
         except ContgraspError as exc:
-            raise BagInputError(f"{TOPIC_ROD_STATE} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
+            raise BagInputError(f"{topics.ROD_STATE} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
         steps.append(a.step)
         ts.append(a.t)
         pens.append(float(msg.max_penetration))
         for key, val in (("s", a.s), ("x", a.x), ("y", a.y), ("theta", a.theta), ("radius", a.radius), ("vx", vx), ("vy", vy)):
             cols[key].append(val)
-    st = {k: _stack(v, TOPIC_ROD_STATE) for k, v in cols.items()}
+    st = {k: _stack(v, topics.ROD_STATE) for k, v in cols.items()}
     return RodSeries(np.asarray(steps, dtype=np.int64), np.asarray(ts), max_penetration=np.asarray(pens), **st)
 
 
@@ -196,14 +192,14 @@ def _contact_series(msgs: list[Any]) -> ContactSeries | None:
         try:
             rows.append(contact_arrays(msg))
         except ContgraspError as exc:
-            raise BagInputError(f"{TOPIC_CONTACT} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
-    s, rho, alpha, delta, s_o = (_stack([getattr(c, k) for c in rows], TOPIC_CONTACT) for k in ("s", "rho", "alpha", "delta", "s_o"))
+            raise BagInputError(f"{topics.CONTACT} message #{i} (step {getattr(msg, 'step', '?')}): {exc}") from exc
+    s, rho, alpha, delta, s_o = (_stack([getattr(c, k) for c in rows], topics.CONTACT) for k in ("s", "rho", "alpha", "delta", "s_o"))
     return ContactSeries(
         np.asarray([c.step for c in rows], dtype=np.int64),
         np.asarray([c.t for c in rows]),
         s, rho, alpha, delta, s_o,
-        _stack([c.shadow[:, 0] for c in rows], TOPIC_CONTACT),
-        _stack([c.shadow[:, 1] for c in rows], TOPIC_CONTACT),
+        _stack([c.shadow[:, 0] for c in rows], topics.CONTACT),
+        _stack([c.shadow[:, 1] for c in rows], topics.CONTACT),
         np.stack([c.in_contact for c in rows]),
         np.asarray([c.tol for c in rows]),
     )
@@ -214,7 +210,7 @@ def _quality_series(msgs: list[Any]) -> QualitySeries | None:
         return None
     w = [np.asarray(m.w, dtype=float) for m in msgs]
     if any(v.shape != (9,) for v in w):
-        raise BagInputError(f"{TOPIC_QUALITY}: a message's W does not have 9 entries")
+        raise BagInputError(f"{topics.QUALITY}: a message's W does not have 9 entries")
     q1, q2, q3, length, tol = (
         np.asarray([float(getattr(m, k)) for m in msgs]) for k in ("q1", "q2", "q3", "contact_length", "contact_tolerance")
     )
@@ -232,13 +228,13 @@ def load_run(path: str | Path) -> RunData:
     missing/corrupt file or one without rod states or object boundary."""
     rec = open_recording(path)
     meta = info(rec)
-    topics = [{"name": t["name"], "type": t["type"], "count": t["count"]} for t in meta["topics"]]
-    counts = {t["name"]: t["count"] for t in topics}
-    if not counts.get(TOPIC_ROD_STATE):
+    recorded = [{"name": t["name"], "type": t["type"], "count": t["count"]} for t in meta["topics"]]
+    counts = {t["name"]: t["count"] for t in recorded}
+    if not counts.get(topics.ROD_STATE):
         have = ", ".join(f"{n} ({c})" for n, c in counts.items()) or "none"
-        raise BagInputError(f"{path}: no {TOPIC_ROD_STATE} messages to analyse (recorded topics: {have})")
-    if not counts.get(TOPIC_OBJECT):
-        raise BagInputError(f"{path}: no {TOPIC_OBJECT} message (the object boundary is needed to recompute contact and quality)")
+        raise BagInputError(f"{path}: no {topics.ROD_STATE} messages to analyse (recorded topics: {have})")
+    if not counts.get(topics.OBJECT):
+        raise BagInputError(f"{path}: no {topics.OBJECT} message (the object boundary is needed to recompute contact and quality)")
     records = rec.metadata_records()
     run_info = _json_values(records.get(RUN_RECORD, {}))
     params = run_info.pop("params", None)
@@ -246,11 +242,11 @@ def load_run(path: str | Path) -> RunData:
         raise BagInputError(f"{path}: the {RUN_RECORD!r} metadata record's params are not per-node parameter mappings")
     recorder = _json_values(records[RECORDER_RECORD]) if RECORDER_RECORD in records else None
 
-    by_topic: dict[str, list[Any]] = {TOPIC_ROD_STATE: [], TOPIC_CONTACT: [], TOPIC_QUALITY: [], TOPIC_OBJECT: []}
+    by_topic: dict[str, list[Any]] = {topics.ROD_STATE: [], topics.CONTACT: [], topics.QUALITY: [], topics.OBJECT: []}
     status: dict[str, str] = {}
     sim_time: dict[int, float] = {}
-    for raw, msg in iter_decoded(rec, [*by_topic, TOPIC_DIAGNOSTICS]):
-        if raw.topic != TOPIC_DIAGNOSTICS:
+    for raw, msg in iter_decoded(rec, [*by_topic, topics.DIAGNOSTICS]):
+        if raw.topic != topics.DIAGNOSTICS:
             by_topic[raw.topic].append(msg)
             continue
         for st in msg.status:
@@ -262,15 +258,15 @@ def load_run(path: str | Path) -> RunData:
             except (KeyError, ValueError):
                 pass
     try:
-        boundary = boundary_from_msg(by_topic[TOPIC_OBJECT][-1])
+        boundary = boundary_from_msg(by_topic[topics.OBJECT][-1])
     except ContgraspError as exc:
         raise BagInputError(f"{path}: the recorded object boundary is unusable: {exc}") from exc
     return RunData(
         path=Path(path),
-        topics=topics,
-        rod=_rod_series(by_topic[TOPIC_ROD_STATE]),
-        contact=_contact_series(by_topic[TOPIC_CONTACT]),
-        quality=_quality_series(by_topic[TOPIC_QUALITY]),
+        topics=recorded,
+        rod=_rod_series(by_topic[topics.ROD_STATE]),
+        contact=_contact_series(by_topic[topics.CONTACT]),
+        quality=_quality_series(by_topic[topics.QUALITY]),
         boundary=boundary,
         params=params,
         run_info=run_info,
@@ -642,7 +638,7 @@ def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: 
             out["figure"] = str(path)
         q = run.quality
         if q is None:
-            out["quality_skipped"] = f"no {TOPIC_QUALITY} messages were recorded"
+            out["quality_skipped"] = f"no {topics.QUALITY} messages were recorded"
             return out
         qpath = quality_plot_path(path)
         quality_history_figure(q.t, (q.q1, q.q2, q.q3), str(qpath), recomputed_t=q.t[rc.quality_index],

@@ -31,7 +31,7 @@ from std_srvs.srv import SetBool
 
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
-from contgrasp_ros import qos
+from contgrasp_ros import qos, topics
 from contgrasp_ros.analysis import contact_stats
 from contgrasp_ros.runtime import DropCounter, GuardedSpin, make_executor
 
@@ -39,8 +39,8 @@ __all__ = ["Monitor", "run_graph"]
 
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
 RECORDER = "mcap_recorder"
-DECIMATED_STREAMS = (qos.TOPIC_ROD_STATE, qos.TOPIC_CONTACT, qos.TOPIC_COUPLE)  # the bulky per-step topics
-RECORDED_STREAMS = (qos.TOPIC_OBJECT, qos.TOPIC_ROD_STATE, qos.TOPIC_CONTACT, qos.TOPIC_COUPLE, qos.TOPIC_QUALITY, "/clock")
+DECIMATED_STREAMS = (topics.ROD_STATE, topics.CONTACT, topics.COUPLE)  # the bulky per-step topics
+RECORDED_STREAMS = (topics.OBJECT, topics.ROD_STATE, topics.CONTACT, topics.COUPLE, topics.QUALITY, topics.CLOCK)
 
 
 class Monitor(Node):
@@ -56,10 +56,10 @@ class Monitor(Node):
         self.history: list[dict[str, Any]] = []
         self._period = history_period
         self._next_t = 0.0
-        self.create_subscription(RodState, qos.TOPIC_ROD_STATE, self._on_rod, qos.STREAM)
-        self.create_subscription(ContactState, qos.TOPIC_CONTACT, self._on_contact, qos.STREAM)
-        self.create_subscription(GraspQuality, qos.TOPIC_QUALITY, self._on_quality, qos.STREAM)
-        self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, qos.STREAM)
+        self.create_subscription(RodState, topics.ROD_STATE, self._on_rod, qos.STREAM)
+        self.create_subscription(ContactState, topics.CONTACT, self._on_contact, qos.STREAM)
+        self.create_subscription(GraspQuality, topics.QUALITY, self._on_quality, qos.STREAM)
+        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diag, qos.STREAM)
         self.pause = self.create_client(SetBool, "/rod_simulator/pause")
         self.sim_params = AsyncParameterClient(self, "/rod_simulator")
         self.loop_wall_time: float | None = None
@@ -109,12 +109,12 @@ class Monitor(Node):
         ):
             return False
         return (
-            self.count_subscribers(qos.TOPIC_ROD_STATE) >= 2
-            and self.count_publishers(qos.TOPIC_CONTACT) >= 1
-            and self.count_subscribers(qos.TOPIC_CONTACT) >= 3
-            and self.count_publishers(qos.TOPIC_COUPLE) >= 1
-            and self.count_subscribers(qos.TOPIC_COUPLE) >= 1
-            and self.count_publishers(qos.TOPIC_QUALITY) >= 1
+            self.count_subscribers(topics.ROD_STATE) >= 2
+            and self.count_publishers(topics.CONTACT) >= 1
+            and self.count_subscribers(topics.CONTACT) >= 3
+            and self.count_publishers(topics.COUPLE) >= 1
+            and self.count_subscribers(topics.COUPLE) >= 1
+            and self.count_publishers(topics.QUALITY) >= 1
         )
 
 
@@ -200,7 +200,7 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
             group.restart(c)
             if c.name == "rod_simulator":
                 resume["pending"], resume["seen"] = True, None
-                resume["old"] = {tuple(i.endpoint_gid) for i in mon.get_publishers_info_by_topic(qos.TOPIC_ROD_STATE)}
+                resume["old"] = {tuple(i.endpoint_gid) for i in mon.get_publishers_info_by_topic(topics.ROD_STATE)}
         return None
 
     lower: dict[str, Any] = {"pending": False, "future": None}
@@ -219,7 +219,7 @@ def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn
         # the subscribers (sensor, recorder) to match it, so its first state is not lost; the
         # dead simulator's service may still be listed: resend until the new one answers.
         if resume["seen"] is None:
-            pubs = mon.get_publishers_info_by_topic(qos.TOPIC_ROD_STATE)
+            pubs = mon.get_publishers_info_by_topic(topics.ROD_STATE)
             if any(tuple(i.endpoint_gid) not in resume["old"] for i in pubs):
                 resume["seen"] = time.monotonic()
             return

@@ -21,11 +21,3 @@ LATCHED = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
-
-TOPIC_OBJECT = "/contgrasp/object"
-TOPIC_ROD_STATE = "/contgrasp/rod_state"
-TOPIC_CONTACT = "/contgrasp/contact"
-TOPIC_COUPLE = "/contgrasp/couple"
-TOPIC_QUALITY = "/contgrasp/quality"
-TOPIC_MARKERS = "/contgrasp/markers"
-TOPIC_STATUS = "/contgrasp/status"

@@ -18,6 +18,8 @@ Every contgrasp node uses these, so they degrade the same way (see docs/ros.md, 
 
 from __future__ import annotations
 
+from contgrasp_ros import topics
+
 import functools
 import os
 import sys
@@ -362,7 +364,7 @@ class Diagnostics:
         self._node = node
         self._drops = drops
         self._build = build
-        self.pub = node.create_publisher(DiagnosticArray, "/diagnostics", qos.STREAM)
+        self.pub = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, qos.STREAM)
         drops.on_first_drop = self.publish
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         node.create_timer(period_s, drops.guard("diagnostics timer", self.publish), clock=self._steady)
@@ -405,11 +407,11 @@ class ObjectTracker:
         self.boundary: Boundary | None = None
         self.drops = drops
         self._stamps = stamps
-        self._topic = qos.TOPIC_OBJECT
+        self._topic = topics.OBJECT
         self._on_change = on_change
-        node.create_subscription(ObjectBoundary, qos.TOPIC_OBJECT, self.on_object, qos.LATCHED)
+        node.create_subscription(ObjectBoundary, topics.OBJECT, self.on_object, qos.LATCHED)
 
-    @guarded("/contgrasp/object")
+    @guarded(topics.OBJECT)
     def on_object(self, msg: Any) -> None:
         """Validate and keep the boundary of an ObjectBoundary message."""
         from contgrasp_ros.convert import boundary_from_msg

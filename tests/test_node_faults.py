@@ -35,7 +35,7 @@ from contgrasp_core.contact import sense  # noqa: E402
 from contgrasp_core.rod import RodModel  # noqa: E402
 from contgrasp_core.rod.integrator import StepFailedError  # noqa: E402
 from contgrasp_msgs.msg import ContactState, CoupleControl, ObjectBoundary, RodState  # noqa: E402
-from contgrasp_ros import qos  # noqa: E402
+from contgrasp_ros import qos, topics  # noqa: E402
 from contgrasp_ros.convert import MAX_SAMPLES, boundary_to_msg  # noqa: E402
 from contgrasp_ros.runtime import stamp_problem  # noqa: E402
 
@@ -179,8 +179,8 @@ def test_boundary_sensor_survives_hostile_rod_states(make) -> None:  # type: ign
         arrays = rod_arrays(n, curv, pose)
         bad = corrupt(arrays, how)
         clock[0] += 10_000_000
-        sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(qos.TOPIC_ROD_STATE), frac, clock[0])
-        step = max(step, node.stamps.newest_step.get(qos.TOPIC_ROD_STATE, 0))  # (a lower step starts a new run)
+        sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(topics.ROD_STATE), frac, clock[0])
+        step = max(step, node.stamps.newest_step.get(topics.ROD_STATE, 0))  # (a lower step starts a new run)
         msg = RodState(step=0 if reset else step, **arrays)
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
         ok, reason = expect.deliver(node.on_rod_state, msg)
@@ -234,8 +234,8 @@ def test_grasp_controller_survives_hostile_contact_states(make) -> None:  # type
         if bad == "none" and n != n_el + 1:
             bad = "wrong node count"
         clock[0] += 10_000_000
-        sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(qos.TOPIC_CONTACT), frac, clock[0])
-        step = max(step, node.stamps.newest_step.get(qos.TOPIC_CONTACT, 0))  # (a lower step starts a new run)
+        sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(topics.CONTACT), frac, clock[0])
+        step = max(step, node.stamps.newest_step.get(topics.CONTACT, 0))  # (a lower step starts a new run)
         msg = ContactState(step=0 if reset else step, **fields)
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
         ok, reason = expect.deliver(node.on_contact, msg)
@@ -268,8 +268,8 @@ def test_grasp_quality_survives_hostile_contact_states(make) -> None:  # type: i
     def prop(n, curv, pose, how, stamp, frac, step) -> None:  # type: ignore[no-untyped-def]
         fields, bad = hostile_contact(n, curv, pose, how)
         clock[0] += 10_000_000
-        sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(qos.TOPIC_CONTACT), frac, clock[0])
-        step = max(step, node.stamps.newest_step.get(qos.TOPIC_CONTACT, 0))  # (a lower step starts a new run)
+        sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(topics.CONTACT), frac, clock[0])
+        step = max(step, node.stamps.newest_step.get(topics.CONTACT, 0))  # (a lower step starts a new run)
         msg = ContactState(step=0 if reset else step, **fields)
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
         ok, reason = expect.deliver(node.on_contact, msg)
@@ -300,8 +300,17 @@ def test_rod_simulator_survives_hostile_couples(make) -> None:  # type: ignore[n
     n = sim.model.n_elements
     stamps: dict[int, Any] = {}  # step -> the stamp of the state published for it
 
-    def progress() -> int:  # advanced, or stopped because the (absurd but finite) couple broke the run
-        return sim.session.k + (1 if sim.failure else 0)
+    applied = [0]  # couples the simulator applied (a step; an absurd but finite couple may then fail the run)
+    advance = sim._advance
+
+    def counting_advance(u: Any) -> None:
+        applied[0] += 1
+        advance(u)
+
+    sim._advance = counting_advance
+
+    def progress() -> int:
+        return applied[0]
 
     expect = Expect(sim.drops, progress)
 
@@ -325,7 +334,7 @@ def test_rod_simulator_survives_hostile_couples(make) -> None:  # type: ignore[n
             t_ns = stamps[k].sec * NS + stamps[k].nanosec
             sec, nsec = t_ns // NS, t_ns % NS
         else:
-            newest = sim.stamps.newest_ns.get(qos.TOPIC_COUPLE)
+            newest = sim.stamps.newest_ns.get(topics.COUPLE)
             sec, nsec, stamp_reason, reset = make_stamp(stamp, newest, frac, stamps[k].sec * NS + stamps[k].nanosec)
             if reset:  # step 0 is only the current step right after a reset
                 step, stamp_reason = 0, (None if k == 0 else "step mismatch")
@@ -518,8 +527,8 @@ def test_unexpected_exception_is_counted_and_the_node_keeps_working(make, monkey
     ex.add_node(node)
     ex.add_node(probe)
     got: list[ContactState] = []
-    probe.create_subscription(ContactState, qos.TOPIC_CONTACT, got.append, qos.STREAM)
-    pub = probe.create_publisher(RodState, qos.TOPIC_ROD_STATE, qos.STREAM)
+    probe.create_subscription(ContactState, topics.CONTACT, got.append, qos.STREAM)
+    pub = probe.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)
     node.object.on_object(boundary_to_msg(OBJ, Header()))
 
     def spin_until(cond: Callable[[], bool]) -> bool:
@@ -528,7 +537,7 @@ def test_unexpected_exception_is_counted_and_the_node_keeps_working(make, monkey
             ex.spin_once(timeout_sec=0.02)
         return cond()
 
-    assert spin_until(lambda: pub.get_subscription_count() > 0 and probe.count_publishers(qos.TOPIC_CONTACT) > 0)
+    assert spin_until(lambda: pub.get_subscription_count() > 0 and probe.count_publishers(topics.CONTACT) > 0)
     arrays = rod_arrays(11, 10.0, (0.0, 0.0, 0.0))
     monkeypatch.setattr(boundary_sensor, "sense_rod_state", _boom)
     pub.publish(RodState(step=1, **arrays))
@@ -606,7 +615,7 @@ def test_diagnostics_report_drops_by_reason(make) -> None:  # type: ignore[no-un
         ex.add_node(n)
     got: list[tuple[float, str, dict[str, str]]] = []
     probe.create_subscription(
-        DiagnosticArray, "/diagnostics",
+        DiagnosticArray, topics.DIAGNOSTICS,
         lambda m: got.extend((time.monotonic(), s.name, {kv.key: kv.value for kv in s.values}) for s in m.status), qos.STREAM)
 
     def spin(seconds: float) -> None:
@@ -615,7 +624,7 @@ def test_diagnostics_report_drops_by_reason(make) -> None:  # type: ignore[no-un
             ex.spin_once(timeout_sec=0.02)
 
     end = time.monotonic() + 10
-    while time.monotonic() < end and probe.count_publishers("/diagnostics") < 2:
+    while time.monotonic() < end and probe.count_publishers(topics.DIAGNOSTICS) < 2:
         ex.spin_once(timeout_sec=0.02)
     spin(0.2)
     got.clear()

@@ -21,7 +21,7 @@ from contgrasp_core.contact import sense  # noqa: E402
 from contgrasp_core.quality import quality_of_state  # noqa: E402
 from contgrasp_core.scenario import PAPER, QUALITY  # noqa: E402
 from contgrasp_msgs.msg import ContactState, GraspQuality, ObjectBoundary, RodState  # noqa: E402
-from contgrasp_ros import qos  # noqa: E402
+from contgrasp_ros import qos, topics  # noqa: E402
 from contgrasp_ros.convert import boundary_to_msg, contact_to_msg  # noqa: E402
 from contgrasp_ros.nodes.boundary_sensor import BoundarySensor  # noqa: E402
 from contgrasp_ros.nodes.grasp_quality import GraspQualityNode  # noqa: E402
@@ -76,10 +76,10 @@ def test_boundary_sensor_matches_core_and_survives_bad_messages(graph) -> None: 
     ctx, ex, add = graph
     sensor = add(BoundarySensor(context=ctx))
     probe = add(rclpy.create_node("probe", context=ctx))
-    obj_pub = probe.create_publisher(ObjectBoundary, qos.TOPIC_OBJECT, qos.LATCHED)
-    rod_pub = probe.create_publisher(RodState, qos.TOPIC_ROD_STATE, qos.STREAM)
+    obj_pub = probe.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
+    rod_pub = probe.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)
     got: list[ContactState] = []
-    probe.create_subscription(ContactState, qos.TOPIC_CONTACT, got.append, qos.STREAM)
+    probe.create_subscription(ContactState, topics.CONTACT, got.append, qos.STREAM)
     obj = circle(0.025, (0.08, 0.08))
     obj_pub.publish(boundary_to_msg(obj, Header(frame_id="world")))
     assert spin_until(ex, lambda: sensor.object.boundary is not None and rod_pub.get_subscription_count() > 0)
@@ -103,7 +103,7 @@ def test_boundary_sensor_matches_core_and_survives_bad_messages(graph) -> None: 
     for m in (bad, short, empty):
         rod_pub.publish(m)
     assert spin_until(ex, lambda: sensor.drops.total == 3)
-    assert sensor.drops.counts == {f"{qos.TOPIC_ROD_STATE}: {r}": 1 for r in ("NaN/Inf", "length mismatch", "too few samples")}
+    assert sensor.drops.counts == {f"{topics.ROD_STATE}: {r}": 1 for r in ("NaN/Inf", "length mismatch", "too few samples")}
     rod_pub.publish(rod_msg(6, shape, radius, 1.75))  # still working
     assert spin_until(ex, lambda: len(got) == 2)
     assert got[1].step == 6
@@ -124,10 +124,10 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
 
     node.set_parameters([Parameter("rate_hz", value=2.0)])
     probe = add(rclpy.create_node("probe", context=ctx))
-    obj_pub = probe.create_publisher(ObjectBoundary, qos.TOPIC_OBJECT, qos.LATCHED)
-    c_pub = probe.create_publisher(ContactState, qos.TOPIC_CONTACT, qos.STREAM)
+    obj_pub = probe.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
+    c_pub = probe.create_publisher(ContactState, topics.CONTACT, qos.STREAM)
     got: list[GraspQuality] = []
-    probe.create_subscription(GraspQuality, qos.TOPIC_QUALITY, got.append, qos.STREAM)
+    probe.create_subscription(GraspQuality, topics.QUALITY, got.append, qos.STREAM)
     obj = ellipse(0.04, 0.02, (0.08, 0.06))
     obj_pub.publish(boundary_to_msg(obj, Header()))
     assert spin_until(ex, lambda: node.object.boundary is not None and c_pub.get_subscription_count() > 0)
@@ -148,7 +148,7 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
     bad.in_contact = bad.in_contact[:3]
     c_pub.publish(bad)
     assert spin_until(ex, lambda: node.drops.total == 1)
-    assert node.drops.counts == {f"{qos.TOPIC_CONTACT}: length mismatch": 1}
+    assert node.drops.counts == {f"{topics.CONTACT}: length mismatch": 1}
 
 
 def _paper_model(n: int = 12):  # type: ignore[no-untyped-def]
@@ -170,10 +170,10 @@ def test_grasp_controller_matches_core_and_takes_new_gains(graph) -> None:  # ty
     model = _paper_model()
     node = add(GraspController(context=ctx, parameter_overrides=[Parameter("n_elements", value=model.n_elements)]))
     probe = add(rclpy.create_node("probe", context=ctx))
-    c_pub = probe.create_publisher(ContactState, qos.TOPIC_CONTACT, qos.STREAM)
+    c_pub = probe.create_publisher(ContactState, topics.CONTACT, qos.STREAM)
     got: list[CoupleControl] = []
-    probe.create_subscription(CoupleControl, qos.TOPIC_COUPLE, got.append, qos.STREAM)
-    assert spin_until(ex, lambda: c_pub.get_subscription_count() > 0 and probe.count_publishers(qos.TOPIC_COUPLE) > 0)
+    probe.create_subscription(CoupleControl, topics.COUPLE, got.append, qos.STREAM)
+    assert spin_until(ex, lambda: c_pub.get_subscription_count() > 0 and probe.count_publishers(topics.COUPLE) > 0)
     obj = circle(0.025, (0.08, 0.08))
     shape = shape_from_curvature(model.s_nodes, np.full(model.n_elements + 1, 5.0), BasePose())
     state = sense(shape, obj, model.radius(model.s_nodes))
@@ -194,7 +194,7 @@ def test_grasp_controller_matches_core_and_takes_new_gains(graph) -> None:  # ty
     wrong = sense(shape_from_curvature(np.linspace(0, 0.2, 5), np.zeros(5), BasePose()), obj, 0.01)
     c_pub.publish(contact_to_msg(wrong, Header(), 6))  # 5 nodes for a 12-element rod
     assert spin_until(ex, lambda: node.drops.total == 1)
-    assert node.drops.counts == {f"{qos.TOPIC_CONTACT}: wrong node count": 1}
+    assert node.drops.counts == {f"{topics.CONTACT}: wrong node count": 1}
 
 
 def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type: ignore[no-untyped-def]
@@ -219,11 +219,11 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
     probe = add(rclpy.create_node("probe", context=ctx))
     states: list[RodState] = []
     status: list[dict[str, str]] = []
-    probe.create_subscription(RodState, qos.TOPIC_ROD_STATE, states.append, qos.STREAM)
+    probe.create_subscription(RodState, topics.ROD_STATE, states.append, qos.STREAM)
     probe.create_subscription(
-        DiagnosticArray, "/diagnostics", lambda m: status.append({kv.key: kv.value for kv in m.status[0].values}), qos.STREAM
+        DiagnosticArray, topics.DIAGNOSTICS, lambda m: status.append({kv.key: kv.value for kv in m.status[0].values}), qos.STREAM
     )
-    u_pub = probe.create_publisher(CoupleControl, qos.TOPIC_COUPLE, qos.STREAM)
+    u_pub = probe.create_publisher(CoupleControl, topics.COUPLE, qos.STREAM)
     pause = probe.create_client(SetBool, "/rod_simulator/pause")
     reset = probe.create_client(Trigger, "/rod_simulator/reset")
     assert spin_until(ex, lambda: pause.service_is_ready() and u_pub.get_subscription_count() > 0)
@@ -242,7 +242,7 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
     # malformed couple: dropped and counted; then no couple at all: the zero fallback after the timeout
     u_pub.publish(couple_to_msg(model.joint_s[:3], u[:3], states[1].header, 1))
     assert spin_until(ex, lambda: len(states) == 3, timeout=10)
-    assert sim.missed == 1 and sim.drops.counts == {f"{qos.TOPIC_COUPLE}: wrong joints": 1}
+    assert sim.missed == 1 and sim.drops.counts == {f"{topics.COUPLE}: wrong joints": 1}
     ref.advance(np.zeros(model.n_elements))
     np.testing.assert_array_equal(states[2].y, ref.observe().x[:, 1])
     assert spin_until(ex, lambda: status and status[-1]["missed_deadlines"] == str(sim.missed))
@@ -266,7 +266,7 @@ def test_rod_simulator_free_running_advances_on_wall_time(graph) -> None:  # typ
     add(RodSimulator(context=ctx, parameter_overrides=over))
     probe = add(rclpy.create_node("probe", context=ctx))
     states: list[RodState] = []
-    probe.create_subscription(RodState, qos.TOPIC_ROD_STATE, states.append, qos.STREAM)
+    probe.create_subscription(RodState, topics.ROD_STATE, states.append, qos.STREAM)
     assert spin_until(ex, lambda: len(states) >= 5, timeout=20)
     assert [m.step for m in states[-3:]] == sorted(m.step for m in states[-3:])
 
@@ -276,16 +276,16 @@ def test_boundary_sensor_senses_a_state_that_arrived_before_the_object(graph) ->
     ctx, ex, add = graph
     sensor = add(BoundarySensor(context=ctx))
     probe = add(rclpy.create_node("probe", context=ctx))
-    rod_pub = probe.create_publisher(RodState, qos.TOPIC_ROD_STATE, qos.STREAM)
+    rod_pub = probe.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)
     got: list[ContactState] = []
-    probe.create_subscription(ContactState, qos.TOPIC_CONTACT, got.append, qos.STREAM)
-    assert spin_until(ex, lambda: rod_pub.get_subscription_count() > 0 and probe.count_publishers(qos.TOPIC_CONTACT) > 0)
+    probe.create_subscription(ContactState, topics.CONTACT, got.append, qos.STREAM)
+    assert spin_until(ex, lambda: rod_pub.get_subscription_count() > 0 and probe.count_publishers(topics.CONTACT) > 0)
     obj = circle(0.025, (0.08, 0.08))
     shape = arm_near(obj, BasePose(0.0, 0.0, 0.0))
     rod_pub.publish(rod_msg(0, shape, 0.01, 0.0))
     assert spin_until(ex, lambda: sensor.waiting is not None)
     assert got == []
-    obj_pub = probe.create_publisher(ObjectBoundary, qos.TOPIC_OBJECT, qos.LATCHED)
+    obj_pub = probe.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
     obj_pub.publish(boundary_to_msg(obj, Header(frame_id="world")))
     assert spin_until(ex, lambda: len(got) == 1)
     assert got[0].step == 0 and sensor.drops.total == 0

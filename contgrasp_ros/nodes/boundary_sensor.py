@@ -15,7 +15,7 @@ from rclpy.node import Node
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, RodState
-from contgrasp_ros import qos
+from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import RodArrays, contact_to_msg, require_finite, rod_state_arrays
 from contgrasp_ros.evaluate import sense_rod_state
 from contgrasp_ros.runtime import Diagnostics, DropCounter, ObjectTracker, StampGate, declare, guarded, run_node
@@ -36,21 +36,21 @@ class BoundarySensor(Node):
         self.waiting: tuple[RodState, RodArrays] | None = None
         self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._sense_waiting)
         self.sensed = 0
-        self.pub = self.create_publisher(ContactState, qos.TOPIC_CONTACT, qos.STREAM)
-        self.create_subscription(RodState, qos.TOPIC_ROD_STATE, self.on_rod_state, qos.STREAM)
+        self.pub = self.create_publisher(ContactState, topics.CONTACT, qos.STREAM)
+        self.create_subscription(RodState, topics.ROD_STATE, self.on_rod_state, qos.STREAM)
 
-    @guarded(qos.TOPIC_ROD_STATE)
+    @guarded(topics.ROD_STATE)
     def on_rod_state(self, msg: RodState) -> None:
         """Validate a rod state and sense it (or keep it until the object is known)."""
         try:
             rod = rod_state_arrays(msg)
-            self.stamps.admit(qos.TOPIC_ROD_STATE, msg.header, rod.step)
+            self.stamps.admit(topics.ROD_STATE, msg.header, rod.step)
         except ContgraspError as exc:
-            self.drops.drop_error(qos.TOPIC_ROD_STATE, exc)
+            self.drops.drop_error(topics.ROD_STATE, exc)
             return
         if self.object.boundary is None:
             if self.waiting is not None:
-                self.drops.drop(qos.TOPIC_ROD_STATE, "no object yet", "a newer rod state arrived before the object")
+                self.drops.drop(topics.ROD_STATE, "no object yet", "a newer rod state arrived before the object")
             self.waiting = (msg, rod)
             return
         self._sense(msg, rod)
@@ -62,7 +62,7 @@ class BoundarySensor(Node):
             state = sense_rod_state(rod, boundary, float(self.get_parameter("contact_tolerance").value))
             require_finite("the sensed contact state", state.rho, state.alpha, state.delta, state.s_o, state.foot)
         except ContgraspError as exc:
-            self.drops.drop_error(qos.TOPIC_ROD_STATE, exc)
+            self.drops.drop_error(topics.ROD_STATE, exc)
             return
         self.pub.publish(contact_to_msg(state, msg.header, msg.step))
         self.sensed += 1

@@ -19,7 +19,7 @@ from contgrasp_core.control import FeedbackGains, feedback_at_joints, paper_gain
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, CoupleControl
-from contgrasp_ros import qos
+from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import MessageError, contact_arrays, couple_to_msg, require_finite
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import Diagnostics, DropCounter, StampGate, add_parameter_check, declare, guarded, run_node
@@ -46,8 +46,8 @@ class GraspController(Node):
         self.gains = self._gains({n: self.get_parameter(n).value for n in GAIN_PARAMETERS})
         add_parameter_check(self, self._check_gains)
         self.add_post_set_parameters_callback(self.drops.guard("parameters", self._refresh))
-        self.pub = self.create_publisher(CoupleControl, qos.TOPIC_COUPLE, qos.STREAM)
-        self.create_subscription(ContactState, qos.TOPIC_CONTACT, self.on_contact, qos.STREAM)
+        self.pub = self.create_publisher(CoupleControl, topics.COUPLE, qos.STREAM)
+        self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM)
 
     def _gains(self, p: dict[str, Any]) -> FeedbackGains:
         if p["adaptive_mu2"]:
@@ -69,7 +69,7 @@ class GraspController(Node):
     def _refresh(self, _params: object) -> None:
         self.gains = self._gains({n: self.get_parameter(n).value for n in GAIN_PARAMETERS})
 
-    @guarded(qos.TOPIC_CONTACT)
+    @guarded(topics.CONTACT)
     def on_contact(self, msg: ContactState) -> None:
         """Validate a contact state and answer it with the couple (echoing its stamp and step)."""
         try:
@@ -79,11 +79,11 @@ class GraspController(Node):
                     f"contact state has {len(c.s)} nodes; the controller's rod has {self.model.n_elements + 1}",
                     reason="wrong node count",
                 )
-            self.stamps.admit(qos.TOPIC_CONTACT, msg.header, c.step)
+            self.stamps.admit(topics.CONTACT, msg.header, c.step)
             u = feedback_at_joints(self.model, self.gains, c.rho, c.alpha)
             require_finite("the couple", u.u, u.g_rho, u.g_alpha)
         except ContgraspError as exc:
-            self.drops.drop_error(qos.TOPIC_CONTACT, exc)
+            self.drops.drop_error(topics.CONTACT, exc)
             return
         self.pub.publish(couple_to_msg(self.model.joint_s, u, msg.header, msg.step))
 

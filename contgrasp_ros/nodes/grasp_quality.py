@@ -14,7 +14,7 @@ from rclpy.node import Node
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, GraspQuality
-from contgrasp_ros import qos
+from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import contact_arrays, quality_to_msg, require_finite
 from contgrasp_ros.evaluate import contact_quality
 from contgrasp_ros.runtime import Diagnostics, DropCounter, ObjectTracker, StampGate, declare, guarded, run_node
@@ -35,21 +35,21 @@ class GraspQualityNode(Node):
         self.diagnostics = Diagnostics(self, self.drops)
         self.object = ObjectTracker(self, self.drops, self.stamps)
         self.last_t: float | None = None
-        self.pub = self.create_publisher(GraspQuality, qos.TOPIC_QUALITY, qos.STREAM)
-        self.create_subscription(ContactState, qos.TOPIC_CONTACT, self.on_contact, qos.STREAM)
+        self.pub = self.create_publisher(GraspQuality, topics.QUALITY, qos.STREAM)
+        self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM)
 
-    @guarded(qos.TOPIC_CONTACT)
+    @guarded(topics.CONTACT)
     def on_contact(self, msg: ContactState) -> None:
         """Validate a contact state; evaluate and publish its quality when the rate allows."""
         try:
             c = contact_arrays(msg)
-            self.stamps.admit(qos.TOPIC_CONTACT, msg.header, c.step)
+            self.stamps.admit(topics.CONTACT, msg.header, c.step)
         except ContgraspError as exc:
-            self.drops.drop_error(qos.TOPIC_CONTACT, exc)
+            self.drops.drop_error(topics.CONTACT, exc)
             return
         boundary = self.object.boundary
         if boundary is None:
-            self.drops.drop(qos.TOPIC_CONTACT, "no object yet", "no object boundary received yet")
+            self.drops.drop(topics.CONTACT, "no object yet", "no object boundary received yet")
             return
         rate = self.get_parameter("rate_hz").value
         if rate > 0 and self.last_t is not None and 0.0 <= c.t - self.last_t < 1.0 / rate - 1e-12:
@@ -61,7 +61,7 @@ class GraspQualityNode(Node):
             q = contact_quality(c, boundary, tol, ref)
             require_finite("the grasp quality", q.W, q.Q1, q.Q2, q.Q3, q.contact_length)
         except ContgraspError as exc:
-            self.drops.drop_error(qos.TOPIC_CONTACT, exc)
+            self.drops.drop_error(topics.CONTACT, exc)
             return
         self.pub.publish(quality_to_msg(q, msg.header, msg.step, c.tol if tol < 0 else tol))
 

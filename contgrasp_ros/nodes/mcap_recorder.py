@@ -49,7 +49,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_ros import qos
+from contgrasp_ros import qos, topics
 from contgrasp_ros.bag.definitions import full_text
 from contgrasp_ros.bag.errors import BagError
 from contgrasp_ros.bag.rosbag2 import qos_profile_dict
@@ -146,7 +146,7 @@ class McapRecorder(Node):
         self.drops = DropCounter(self)  # (internal errors of the callbacks; nothing is dropped on purpose)
         self.exit_code = 0
         self._subs: dict[str, Any] = {}
-        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.STREAM)
+        self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, qos.STREAM)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(discovery, self.discover, clock=steady)
         self.create_timer(flush, self.flush, clock=steady)

@@ -39,7 +39,7 @@ from contgrasp_core.rod.session import DivergenceLimits, LoopSession
 from contgrasp_core.scenario import PAPER, object_from_parameters
 from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
-from contgrasp_ros import qos
+from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
@@ -108,11 +108,11 @@ class RodSimulator(Node):
         self.missed = 0
         self.outage = 0  # consecutive missed deadlines (the current outage)
         self.failure = ""
-        self.pub_clock = self.create_publisher(ClockMsg, "/clock", qos.STREAM)
-        self.pub_state = self.create_publisher(RodState, qos.TOPIC_ROD_STATE, qos.STREAM)
-        self.pub_object = self.create_publisher(ObjectBoundary, qos.TOPIC_OBJECT, qos.LATCHED)
-        self.pub_markers = self.create_publisher(MarkerArray, qos.TOPIC_MARKERS, qos.STREAM)
-        self.create_subscription(CoupleControl, qos.TOPIC_COUPLE, self.on_couple, qos.STREAM)
+        self.pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, qos.STREAM)
+        self.pub_state = self.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)
+        self.pub_object = self.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
+        self.pub_markers = self.create_publisher(MarkerArray, topics.MARKERS, qos.STREAM)
+        self.create_subscription(CoupleControl, topics.COUPLE, self.on_couple, qos.STREAM)
         self.create_service(SetBool, "~/pause", self.on_pause)
         self.create_service(Trigger, "~/reset", self.on_reset)
         self.pub_object.publish(boundary_to_msg(self.boundary, Header(frame_id="world")))
@@ -225,7 +225,7 @@ class RodSimulator(Node):
     def _can_step(self) -> bool:
         return self.published and not self.paused and not self.session.finished and not self.failure
 
-    @guarded(qos.TOPIC_COUPLE)
+    @guarded(topics.COUPLE)
     def on_couple(self, msg: CoupleControl) -> None:
         """Validate a couple; in lock-step advance with the couple answering the current step."""
         try:
@@ -238,9 +238,9 @@ class RodSimulator(Node):
             if self.lockstep and step != self.session.k:
                 raise MessageError(f"couple for step {step} while waiting for step {self.session.k} "
                                    "(a late answer to a step that timed out, or a stale one)", reason="step mismatch")
-            self.stamps.admit(qos.TOPIC_COUPLE, msg.header, step)
+            self.stamps.admit(topics.COUPLE, msg.header, step)
         except ContgraspError as exc:
-            self.drops.drop_error(qos.TOPIC_COUPLE, exc)
+            self.drops.drop_error(topics.COUPLE, exc)
             return
         if not self.lockstep:
             self.last_couple = u
