@@ -18,8 +18,6 @@ Every contgrasp node uses these, so they degrade the same way (see docs/ros.md, 
 
 from __future__ import annotations
 
-from contgrasp_ros import topics
-
 import functools
 import os
 import sys
@@ -41,6 +39,7 @@ from std_msgs.msg import Header
 
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code, one_line
+from contgrasp_ros import topics
 
 __all__ = [
     "declare",
