@@ -13,7 +13,10 @@ Every contgrasp node uses these, so they degrade the same way (see docs/ros.md, 
 * :class:`StampGate` - the stamp rule (invalid, from the past, from the future);
 * :class:`Diagnostics` - the node's DiagnosticStatus on ``/diagnostics``: every second of wall
   time and at once on the first drop;
-* :class:`GuardedSpin` - executor turns that survive a message rclpy fails to take.
+* :class:`GuardedSpin` - executor turns that survive a message rclpy fails to take;
+* :func:`sim_time_by_default` - the graph's time is the simulator's ``/clock`` unless the user
+  sets ``use_sim_time``;
+* :class:`FinishPolicy` - what a node does when the run is over (parameter ``on_finish``).
 """
 
 from __future__ import annotations
@@ -55,6 +58,9 @@ __all__ = [
     "ObjectTracker",
     "make_executor",
     "run_node",
+    "sim_time_by_default",
+    "FinishPolicy",
+    "ON_FINISH",
 ]
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -388,6 +394,86 @@ class Diagnostics:
         self.pub.publish(DiagnosticArray(header=Header(stamp=header_stamp), status=[self.status()]))
 
 
+# ---------------------------------------------------------------------------- time and the end of a run
+def sim_time_by_default(node: Node) -> None:
+    """``use_sim_time`` true unless the command line or a parameter file set it: the loop runs in
+    the simulator's time (``/clock``), started by hand or by the launcher alike."""
+    # rclpy 7.1 keeps the values given on the command line, in --params-file and in the node's
+    # parameter_overrides in this mapping; it has no public accessor for "was it given"
+    if "use_sim_time" not in node._parameter_overrides:
+        node.set_parameters([Parameter("use_sim_time", value=True)])
+
+
+ON_FINISH = ("idle", "exit")
+
+
+class FinishPolicy:
+    """What the node does when the run is over, by its ``on_finish`` parameter: ``idle`` (the
+    default) stays up and says so (the simulator can be reset with ``~/reset``; Ctrl-C stops a
+    node); ``exit`` ends the process ``grace_s`` wall seconds later (so the last messages are
+    delivered), with status 0 for a finished run and 1 for a failed one.
+
+    The simulator reports the end itself (:meth:`done`); the other nodes learn it from the
+    simulator's status on ``/diagnostics`` (``watch_simulator``: state ``finished`` or
+    ``failed``; ``running`` again after a reset re-arms the policy). :func:`run_node` ends its
+    spin loop when the node's ``stop_requested`` is set and returns ``exit_code``.
+    """
+
+    def __init__(self, node: Node, *, watch_simulator: bool, grace_s: float = 1.0) -> None:
+        self._node = node
+        self._grace = grace_s
+        self._ended = False
+        declare(node, "on_finish", "idle", "when the run is over: 'idle' (stay up) or 'exit' (status 0 finished, 1 failed)",
+                choices=ON_FINISH)
+        node.stop_requested = False  # type: ignore[attr-defined]
+        if watch_simulator:
+            from contgrasp_ros import qos
+
+            node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_status, qos.STREAM)
+
+    def _on_status(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            if st.name != "rod_simulator":
+                continue
+            values = {kv.key: kv.value for kv in st.values}
+            state = values.get("state")
+            if state in ("finished", "failed"):
+                detail = f"at t = {values.get('sim_time_s', '?')} s"
+                self.done(state == "failed", f"the simulator's run {state} {detail}")
+            elif state == "running":
+                self._ended = False
+
+    def rearm(self) -> None:
+        """A new run started (the simulator's reset)."""
+        self._ended = False
+
+    def done(self, failed: bool, what: str, before_exit: Callable[[], None] | None = None) -> None:
+        """The run is over (once per run): stay up or schedule the exit, and log which.
+        ``before_exit`` runs right before the node stops (the simulator's last status)."""
+        if self._ended:
+            return
+        self._ended = True
+        log = self._node.get_logger()
+        if self._node.get_parameter("on_finish").value == "idle":
+            log.info(f"{what}; staying up (on_finish: idle): call ~/reset on the simulator to run again, "
+                     "Ctrl-C to stop, or start the nodes with on_finish:=exit")
+            return
+        code = 1 if failed else 0
+        log.info(f"{what}; exiting with status {code} (on_finish: exit)")
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        timer = None
+
+        def stop() -> None:
+            assert timer is not None
+            timer.cancel()
+            if before_exit is not None:
+                before_exit()
+            self._node.exit_code = max(int(getattr(self._node, "exit_code", 0)), code)
+            self._node.stop_requested = True
+
+        timer = self._node.create_timer(self._grace, stop, clock=steady)
+
+
 # ---------------------------------------------------------------------------- the object
 class ObjectTracker:
     """Keeps the latest valid object boundary from the transient-local object topic; invalid
@@ -460,7 +546,8 @@ class GuardedSpin:
 
 
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
-    """Init rclpy, build the node, spin until shutdown (SIGINT/SIGTERM), clean up.
+    """Init rclpy, build the node, spin until shutdown (SIGINT/SIGTERM) or until the node asks to
+    stop (:class:`FinishPolicy`, ``on_finish: exit``), clean up.
 
     Errors are one line on stderr, ``NAME: error: ...``, and the exit code follows the error's
     family (:func:`contgrasp_core.errors.exit_code`): a node that rejects its start-up
@@ -487,7 +574,7 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
         executor = make_executor()
         executor.add_node(node)
         spin = GuardedSpin(executor, getattr(node, "drops", None) or DropCounter(node))
-        while True:
+        while not getattr(node, "stop_requested", False):  # (FinishPolicy: on_finish exit)
             spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -62,6 +62,7 @@ def make(ros_context):  # type: ignore[no-untyped-def]
     nodes = []
 
     def build(cls, **params):  # type: ignore[no-untyped-def]
+        params.setdefault("use_sim_time", False)  # no /clock here: the stamp rule against wall time
         node = cls(context=ros_context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
         nodes.append(node)
         return node
@@ -288,7 +289,9 @@ COUPLE_FIELDS = ("s", "u", "rho_ref", "alpha_ref", "du_drho", "du_dalpha")
 def small_sim(make, **params):  # type: ignore[no-untyped-def]
     from contgrasp_ros.nodes.rod_simulator import RodSimulator
 
-    p = dict(n_elements=6, damping=2.0, drag_normal=5110.0, drag_tangential=25.55, duration=100.0, marker_period=0.0)
+    # (no graph around it: step 0 goes out at once instead of waiting for a sensor and a controller)
+    p = dict(n_elements=6, damping=2.0, drag_normal=5110.0, drag_tangential=25.55, duration=100.0, marker_period=0.0,
+             wait_for_peers=False)
     p.update(params)
     return make(RodSimulator, **p)
 

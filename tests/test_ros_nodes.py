@@ -214,7 +214,7 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
     model = _paper_model()
     over = [Parameter(k, value=v) for k, v in dict(
         n_elements=model.n_elements, control_period=0.01, start_paused=True, couple_timeout=0.3,
-        timeout_fallback="zero", duration=1.0).items()]
+        timeout_fallback="zero", duration=1.0, wait_for_peers=False).items()]  # (the probe plays the controller)
     sim = add(RodSimulator(context=ctx, parameter_overrides=over))
     probe = add(rclpy.create_node("probe", context=ctx))
     states: list[RodState] = []

@@ -18,7 +18,17 @@ from contgrasp_msgs.msg import ContactState, RodState
 from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import RodArrays, contact_to_msg, require_finite, rod_state_arrays
 from contgrasp_ros.evaluate import sense_rod_state
-from contgrasp_ros.runtime import Diagnostics, DropCounter, ObjectTracker, StampGate, declare, guarded, run_node
+from contgrasp_ros.runtime import (
+    Diagnostics,
+    DropCounter,
+    FinishPolicy,
+    ObjectTracker,
+    StampGate,
+    declare,
+    guarded,
+    run_node,
+    sim_time_by_default,
+)
 
 
 class BoundarySensor(Node):
@@ -26,10 +36,12 @@ class BoundarySensor(Node):
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("boundary_sensor", **node_kwargs)
+        sim_time_by_default(self)
         declare(self, "contact_tolerance", PAPER.sensing.contact_tolerance, "contact where delta >= -tolerance [m]", lo=0.0, hi=1.0)
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops)
+        self.finish = FinishPolicy(self, watch_simulator=True)
         # The latched object and the first rod state race (e.g. on one executor): a state that
         # arrives first is kept and sensed as soon as the object is there, so the lock-step
         # simulator is not left waiting for its first couple.

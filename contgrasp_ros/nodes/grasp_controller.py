@@ -22,7 +22,17 @@ from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import MessageError, contact_arrays, couple_to_msg, require_finite
 from contgrasp_ros.nodes.rod_params import declare_rod_model
-from contgrasp_ros.runtime import Diagnostics, DropCounter, StampGate, add_parameter_check, declare, guarded, run_node
+from contgrasp_ros.runtime import (
+    Diagnostics,
+    DropCounter,
+    FinishPolicy,
+    StampGate,
+    add_parameter_check,
+    declare,
+    guarded,
+    run_node,
+    sim_time_by_default,
+)
 
 GAIN_PARAMETERS = ("mu1", "mu2", "adaptive_mu2", "object_radius", "length_unit")
 MU2_LIMIT = 1e6  # |mu2| in law units, given or adaptive
@@ -33,6 +43,7 @@ class GraspController(Node):
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("grasp_controller", **node_kwargs)
+        sim_time_by_default(self)
         self.model = declare_rod_model(self)
         paper = PAPER.node_parameters("grasp_controller")
         declare(self, "mu1", paper["mu1"], "gain mu1 > 0 of eq. dynamic_feedback", lo=1e-9, hi=1e6)
@@ -43,6 +54,7 @@ class GraspController(Node):
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops)
+        self.finish = FinishPolicy(self, watch_simulator=True)
         self.gains = self._gains({n: self.get_parameter(n).value for n in GAIN_PARAMETERS})
         add_parameter_check(self, self._check_gains)
         self.add_post_set_parameters_callback(self.drops.guard("parameters", self._refresh))

@@ -17,7 +17,17 @@ from contgrasp_msgs.msg import ContactState, GraspQuality
 from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import contact_arrays, quality_to_msg, require_finite
 from contgrasp_ros.evaluate import contact_quality
-from contgrasp_ros.runtime import Diagnostics, DropCounter, ObjectTracker, StampGate, declare, guarded, run_node
+from contgrasp_ros.runtime import (
+    Diagnostics,
+    DropCounter,
+    FinishPolicy,
+    ObjectTracker,
+    StampGate,
+    declare,
+    guarded,
+    run_node,
+    sim_time_by_default,
+)
 
 
 class GraspQualityNode(Node):
@@ -25,6 +35,7 @@ class GraspQualityNode(Node):
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("grasp_quality", **node_kwargs)
+        sim_time_by_default(self)
         paper = PAPER.node_parameters("grasp_quality")
         declare(self, "rate_hz", paper["rate_hz"], "evaluations per simulated second (0 = every contact state)", lo=0.0, hi=1e6)
         declare(self, "contact_tolerance", paper["contact_tolerance"], "contact tolerance [m]; < 0 uses the sensor's", lo=-1.0, hi=1.0)
@@ -33,6 +44,7 @@ class GraspQualityNode(Node):
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops)
+        self.finish = FinishPolicy(self, watch_simulator=True)
         self.object = ObjectTracker(self, self.drops, self.stamps)
         self.last_t: float | None = None
         self.pub = self.create_publisher(GraspQuality, topics.QUALITY, qos.STREAM)

@@ -54,7 +54,7 @@ from contgrasp_ros.bag.definitions import full_text
 from contgrasp_ros.bag.errors import BagError
 from contgrasp_ros.bag.rosbag2 import qos_profile_dict
 from contgrasp_ros.bag.writer import COMPRESSIONS, LAYOUTS, MIN_BAG_SIZE, RECORDER_RECORD, RUN_RECORD, BagWriter, check_split
-from contgrasp_ros.runtime import DropCounter, FatalNodeError, declare, guarded, run_node
+from contgrasp_ros.runtime import DropCounter, FatalNodeError, FinishPolicy, declare, guarded, run_node
 
 
 
@@ -145,6 +145,7 @@ class McapRecorder(Node):
         self.received: dict[str, int] = {}
         self.drops = DropCounter(self)  # (internal errors of the callbacks; nothing is dropped on purpose)
         self.exit_code = 0
+        self.finish = FinishPolicy(self, watch_simulator=True)
         self._subs: dict[str, Any] = {}
         self._pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, qos.STREAM)
         steady = Clock(clock_type=ClockType.STEADY_TIME)

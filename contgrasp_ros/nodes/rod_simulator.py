@@ -2,12 +2,17 @@
 object boundary (transient-local), RViz markers and /diagnostics; applies the couple control.
 
 Thin wrapper of :class:`contgrasp_core.rod.session.LoopSession` (the same stepping the
-core-only closed loop uses). Lock-step mode (default): state k is published and the rod
-advances only when the couple stamped with step k arrives; after ``couple_timeout`` wall
-seconds the configured fallback (``hold`` the last couple or apply ``zero``) is used, the miss
-is counted and a warning logged. Free-running mode advances every ``control_period`` of wall
-time with the latest couple. Services: ``~/pause`` (std_srvs/SetBool: true pauses, false
-resumes) and ``~/reset`` (std_srvs/Trigger).
+core-only closed loop uses); the stepping rules are :mod:`contgrasp_ros.lockstep`. Step 0 goes
+out once the loop's peers are matched (lock-step with ``wait_for_peers``, the default: a
+rod-state subscriber and a couple publisher; always at least ``min_subscribers`` subscribers;
+after ``peer_timeout`` wall seconds it goes out anyway), so a graph started by hand runs like the launcher's. Lock-step
+mode (default): state k is published and the rod advances only when the couple stamped with
+step k arrives; after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
+couple or apply ``zero``) is used, the miss is counted and a warning logged. Free-running mode
+advances every ``control_period`` of wall time with the latest couple. Services: ``~/pause``
+(std_srvs/SetBool: true pauses, false resumes) and ``~/reset`` (std_srvs/Trigger). The node runs
+in simulated time (``use_sim_time`` defaults to true: the ``/clock`` it publishes) and, when the
+run is over, stays up or exits as ``on_finish`` says (:class:`~contgrasp_ros.runtime.FinishPolicy`).
 
 Couples are validated (lengths, NaN/Inf, joints, the stamp rule, the step in lock-step) and
 bad ones dropped and counted. A run that breaks - Newton fails, NaN/Inf in the state, the rod
@@ -41,17 +46,20 @@ from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays
+from contgrasp_ros.lockstep import LockStep, Peers, StartGate
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import (
     Diagnostics,
     DropCounter,
     FatalNodeError,
+    FinishPolicy,
     StampGate,
     declare,
     guarded,
     run_node,
     service_failure,
+    sim_time_by_default,
 )
 
 FALLBACKS = ("hold", "zero")
@@ -67,6 +75,7 @@ class RodSimulator(Node):
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__("rod_simulator", **node_kwargs)
+        sim_time_by_default(self)
         self.model = declare_rod_model(self)
         paper = PAPER.node_parameters("rod_simulator")
         obj = (
@@ -88,13 +97,22 @@ class RodSimulator(Node):
             settle_hold=declare(self, "settle_hold", paper["settle_hold"], "for this long [s]", lo=1e-9, hi=1e6, read_only=True),
             min_time=declare(self, "min_time", paper["min_time"], "never settled before [s]", lo=0.0, hi=1e6, read_only=True),
         )
-        self.lockstep = declare(self, "lockstep", True, "advance only when the couple for the current step arrived", read_only=True)
         declare(self, "couple_timeout", 10.0, "lock-step: wall seconds to wait for a couple", lo=1e-3, hi=3600.0)
         declare(self, "timeout_fallback", "hold", "lock-step timeout: 'hold' the last couple or apply 'zero'", choices=FALLBACKS)
         self.start_paused = declare(self, "start_paused", False, "wait for ~/pause(false) before the first step", read_only=True)
         declare(self, "marker_period", 0.05, "simulated seconds between RViz marker updates (0 = off)", lo=0.0, hi=1e6)
+        self.lockstep = declare(self, "lockstep", True, "advance only when the couple for the current step arrived", read_only=True)
         declare(self, "min_subscribers", 0, "publish the first state only once this many subscribers matched the "
                 "rod state (a restarted simulator: its first state is not lost while they reconnect)", lo=0, hi=1000)
+        self.gate = StartGate(
+            wait_for_peers=declare(self, "wait_for_peers", True, "lock-step: publish step 0 only once a rod-state "
+                                   "subscriber (the sensor) and a couple publisher (the controller) are matched",
+                                   read_only=True) and self.lockstep,
+            timeout=declare(self, "peer_timeout", 30.0, "wall seconds to wait for the peers before publishing step 0 "
+                            "anyway (0 = wait forever)", lo=0.0, hi=1e6, read_only=True),
+        )
+        self.rule = LockStep()
+        self.finish = FinishPolicy(self, watch_simulator=False)
         declare(self, "max_penetration_limit", 0.0,
                 "the run fails when the rod surface is deeper inside the object than this [m]; 0 = the tip radius",
                 lo=0.0, hi=100.0)
@@ -105,14 +123,12 @@ class RodSimulator(Node):
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops, self._status_values)
-        self.missed = 0
-        self.outage = 0  # consecutive missed deadlines (the current outage)
         self.failure = ""
         self.pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, qos.STREAM)
         self.pub_state = self.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)
         self.pub_object = self.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
         self.pub_markers = self.create_publisher(MarkerArray, topics.MARKERS, qos.STREAM)
-        self.create_subscription(CoupleControl, topics.COUPLE, self.on_couple, qos.STREAM)
+        self.sub_couple = self.create_subscription(CoupleControl, topics.COUPLE, self.on_couple, qos.STREAM)
         self.create_service(SetBool, "~/pause", self.on_pause)
         self.create_service(Trigger, "~/reset", self.on_reset)
         self.pub_object.publish(boundary_to_msg(self.boundary, Header(frame_id="world")))
@@ -124,18 +140,22 @@ class RodSimulator(Node):
         period = control_period if not self.lockstep else 0.005
         self.create_timer(period, self.on_tick, clock=self._steady)
         if not self.paused:
-            self._publish_observation()
+            self._publish_first_observation()
+
+    @property
+    def missed(self) -> int:
+        """Deadlines missed in this run (lock-step)."""
+        return self.rule.missed
 
     # ------------------------------------------------------------------ loop
     def _reset_session(self) -> None:
         self.session = LoopSession(self.system, self.config)
         self.last_couple: np.ndarray | FeedbackExpansion = np.zeros(self.model.n_elements)
-        self.pending: np.ndarray | FeedbackExpansion | None = None
-        self.waiting_since: float | None = None
-        self.published = False
+        self.rule.reset()
         self.next_marker_t = 0.0
         self.failure = ""
         self.stamps.reset()
+        self.finish.rearm()
 
     def limits(self) -> DivergenceLimits:
         """The divergence limits from the parameters (``max_penetration_limit`` 0 = the tip radius)."""
@@ -146,8 +166,9 @@ class RodSimulator(Node):
         """Stop the run: state ``failed``, the cause with the simulated time in ``message``."""
         self.failure = f"t = {float(self.session.state.t):.6g} s: {cause}"
         self.get_logger().error(f"simulation stopped: {self.failure}")
-        self.waiting_since = None
+        self.rule.stop()
         self._publish_status()
+        self.finish.done(True, f"the run failed at t = {float(self.session.state.t):.4g} s", self._publish_status)
 
     def _publish_observation(self) -> None:
         try:
@@ -170,8 +191,7 @@ class RodSimulator(Node):
         if period > 0 and obs.t + 1e-12 >= self.next_marker_t:
             self.next_marker_t = obs.t + period
             self.pub_markers.publish(scene_markers(self.boundary, obs, header))
-        self.published = True
-        self.waiting_since = time.monotonic()
+        self.rule.published(time.monotonic())
         self._publish_status()
 
     def _status(self) -> str:
@@ -212,18 +232,26 @@ class RodSimulator(Node):
         self.last_couple = couple
         self._publish_observation()
         if self.session.finished and not self.failure:
-            self.waiting_since = None
-            self.get_logger().info(
-                f"finished at t = {self.session.state.t:.4g} s (settled: {self.session.settled}, missed deadlines: {self.missed})"
-            )
+            self.rule.stop()
+            s = self.session
+            settled = f"settled at {s.settle_time:.4g} s" if s.settle_time is not None else "not settled"
+            self.finish.done(False, f"finished at t = {s.state.t:.4g} s ({settled}, missed deadlines: {self.missed})",
+                             self._publish_status)
 
     def _publish_first_observation(self) -> None:
-        """The run's first state, once ``min_subscribers`` subscribers matched the rod state."""
-        if self.pub_state.get_subscription_count() >= self.get_parameter("min_subscribers").value:
+        """The run's first state, once the peers are matched (:class:`~contgrasp_ros.lockstep.StartGate`)."""
+        contact = min(self.count_publishers(topics.CONTACT), self.count_subscribers(topics.CONTACT))
+        peers = Peers(self.pub_state.get_subscription_count(), self.sub_couple.get_publisher_count(), contact)
+        go, line = self.gate.check(time.monotonic(), peers, self.get_parameter("min_subscribers").value)
+        if line and "anyway" in line:  # (rclpy: one severity per logging call site)
+            self.get_logger().warn(line)
+        elif line:
+            self.get_logger().info(line)
+        if go:
             self._publish_observation()
 
     def _can_step(self) -> bool:
-        return self.published and not self.paused and not self.session.finished and not self.failure
+        return self.rule.started and not self.paused and not self.session.finished and not self.failure
 
     @guarded(topics.COUPLE)
     def on_couple(self, msg: CoupleControl) -> None:
@@ -245,29 +273,24 @@ class RodSimulator(Node):
         if not self.lockstep:
             self.last_couple = u
             return
-        if self.outage:
-            self.get_logger().info(f"couples are back at step {step} after {self.outage} missed deadlines "
-                                   f"({self.missed} in total)")
-            self.outage = 0
-        if self._can_step():
-            self._advance(u)
-        else:
-            self.pending = u
+        now, ended = self.rule.couple(u, self._can_step())
+        if ended:
+            self.get_logger().info(f"couples are back at step {step} after {ended} missed deadlines ({self.missed} in total)")
+        if now is not None:
+            self._advance(now)
 
     @guarded("timer")
     def on_tick(self) -> None:
-        if not self.published and not self.paused:
+        if not self.rule.started and not self.paused and not self.failure:
             self._publish_first_observation()
         if not self._can_step():
             return
         if not self.lockstep:
             self._advance(self.last_couple)
             return
-        if self.waiting_since is not None and time.monotonic() - self.waiting_since > self.get_parameter("couple_timeout").value:
-            self.missed += 1
-            self.outage += 1
+        if self.rule.tick(time.monotonic(), self.get_parameter("couple_timeout").value):
             fallback = self.get_parameter("timeout_fallback").value
-            if self.outage == 1:  # once per outage; its length is reported when couples return
+            if self.rule.first_of_outage:  # once per outage; its length is reported when couples return
                 self.get_logger().warn(
                     f"no couple for step {self.session.k} within the timeout: applying the '{fallback}' fallback "
                     f"until couples arrive again ({self.missed} missed deadlines so far)"
@@ -279,13 +302,10 @@ class RodSimulator(Node):
     def on_pause(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
         self.paused = bool(req.data)
         if not self.paused:
-            if not self.published:
+            if not self.rule.started:
                 self._publish_first_observation()
-            elif self.pending is not None and self._can_step():
-                u, self.pending = self.pending, None
+            elif (u := self.rule.resume(time.monotonic())) is not None and self._can_step():
                 self._advance(u)
-            else:
-                self.waiting_since = time.monotonic()
         self._publish_status()
         resp.success, resp.message = True, self._status()
         return resp
@@ -293,8 +313,6 @@ class RodSimulator(Node):
     @guarded("~/reset", on_error=service_failure)
     def on_reset(self, req: Trigger.Request, resp: Trigger.Response) -> Trigger.Response:
         self._reset_session()
-        self.missed = 0
-        self.outage = 0
         if not self.paused:
             self._publish_observation()
         resp.success, resp.message = True, "reset to the initial state"

@@ -1,0 +1,157 @@
+"""The rod simulator's stepping rules as plain logic (no rclpy), so they are unit-tested alone.
+
+:class:`StartGate` decides when the run's first state (step 0) may go out: a graph started by
+hand (``ros2 run`` per node, in any order) must not lose it to a sensor that has not matched yet,
+or the lock-step loop stalls for a whole couple timeout at step 0 and the run differs from the
+launcher's. :class:`LockStep` is the lock-step rule itself: state k out, wait for the couple
+answering step k; a couple that arrives while paused is kept; after the couple timeout the
+configured fallback is applied and the miss counted, once per outage in the log.
+
+The node (:mod:`contgrasp_ros.nodes.rod_simulator`) feeds them wall-clock times (``now``, s,
+monotonic) and what it sees of the graph, and performs what they return.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["Peers", "StartGate", "LockStep"]
+
+
+@dataclass(frozen=True)
+class Peers:
+    """What the simulator sees of the closed loop: subscribers of its rod state (the sensor, a
+    recorder, a monitor), the contact topic's links (the fewer of its publishers and subscribers
+    in the graph: the sensor and the controller) and publishers of couples (the controller)."""
+
+    rod_state_subscribers: int
+    couple_publishers: int
+    contact_links: int = 0
+
+
+class StartGate:
+    """When step 0 may be published.
+
+    With ``wait_for_peers`` the loop's peers must be there: at least ``max(1, min_subscribers)``
+    subscribers of the rod state, a contact publisher and subscriber, and a couple publisher;
+    without it only ``min_subscribers`` subscribers. Once they are there, ``grace`` more seconds pass (discovery runs ahead of the
+    endpoints' matching, and a state published before a reader matched is not delivered to it).
+    After ``timeout`` seconds of waiting (0 = never) step 0 goes out anyway. While waiting a log
+    line every ``log_period`` seconds says what is missing.
+    """
+
+    def __init__(self, *, wait_for_peers: bool, timeout: float, grace: float = 0.5, log_period: float = 5.0) -> None:
+        self.wait_for_peers = wait_for_peers
+        self.timeout = timeout
+        self.grace = grace
+        self.log_period = log_period
+        self.restart()
+
+    def restart(self) -> None:
+        """Wait again (a reset run's first state)."""
+        self._since: float | None = None  # first check
+        self._matched_since: float | None = None
+        self._next_log = 0.0
+
+    def needs(self, min_subscribers: int) -> Peers:
+        """The peers step 0 waits for."""
+        if self.wait_for_peers:
+            return Peers(max(1, min_subscribers), 1, 1)
+        return Peers(min_subscribers, 0, 0)
+
+    def check(self, now: float, peers: Peers, min_subscribers: int) -> tuple[bool, str | None]:
+        """(step 0 may go out now, a line to log or None)."""
+        need = self.needs(min_subscribers)
+        first = self._since is None
+        if self._since is None:
+            self._since = now
+        if (peers.rod_state_subscribers >= need.rod_state_subscribers and peers.couple_publishers >= need.couple_publishers
+                and peers.contact_links >= need.contact_links):
+            if self._matched_since is None:
+                # peers that were there before the first check (a launcher resuming the
+                # simulator, a reset) have matched long since: no grace period for them
+                self._matched_since = now - (self.grace if first else 0.0)
+            if now - self._matched_since >= self.grace or need == Peers(0, 0, 0):
+                return True, f"publishing step 0 ({_have(peers, need)}; waited {now - self._since:.1f} s)"
+            return False, None
+        self._matched_since = None
+        waited = now - self._since
+        if self.timeout > 0 and waited >= self.timeout:
+            return True, (f"no peers after {waited:.1f} s ({_have(peers, need)}): publishing step 0 anyway "
+                          "(peer_timeout); without a controller the lock-step loop applies its timeout fallback")
+        if now >= self._next_log:
+            self._next_log = now + self.log_period
+            limit = f"; publishing anyway after peer_timeout = {self.timeout:g} s" if self.timeout > 0 else ""
+            return False, (f"waiting for the closed loop's peers before publishing step 0: {_have(peers, need)} "
+                           f"(start boundary_sensor and grasp_controller; wait_for_peers:=false starts at once{limit})")
+        return False, None
+
+
+def _have(peers: Peers, need: Peers) -> str:
+    return (f"rod state subscribers {peers.rod_state_subscribers}/{need.rod_state_subscribers}, "
+            f"contact links {peers.contact_links}/{need.contact_links}, "
+            f"couple publishers {peers.couple_publishers}/{need.couple_publishers}")
+
+
+class LockStep:
+    """The lock-step rule between the state published for step k and the couple answering it.
+
+    ``published(now)`` after each state; ``couple(now, u, can_step)`` for a couple that passed
+    validation (its step is the current one) returns the couple to apply now, or None (kept
+    until ``resume``); ``tick(now, timeout)`` returns True when the deadline passed, the miss
+    counted (apply the fallback); ``stop()`` when the run finished or failed.
+    """
+
+    def __init__(self) -> None:
+        self.missed = 0  # deadlines missed in this run
+        self.outage = 0  # consecutive missed deadlines (the current outage)
+        self.reset()
+
+    def reset(self) -> None:
+        """A new run: nothing published, nothing pending (the miss counts start over too)."""
+        self.started = False
+        self.waiting_since: float | None = None
+        self.pending: Any = None
+        self.missed = 0
+        self.outage = 0
+
+    def published(self, now: float) -> None:
+        """A state went out: its couple is due within the timeout from now."""
+        self.started = True
+        self.waiting_since = now
+
+    def stop(self) -> None:
+        """The run is over: no deadline any more."""
+        self.waiting_since = None
+
+    def couple(self, u: Any, can_step: bool) -> tuple[Any, int]:
+        """A valid couple for the current step: (apply it now or None = kept, length of the outage
+        it ends, 0 if none)."""
+        ended, self.outage = self.outage, 0
+        if can_step:
+            return u, ended
+        self.pending = u
+        return None, ended
+
+    def resume(self, now: float) -> Any:
+        """Unpaused: the couple kept while paused, to apply now; else the deadline restarts."""
+        u, self.pending = self.pending, None
+        if u is None and self.started:
+            self.waiting_since = now
+        return u
+
+    def tick(self, now: float, timeout: float) -> bool:
+        """True when the couple is overdue: the miss is counted, apply the fallback (and
+        ``first_of_outage`` tells whether to log it)."""
+        if self.waiting_since is None or now - self.waiting_since <= timeout:
+            return False
+        self.missed += 1
+        self.outage += 1
+        self.waiting_since = None
+        return True
+
+    @property
+    def first_of_outage(self) -> bool:
+        """The last miss began an outage (log it once; its length is logged when couples return)."""
+        return self.outage == 1

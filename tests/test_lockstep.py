@@ -1,0 +1,100 @@
+"""The simulator's stepping rules without ROS (contgrasp_ros.lockstep): when step 0 goes out,
+and the lock-step deadline, fallback and outage counting."""
+
+from __future__ import annotations
+
+from contgrasp_ros.lockstep import LockStep, Peers, StartGate
+
+LOOP = Peers(rod_state_subscribers=1, couple_publishers=1, contact_links=1)
+
+
+def test_step_0_waits_for_every_peer_of_the_loop_then_a_grace_period() -> None:
+    gate = StartGate(wait_for_peers=True, timeout=30.0, grace=0.5, log_period=5.0)
+    go, line = gate.check(0.0, Peers(0, 0, 0), 0)
+    assert not go and line is not None and "rod state subscribers 0/1" in line and "couple publishers 0/1" in line
+    assert gate.check(1.0, Peers(0, 0, 0), 0) == (False, None)  # (the next line after log_period)
+    go, line = gate.check(5.0, Peers(1, 0, 1), 0)
+    assert not go and line is not None and "couple publishers 0/1" in line
+    # a subscriber and a controller but no sensor between them: the contact topic has no link yet
+    assert gate.check(6.0, Peers(1, 1, 0), 0)[0] is False
+    assert gate.check(7.0, LOOP, 0)[0] is False  # matched: the grace period starts
+    assert gate.check(7.4, LOOP, 0)[0] is False
+    go, line = gate.check(7.5, LOOP, 0)
+    assert go and line is not None and "waited 7.5 s" in line
+
+
+def test_a_peer_that_leaves_during_the_grace_period_restarts_it() -> None:
+    gate = StartGate(wait_for_peers=True, timeout=0.0, grace=0.5)
+    assert not gate.check(0.0, Peers(0, 0, 0), 0)[0]
+    assert not gate.check(0.1, LOOP, 0)[0]
+    assert not gate.check(0.3, Peers(1, 0, 1), 0)[0]
+    assert not gate.check(0.6, LOOP, 0)[0]
+    assert gate.check(1.1, LOOP, 0)[0]
+
+
+def test_peers_there_at_the_first_check_need_no_grace_period() -> None:
+    """The launcher resumes the simulator once the graph is connected: step 0 goes out at once."""
+    gate = StartGate(wait_for_peers=True, timeout=30.0, grace=0.5)
+    assert gate.check(0.0, LOOP, 0)[0]
+
+
+def test_min_subscribers_counts_too_and_the_timeout_starts_anyway() -> None:
+    gate = StartGate(wait_for_peers=True, timeout=10.0, grace=0.0)
+    assert gate.needs(3) == Peers(3, 1, 1)
+    assert not gate.check(0.0, LOOP, 3)[0]
+    go, line = gate.check(10.0, LOOP, 3)
+    assert go and line is not None and "anyway" in line and "rod state subscribers 1/3" in line
+    # timeout 0: wait for ever
+    patient = StartGate(wait_for_peers=True, timeout=0.0)
+    assert not patient.check(0.0, Peers(0, 0, 0), 0)[0]
+    assert not patient.check(1e6, Peers(0, 0, 0), 0)[0]
+
+
+def test_without_waiting_for_peers_step_0_goes_out_at_once() -> None:
+    gate = StartGate(wait_for_peers=False, timeout=30.0, grace=0.5)
+    assert gate.needs(0) == Peers(0, 0, 0)
+    assert gate.check(0.0, Peers(0, 0, 0), 0)[0]
+    # ... but min_subscribers still holds it back (a restarted simulator in the launcher)
+    gate.restart()
+    assert not gate.check(0.0, Peers(1, 0, 0), 2)[0]
+    assert not gate.check(0.2, Peers(2, 0, 0), 2)[0]
+    assert gate.check(0.75, Peers(2, 0, 0), 2)[0]
+
+
+def test_lockstep_deadline_fallback_and_outage() -> None:
+    rule = LockStep()
+    assert not rule.started and rule.tick(100.0, 1.0) is False  # nothing published: no deadline
+    rule.published(0.0)
+    assert rule.started and rule.tick(1.0, 1.0) is False  # (strictly later than the timeout)
+    assert rule.tick(1.01, 1.0) is True and rule.missed == 1 and rule.first_of_outage
+    assert rule.tick(5.0, 1.0) is False  # the fallback was applied: no deadline until the next state
+    rule.published(5.0)
+    assert rule.tick(6.5, 1.0) is True and rule.missed == 2 and not rule.first_of_outage
+    rule.published(6.5)
+    u, ended = rule.couple("u2", can_step=True)
+    assert u == "u2" and ended == 2 and rule.outage == 0
+    rule.published(6.6)
+    assert rule.couple("u3", can_step=True) == ("u3", 0)
+
+
+def test_a_couple_that_arrives_while_paused_is_applied_on_resume() -> None:
+    rule = LockStep()
+    rule.published(0.0)
+    assert rule.couple("u0", can_step=False) == (None, 0)
+    assert rule.resume(3.0) == "u0" and rule.pending is None
+    # resumed with nothing pending: the deadline counts from the resume, not from the publication
+    rule.published(4.0)
+    assert rule.resume(10.0) is None
+    assert rule.tick(10.5, 1.0) is False and rule.tick(11.1, 1.0) is True
+
+
+def test_stop_and_reset() -> None:
+    rule = LockStep()
+    rule.published(0.0)
+    rule.stop()
+    assert rule.tick(100.0, 1.0) is False
+    rule.published(100.0)
+    assert rule.tick(200.0, 1.0) is True and rule.missed == 1
+    rule.couple("u", can_step=False)
+    rule.reset()
+    assert (rule.started, rule.missed, rule.outage, rule.pending, rule.waiting_since) == (False, 0, 0, None, None)
