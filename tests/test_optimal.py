@@ -271,7 +271,7 @@ def test_paper_figure2_optima_wrap_the_objects(paper_solutions):
     0.026 (rho/rho_d), 0.052 (alpha; the taper rho_d' = -0.045 forces alpha ~ pi/2 - 0.045)
     and 0.012 (kappa vs the parallel-curve curvature kappa_o / (1 + rho_d kappa_o)); the
     thresholds leave ~2x headroom. kappa differs from kappa_o itself because the arm wraps at
-    distance rho_d (paper's remark), by about rho_d kappa_o^2."""
+    distance rho_d (paper Sec. III-A), by about rho_d kappa_o^2."""
     for name, r in paper_solutions.items():
         p = r.problem
         t = p.s / p.s[-1]
