@@ -3,7 +3,7 @@
 For the three Fig. 2 objects at N = 500 nodes (paper settings, chi = 10), in one process:
 
   reference  fast solver at tol 1e-11 -> J*
-  (a)        sweep at the paper's eta = 1e-6 (paper's eq. costates) until J <= 1.01 J*,
+  (a)        sweep at the paper's eta = 1e-6 (paper's costates, eq. (12)) until J <= 1.01 J*,
              or its cost after a fixed iteration budget
   (b)        sweep at the largest stable eta found by a geometric search (factor sqrt 2,
              300-iteration probes; stable = no divergence/singularity and cost decreased),

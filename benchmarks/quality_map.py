@@ -3,7 +3,7 @@
 For each paper object on the same (psi, d) grid (default 24 x 6 = 144 poses), in one process:
 
   (a) the paper's method: every pose's inner problem solved by the forward-backward sweep
-      (eq. forward_backward, eta = 1e-6, the paper's costates). A full map would take hours,
+      (the gradient step eq. (13), eta = 1e-6, the paper's costates). A full map would take hours,
       so it is ESTIMATED from a sample of poses: each sampled sweep runs until its cost is
       within 1 % of the fast solver's optimum or a time budget expires (then the per-pose
       time is a LOWER bound, marked '>=');

@@ -3,7 +3,7 @@
 Both simulate the same rod (L = 0.2 m, radius 1 cm -> 1 mm, density 1042, E = 10 kPa, Poisson
 0.5, 100 elements), the same environment (mass-proportional damping zeta, quadratic drag
 5110 / 25.55 per unit projected area, the same penalty contact law on the element centres
-against the circle of radius 2.5 cm at (8, 8) cm) and the same feedback law (eq. dynamic_feedback
+against the circle of radius 2.5 cm at (8, 8) cm) and the same feedback law (eq. (19)
 with mu1 = 1 and the adaptive mu2, centimetre units), from the straight arm at rest.
 
 PyElastica (explicit PositionVerlet, stepped with the stepper's own ``step(sim, t, dt)``) applies
@@ -53,7 +53,7 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
                    shear_ratio: float = 100.0, stretch_ratio: float = 100.0):
     """Simulate the scenario in PyElastica; returns (node positions (N+1, 2), wall s, ok, max node speed).
 
-    ``held_couple`` (N,) at the joints: open loop; None: the closed loop (eq. dynamic_feedback).
+    ``held_couple`` (N,) at the joints: open loop; None: the closed loop (eq. (19)).
     ``via``: how the couple enters, ``"rest_curvature"`` (``kappa_rest = -u/EI`` at the interior
     nodes, the joint couple at the clamp acts on the clamped element and is dropped, as in
     contgrasp's clamped base) or ``"torques"`` (equal and opposite external torques

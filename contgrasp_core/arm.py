@@ -1,6 +1,6 @@
 """Continuum arm geometry: length, radius profile, base pose, and shape from curvature.
 
-Paper Sec. II-A, eq. kinematics: ``dr/ds = a = (cos theta, sin theta)``, ``dtheta/ds = kappa``
+Paper Sec. II-A, eq. (1) (arm kinematics): ``dr/ds = a = (cos theta, sin theta)``, ``dtheta/ds = kappa``
 for ``s in [0, L]``, with the base pose ``(r(0), theta(0)) = (r0, theta0)``.
 """
 
@@ -52,7 +52,7 @@ class Arm:
 
     @classmethod
     def paper_tapered(cls, length: float) -> Arm:
-        """Paper Sec. III-B: radius L/20 at the base tapering linearly to L/200 at the tip."""
+        """Paper Sec. III-A: radius L/20 at the base tapering linearly to L/200 at the tip."""
         length = real("arm length", length, lo=0.0, lo_open=True)
         return cls(length, length / 20.0, length / 200.0)
 
@@ -114,7 +114,7 @@ def curvature_spline(s: ArrayLike, kappa: ArrayLike) -> CubicSpline:
 def shape_from_curvature(
     s: ArrayLike, kappa: ArrayLike, base: BasePose = BasePose()
 ) -> ArmShape:
-    """Integrate eq. kinematics from the base pose for curvature samples ``kappa`` on ``s``.
+    """Integrate the arm kinematics eq. (1) from the base pose for curvature samples ``kappa`` on ``s``.
 
     The curvature is interpolated by a cubic spline; ``theta`` is its exact antiderivative
     and ``r`` is integrated with 8-point Gauss-Legendre quadrature on every grid cell, so the

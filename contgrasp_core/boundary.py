@@ -1,6 +1,6 @@
 """Object boundaries: smooth, simple, closed planar curves parameterised by arclength.
 
-Paper Sec. II-B, eq. gamma: ``d gamma / d s_o = t = (cos phi, sin phi)``, ``d phi / d s_o = kappa_o``.
+Paper Sec. II-B, eq. (2): ``d gamma / d s_o = t = (cos phi, sin phi)``, ``d phi / d s_o = kappa_o``.
 Curves are traversed counter-clockwise (the object lies to the LEFT of the tangent), ``s_o``
 runs over ``[0, L_o)`` and every evaluation accepts any real ``s_o`` (taken modulo ``L_o``;
 the tangent angle is continued so that ``phi(s_o + L_o) = phi(s_o) + 2 pi``).
@@ -108,7 +108,7 @@ class Boundary:
         self.params = dict(params)
         bp = np.asarray(breakpoints, dtype=float)
         self._bp = bp
-        # Cumulative arclength at the panel breakpoints (eq. gamma: |dgamma/ds_o| = 1).
+        # Cumulative arclength at the panel breakpoints (eq. (2): |dgamma/ds_o| = 1).
         panel_len = self._gauss_arclength(bp[:-1], bp[1:])
         self._S = np.concatenate([[0.0], np.cumsum(panel_len)])
         self.length = float(self._S[-1])
@@ -194,7 +194,7 @@ class Boundary:
         return cross / np.hypot(*d1.T) ** 3
 
     def tangent_angle(self, s_o: ArrayLike) -> NDArray[np.float64]:
-        """Continuous tangent angle phi(s_o) (eq. gamma), ``phi(s + L_o) = phi(s) + 2 pi``."""
+        """Continuous tangent angle phi(s_o) (eq. (2)), ``phi(s + L_o) = phi(s) + 2 pi``."""
         s = self._arclengths(s_o)
         return self._phi(self._t_of_s(s), s)
 
@@ -209,7 +209,7 @@ class Boundary:
         return np.stack([-np.sin(phi), np.cos(phi)], axis=-1)
 
     def curvature(self, s_o: ArrayLike) -> NDArray[np.float64]:
-        """kappa_o(s_o) = d phi / d s_o (eq. gamma); positive on convex parts."""
+        """kappa_o(s_o) = d phi / d s_o (eq. (2)); positive on convex parts."""
         s = self._arclengths(s_o)
         return self._kappa(self._t_of_s(s)).reshape(s.shape)
 

@@ -3,9 +3,9 @@
 Three views of the same relative geometry:
 
 * :func:`sense` - geometric sensing: from an arm shape, the shadow point s_o(s) (closest
-  boundary point), contact distance rho, contact angle alpha (eq. rho_alpha_definition),
-  contact depth delta (eq. delta) and the contact set (Definition 1).
-* :func:`integrate_contact` - the contact kinematics ODE (eqs. object_speed, rho_alpha_2)
+  boundary point), contact distance rho, contact angle alpha (eq. (4)),
+  contact depth delta (eq. (5)) and the contact set (Definition 1).
+* :func:`integrate_contact` - the contact kinematics ODE (eqs. (7), (8))
   in s with state (rho, alpha, s_o), driven by a curvature profile kappa(s).
 * :func:`shape_from_contact` - the reverse map from (rho, alpha, s_o)(s) to the arm shape.
 
@@ -53,7 +53,7 @@ class ContactState:
     """Geometric contact state along the arm (arrays over the arm grid ``s``).
 
     ``s_o`` is unwrapped along the arm (continuous, may exceed L_o); ``foot`` = gamma(s_o);
-    ``nu_o`` = sin(alpha) / (1 + rho kappa_o) (eq. object_speed); ``in_contact`` is
+    ``nu_o`` = sin(alpha) / (1 + rho kappa_o) (eq. (7)); ``in_contact`` is
     ``delta >= -tol``; ``valid`` marks points inside the admissible region.
     """
 
@@ -72,7 +72,7 @@ class ContactState:
 
 @dataclass(frozen=True)
 class ContactKinematics:
-    """Solution of the contact kinematics ODE (eq. rho_alpha_2) on the grid ``s``."""
+    """Solution of the contact kinematics ODE (eq. (8)) on the grid ``s``."""
 
     s: NDArray[np.float64]
     rho: NDArray[np.float64]
@@ -103,8 +103,8 @@ def sense(
 ) -> ContactState:
     """Geometric sensing of (rho, alpha, delta, s_o) and the contact set from an arm shape.
 
-    Implements eq. rho_alpha_definition with the closest boundary point as shadow point,
-    eq. delta (``delta = r_arm - rho``) and Definition 1 with tolerance ``tol``
+    Implements eq. (4) with the closest boundary point as shadow point,
+    eq. (5) (``delta = r_arm - rho``) and Definition 1 with tolerance ``tol``
     (``in_contact = delta >= -tol``).
     """
     instance("shape", shape, ArmShape)
@@ -183,7 +183,7 @@ def check_state(boundary: Boundary, rho: float, alpha: float, s_o: float, *, s: 
         raise ContactValidityError(
             f"1 + rho kappa_o = {1.0 + rho * k_o:.6g} at s = {s:.6g} (rho = {rho:.6g}, "
             f"kappa_o = {k_o:.6g}): the shadow point would stop or run backwards "
-            "(eq. object_speed needs 1 + rho kappa_o > 0)",
+            "(eq. (7) needs 1 + rho kappa_o > 0)",
             s=s,
             condition="1 + rho kappa_o > 0",
         )
@@ -205,7 +205,7 @@ def integrate_contact(
     rtol: float = 1e-11,
     atol: float = 1e-12,
 ) -> ContactKinematics:
-    """Integrate the contact kinematics (eqs. object_speed, rho_alpha_2) along the arm.
+    """Integrate the contact kinematics (eqs. (7), (8)) along the arm.
 
     ``d rho/ds = -cos alpha``, ``d alpha/ds = -kappa + kappa_o sin(alpha) / (1 + rho kappa_o)``,
     ``d s_o/ds = nu_o = sin(alpha) / (1 + rho kappa_o)``, from (rho0, alpha0, s_o0) at ``s[0]``.
@@ -297,7 +297,7 @@ def integrate_contact(
 def shape_from_contact(
     s: ArrayLike, rho: ArrayLike, alpha: ArrayLike, s_o: ArrayLike, boundary: Boundary
 ) -> ArmShape:
-    """Arm shape from the contact state (inverse of eq. rho_alpha_definition).
+    """Arm shape from the contact state (inverse of eq. (4)).
 
     ``r = gamma(s_o) - rho n(s_o)`` and ``theta = phi(s_o) + pi/2 - alpha``.
     """
@@ -351,7 +351,7 @@ def offset_curvature(
     """Curvature, in arm arclength, of the curve parallel to the boundary at ``distance``.
 
     An arm starting at ``(rho, alpha, s_o) = (distance, pi/2, s_o0)`` with this curvature
-    keeps ``rho = distance`` and ``alpha = pi/2`` exactly (eq. rho_alpha_2 with
+    keeps ``rho = distance`` and ``alpha = pi/2`` exactly (eq. (8) with
     ``d alpha/ds = 0``). With ``sigma`` the shadow arclength, the parallel curve has
     ``ds = (1 + d kappa_o(sigma)) d sigma`` so ``s = sigma - s_o0 + d (phi(sigma) - phi(s_o0))``
     and ``kappa = kappa_o / (1 + d kappa_o)``; for a circle of radius R this is 1/(R + d).

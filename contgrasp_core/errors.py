@@ -91,7 +91,7 @@ class ContactValidityError(InputError):
     """The contact kinematics left their valid region (paper Sec. II-C).
 
     Valid states satisfy ``rho > 0``, ``0 < alpha < pi`` and ``1 + rho * kappa_o > 0``
-    (eq. object_speed). ``s`` is the arm arclength where validity was lost and
+    (eq. (7)). ``s`` is the arm arclength where validity was lost and
     ``condition`` names the violated inequality. An input error also when raised mid-
     integration: the initial state and curvature profile given determine the path (module
     docstring).

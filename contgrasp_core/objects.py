@@ -17,7 +17,7 @@ Omitted trailing parameters take the defaults of the caller's :class:`ObjectScal
 :data:`FIG2_SCALE` (the paper's dimensionless Sec. III-IV examples, centred at the origin) or
 :data:`ROD_SCALE` (the rod scenario of Sec. V-C, metres, centred at (0.08, 0.08) m). A user's
 outline is used as given (absolute coordinates in the caller's units); it is closed
-implicitly when its last row does not repeat the first. Paper Sec. III-B names the three
+implicitly when its last row does not repeat the first. Paper Sec. III-A names the three
 built-in objects (:func:`contgrasp_core.boundary.deformed_circle` gives the third's formula).
 """
 
@@ -44,7 +44,7 @@ SHAPES: dict[str, tuple[str, ...]] = {
 _SYNTAX = ", ".join(f"{name}[:{','.join(names)}]" for name, names in SHAPES.items())
 
 PAPER_OBJECTS = tuple(SHAPES)
-"""The paper's three objects (Sec. III-B), by name."""
+"""The paper's three objects (Sec. III-A), by name."""
 
 OUTLINE = "outline"
 
@@ -200,7 +200,7 @@ class ObjectSpec:
 
     @property
     def radius(self) -> float:
-        """The object's nominal radius (the adaptive gain ``mu2`` of the appendix needs one): ``R``
+        """The object's nominal radius (the adaptive gain ``mu2`` of Appendix IV needs one): ``R``
         of a circle or deformed circle, ``sqrt(a b)`` of an ellipse, ``sqrt(area / pi)`` of an
         outline (the circle of the same area)."""
         if self.shape in ("circle", "deformed"):

@@ -3,8 +3,8 @@
 * Point grasp map ``G_i = [I2; (gamma_i^perp)^T] R(phi_i)``, ``gamma^perp = R(pi/2) gamma``,
   with ``gamma`` measured from an explicit wrench reference point (the object frame origin by
   default), and the discrete grasp map ``G~ = [G_1 ... G_n]`` (Definition 2).
-* Continuum grasp map (eq. grasp_map) over the contact set ``S = {s : delta(s) >= -tol}``
-  (Definition 1) and its Gramian ``W = int_S G G^T ds`` (Prop. 2), integrated in ARM arclength s.
+* Continuum grasp map (eq. (14)) over the contact set ``S = {s : delta(s) >= -tol}``
+  (Definition 1) and its Gramian ``W = int_S G G^T ds`` (Prop. 4.1), integrated in ARM arclength s.
 * Metrics: ``Q1 = lambda_min(W)``, ``Q2 = det W``, ``Q3 = lambda_min / lambda_max``; the discrete
   analogues ``sigma_min``, ``prod sigma_i``, ``sigma_min / sigma_max``.
 
@@ -14,7 +14,7 @@ integrand is interpolated linearly to the cut), so contact-set boundaries move c
 with the configuration instead of dropping or keeping whole cells. The rule is second order in
 the grid spacing. Because ``W = sum_i w_i G_i G_i^T`` the discretised continuum operator is
 ``[sqrt(w_1) G_1 ... sqrt(w_n) G_n]`` and its singular values are exactly ``sqrt(eig W)``
-(Prop. 2 made concrete: :func:`continuum_operator`).
+(Prop. 4.1 made concrete: :func:`continuum_operator`).
 """
 
 from __future__ import annotations
@@ -174,10 +174,10 @@ def gramian(
     tol: float | ArrayLike = 0.0,
     ref: ArrayLike = (0.0, 0.0),
 ) -> tuple[NDArray[np.float64], float]:
-    """Gramian ``W = int_S G(s) G(s)^T ds`` (Prop. 2) and the contact length ``int_S ds``.
+    """Gramian ``W = int_S G(s) G(s)^T ds`` (Prop. 4.1) and the contact length ``int_S ds``.
 
     ``gamma``/``phi`` are the contact (shadow) points and boundary tangent angles along the
-    arm grid ``s``; ``delta`` the contact depth (eq. delta).
+    arm grid ``s``; ``delta`` the contact depth (eq. (5)).
     """
     w, maps = _weights_and_maps(s, gamma, phi, delta, tol, ref)
     return np.einsum("i,iak,ibk->ab", w, maps, maps), float(w.sum())
@@ -192,9 +192,9 @@ def continuum_operator(
     tol: float | ArrayLike = 0.0,
     ref: ArrayLike = (0.0, 0.0),
 ) -> NDArray[np.float64]:
-    """Discretised continuum grasp map ``[sqrt(w_1) G_1 ... sqrt(w_n) G_n]`` (eq. grasp_map).
+    """Discretised continuum grasp map ``[sqrt(w_1) G_1 ... sqrt(w_n) G_n]`` (eq. (14)).
 
-    Its singular values equal ``sqrt(eig(W))`` of :func:`gramian` (Prop. 2).
+    Its singular values equal ``sqrt(eig(W))`` of :func:`gramian` (Prop. 4.1).
     """
     w, maps = _weights_and_maps(s, gamma, phi, delta, tol, ref)
     return np.concatenate(list(maps * np.sqrt(w)[:, None, None]), axis=1)

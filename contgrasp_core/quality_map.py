@@ -1,10 +1,10 @@
-"""Grasp-quality maps over arm base poses and their maximisation (paper Sec. IV-C, eq. max_quality).
+"""Grasp-quality maps over arm base poses and their maximisation (paper Sec. IV-C, eq. (16)).
 
 Base positions lie in the region D around the object: the point at boundary distance ``d`` on
 the ray from the object frame origin at polar angle ``psi``, ``d in [d_min, d_max]``; the base
 heading is ``theta0 = psi + pi/2`` (tangent to the disc, counter-clockwise). For each pose the
 initial contact state comes from closest-point projection, the inner optimal grasp
-(eq. optimal_kappa) is solved by :func:`contgrasp_core.optimal.solve`, and Q1..Q3 of its
+(eq. (9)) is solved by :func:`contgrasp_core.optimal.solve`, and Q1..Q3 of its
 contact set are evaluated (:mod:`contgrasp_core.quality`).
 
 Work is split into one task per ``psi``: along it the distances are solved in increasing order,
@@ -390,7 +390,7 @@ MAX_WORKERS = 1024
 
 
 def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
-    """Nelder-Mead maximisation of one metric over D (eq. max_quality), from the best grid point.
+    """Nelder-Mead maximisation of one metric over D (eq. (16)), from the best grid point.
 
     The search variables are (psi, d) with d bounded to [d_min, d_max] (scipy's bounded
     Nelder-Mead); psi is periodic. Invalid poses count as -inf quality.

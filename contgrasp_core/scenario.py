@@ -1,4 +1,4 @@
-"""One model of a closed-loop grasp scenario (paper Sec. V-C and appendix D).
+"""One model of a closed-loop grasp scenario (paper Sec. V-C and Appendix IV).
 
 A :class:`Scenario` is everything that decides what a closed-loop run computes: the rod
 (:class:`~contgrasp_core.rod.model.RodModel`), the object (:class:`~contgrasp_core.objects.ObjectSpec`),
@@ -43,8 +43,8 @@ _LOOP_PARAMETERS = ("duration", "control_period", "dt", "settle_speed", "settle_
 
 @dataclass(frozen=True)
 class GainSettings:
-    """Gains of eq. dynamic_feedback: ``mu1``; ``mu2`` (law units) or, with ``adaptive_mu2``, the
-    appendix's ``mu2(s) = r(s) - 1/(r_obj + r(s))`` with ``object_radius`` (m; None = the
+    """Gains of eq. (19): ``mu1``; ``mu2`` (law units) or, with ``adaptive_mu2``, the
+    Appendix IV ``mu2(s) = r(s) - 1/(r_obj + r(s))`` with ``object_radius`` (m; None = the
     object's nominal radius); ``length_unit`` (metres per law unit, cm as in the paper)."""
 
     mu1: float = 1.0
@@ -192,8 +192,8 @@ PAPER = Scenario(
     gains=GainSettings(object_radius=0.025),
     sensing=SensingSettings(contact_tolerance=0.0, quality_tolerance=0.0005, quality_rate_hz=20.0, reference=(0.08, 0.08)),
 )
-"""The paper's closed-loop grasp (Sec. V-C, appendix D) as the ROS graph runs it: L = 20 cm tapered
+"""The paper's closed-loop grasp (Sec. V-C, Appendix IV) as the ROS graph runs it: L = 20 cm tapered
 1 cm -> 1 mm, octopus material and drag (density 1042 kg/m^3, E = 10 kPa, drag 5110 / 25.55), a
-2.5 cm circle centred at (8, 8) cm, the adaptive mu2 of the appendix, a 2 ms control period
+2.5 cm circle centred at (8, 8) cm, the adaptive mu2 of Appendix IV, a 2 ms control period
 (the law held to first order in the state). The damping ``zeta = 1 /s`` and the contact law are
 this project's choices (docs/rod.md)."""

@@ -3,8 +3,8 @@
 A recording made by the launcher (``contgrasp-launch --bag``) holds the simulator's rod states,
 the sensor's contact states, the quality node's Q1..Q3, ``/diagnostics`` and, as MCAP metadata,
 the run's parameters. :func:`load_run` decodes it (``mcap_ros2``, no message packages) into
-numpy arrays; :func:`recompute` repeats the sensing (paper eqs. rho_alpha_definition and
-delta, Definition 1) and the grasp quality (Sec. IV: W = int_S G G^T ds, Q1 = lambda_min(W),
+numpy arrays; :func:`recompute` repeats the sensing (paper eqs. (4) and
+(5), Definition 1) and the grasp quality (Sec. IV: W = int_S G G^T ds, Q1 = lambda_min(W),
 Q2 = det W, Q3 = lambda_min / lambda_max) from the recorded rod states with exactly the
 functions the nodes call (:mod:`contgrasp_ros.evaluate`), so on a genuine recording the
 recomputation agrees with the recorded topics to rounding (in practice bitwise);
@@ -279,8 +279,8 @@ def load_run(path: str | Path) -> RunData:
 def contact_stats(msg: Any | None) -> dict[str, float | None]:
     """Contact statistics of one contact state (a ContactState message, decoded or not, or
     :class:`~contgrasp_ros.convert.ContactArrays`): over the nodes in contact, the mean of
-    |rho / rho_d - 1| with rho_d = r = delta + rho (eq. delta: delta = r - rho) and the mean of
-    |alpha - pi/2| (eq. rho_alpha_definition); None without a message or contact."""
+    |rho / rho_d - 1| with rho_d = r = delta + rho (eq. (5): delta = r - rho) and the mean of
+    |alpha - pi/2| (eq. (4)); None without a message or contact."""
     none: dict[str, float | None] = {"mean_abs_rho_ratio_minus_1_contact": None, "mean_abs_alpha_minus_half_pi_contact": None}
     if msg is None:
         return none
@@ -357,8 +357,8 @@ def recompute(
     reference: tuple[float, float] | None = None,
 ) -> Recomputation:
     """Recompute the contact state of every recorded rod state that has a recorded contact state
-    of the same step (:func:`~contgrasp_ros.evaluate.sense_rod_state`, eqs. rho_alpha_definition
-    and delta), and the quality of every recorded quality step whose rod state was recorded
+    of the same step (:func:`~contgrasp_ros.evaluate.sense_rod_state`, eqs. (4)
+    and (5)), and the quality of every recorded quality step whose rod state was recorded
     (rod state -> sensing -> :func:`~contgrasp_ros.evaluate.contact_quality`, Sec. IV,
     W = int_S G G^T ds); return the largest absolute differences per quantity.
 

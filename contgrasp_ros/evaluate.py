@@ -1,7 +1,7 @@
 """What the sensing and quality nodes compute from a message, shared with offline analysis.
 
-:func:`sense_rod_state` is the boundary sensor's step (paper eqs. rho_alpha_definition and
-delta, Definition 1) and :func:`contact_quality` the quality node's (Sec. IV: W and Q1..Q3).
+:func:`sense_rod_state` is the boundary sensor's step (paper eqs. (4) and
+(5), Definition 1) and :func:`contact_quality` the quality node's (Sec. IV: W and Q1..Q3).
 ``contgrasp analyze`` calls the same two functions on recorded messages, so a recomputation
 from a recording reproduces the topics exactly. No ROS imports: both run on messages decoded
 without ROS as well.

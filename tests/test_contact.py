@@ -1,4 +1,4 @@
-"""Contact kinematics: ODE (eq. rho_alpha_2) vs geometric sensing, closed forms, validity."""
+"""Contact kinematics: ODE (eq. (8), the contact kinematics) vs geometric sensing, closed forms, validity."""
 
 from __future__ import annotations
 

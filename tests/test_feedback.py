@@ -1,4 +1,4 @@
-"""Feedback law, units, Prop. 1 equilibrium and Lyapunov function (paper Sec. V-B, App. B, D)."""
+"""Feedback law, units, Prop. 5.1 equilibrium and Lyapunov function (paper Sec. V-B, App. II, IV)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def test_feedback_couple_is_minus_ei_times_static_curvature():
     ei = np.array([1e-5, 2e-5, 3e-5])
     mu2 = np.array([0.2, -0.1, 0.4])
     u = feedback_couple(rho, alpha, ei, 1.3, mu2)
-    # eq. curvature_feedback: static kappa = -u / EI
+    # eq. (20): static kappa = -u / EI
     np.testing.assert_allclose(-u / ei, curvature_feedback(rho, alpha, 1.3, mu2), rtol=1e-14)
     with pytest.raises(InvalidParameterError):
         feedback_couple(rho, alpha, -ei, 1.0, 0.0)
@@ -41,7 +41,7 @@ def test_feedback_couple_is_minus_ei_times_static_curvature():
 
 @pytest.mark.parametrize("r_arm", [0.001, 0.0035, 0.01])
 def test_adaptive_mu2_places_equilibrium_at_the_arm_radius(r_arm):
-    # Appendix D: mu2(s) = r - 1/(r_obj + r) makes rho_d = r(s) the Prop. 1 root (cm units)
+    # Appendix IV: mu2(s) = r - 1/(r_obj + r) makes rho_d = r(s) the Prop. 5.1 root (cm units)
     r_obj = 0.025
     mu2 = float(adaptive_mu2(r_arm, r_obj))
     rho_d = equilibrium_distance(1.0 / r_obj, mu2, length_unit=CENTIMETRE)
@@ -52,7 +52,7 @@ def test_adaptive_mu2_places_equilibrium_at_the_arm_radius(r_arm):
 def test_equilibrium_distance_is_the_positive_root(kbar, mu2):
     rho = equilibrium_distance(kbar, mu2)
     assert rho > 0
-    # eq. quadratic and eq. dvds
+    # eq. (21) (the quadratic of Prop. 5.1) and eq. (A-2)
     assert kbar * rho**2 + (1 - mu2 * kbar) * rho - (mu2 + kbar) == pytest.approx(0.0, abs=1e-12)
     assert -(rho - mu2) + kbar / (1 + rho * kbar) == pytest.approx(0.0, abs=1e-12)
     roots = np.roots([kbar, 1 - mu2 * kbar, -(mu2 + kbar)]) if kbar > 0 else np.array([mu2])

@@ -1,4 +1,4 @@
-"""Tests of the optimal-grasp module (paper Sec. III, eq. optimal_kappa) against independent truth."""
+"""Tests of the optimal-grasp module (paper Sec. III, eq. (9)) against independent truth."""
 
 from __future__ import annotations
 
@@ -121,7 +121,7 @@ def test_exact_gradient_matches_central_finite_differences(name):
 
 @pytest.mark.parametrize("name, differs", [("circle", False), ("ellipse", True), ("deformed", True)])
 def test_paper_costates_miss_the_shadow_point_term_except_on_the_circle(name, differs):
-    """eq. costates treat kappa_o(s) as given; only for constant kappa_o is that the gradient."""
+    """The costates, eq. (12), treat kappa_o(s) as given; only for constant kappa_o is that the gradient."""
     p = paper_problem(name, nodes=60)
     u, _ = approach_control(p)
     _, g, pe = gradient(p, u)
@@ -172,7 +172,7 @@ def test_pmp_conditions_hold_at_the_fast_optimum(paper_solutions):
             [p.chi * (r.rho[-1] - p.disc.rho_d[-1]), p.chi * np.sin(r.alpha[-1] - p.disc.alpha_d[-1])]
         )
         assert np.max(np.abs(r.costates[-1])) <= 0.6 * h * max(np.max(np.abs(grad_l)), 1e-12) + 1e-12
-        # the nodal costates satisfy Hamilton's equations (eq. costates plus the s_o costate)
+        # the nodal costates satisfy Hamilton's equations (eq. (12) plus the s_o costate)
         # to second order: central differences vs -dH/dx at interior nodes, outside the thin
         # base layer (width ~0.05 length units, where kappa falls from ~13 to ~5)
         x = np.column_stack([r.rho, r.alpha, r.s_o])
@@ -225,7 +225,7 @@ def test_circle_optimum_follows_the_closed_form_turnpike():
     """Constant-radius arm on a circle: away from both ends the PMP system has the exact steady
     state alpha = pi/2, kappa = 1/(R + rho*), rho* - rho_d = kappa^3 / chi, and the optimum
     approaches it exponentially at the rate of the slowest stable eigenvalue of the linearised
-    state-costate system (computed here independently from eq. costates)."""
+    state-costate system (computed here independently from eq. (12))."""
     R, chi, rd = 5.0, 10.0, 1.0
     b = circle(R)
     L = 2.0 * b.length / 3.0
@@ -264,14 +264,14 @@ def test_circle_optimum_follows_the_closed_form_turnpike():
 
 
 def test_paper_figure2_optima_wrap_the_objects(paper_solutions):
-    """Sec. III-B claims: rho/rho_d -> 1, alpha -> pi/2, kappa follows kappa_o once wrapped.
+    """Sec. III-A claims: rho/rho_d -> 1, alpha -> pi/2, kappa follows kappa_o once wrapped.
 
     Over s/L in [0.4, 0.9] (after the approach boundary layer, whose decay length is
     1/1.07 ~ L/20, and before the free-end layer) the measured deviations are below
     0.026 (rho/rho_d), 0.052 (alpha; the taper rho_d' = -0.045 forces alpha ~ pi/2 - 0.045)
     and 0.012 (kappa vs the parallel-curve curvature kappa_o / (1 + rho_d kappa_o)); the
     thresholds leave ~2x headroom. kappa differs from kappa_o itself because the arm wraps at
-    distance rho_d (paper's remark), by about rho_d kappa_o^2."""
+    distance rho_d (paper Sec. III-A), by about rho_d kappa_o^2."""
     for name, r in paper_solutions.items():
         p = r.problem
         t = p.s / p.s[-1]
@@ -290,7 +290,7 @@ def test_paper_figure2_optima_wrap_the_objects(paper_solutions):
 
 def test_arm_shape_is_consistent_with_the_curvature(paper_solutions):
     """r = gamma(s_o) - rho n and theta = phi + pi/2 - alpha must be an arclength-parametrised
-    curve with d theta/ds = kappa (eq. kinematics), to the O(h^2) of the scheme (outside the base
+    curve with d theta/ds = kappa (eq. (1)), to the O(h^2) of the scheme (outside the base
     layer, where h = 0.043 does not resolve the curvature spike)."""
     r = paper_solutions["deformed"]
     h = r.problem.disc.h

@@ -1,4 +1,4 @@
-"""Grasp maps, Gramian and Q1..Q3 against closed forms and Prop. 2."""
+"""Grasp maps, Gramian and Q1..Q3 against closed forms and Prop. 4.1."""
 
 from __future__ import annotations
 

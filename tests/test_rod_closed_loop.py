@@ -79,7 +79,7 @@ def test_paper_scenario_matches_static_theory_where_unobstructed(paper_run):
     res, m = paper_run, paper_run.model
     s, rho_th, alpha_th = static_solution(res, 0.025)
     r = m.radius(s)
-    # eq. rho_alpha_2 + eq. curvature_feedback from the base: the rod follows it up to where the
+    # eq. (8) + eq. (20) from the base: the rod follows it up to where the
     # static solution would cut into the object (paper: "arm not being able to pass through the
     # object"); the contact reaction loads the proximal rod too, so agreement there is approximate
     free = s < s[np.argmax(rho_th < r)] - 0.01

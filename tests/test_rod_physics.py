@@ -1,4 +1,4 @@
-"""Rod engine against closed forms (paper eq. dynamics, eq. boundary_conditions)."""
+"""Rod engine against closed forms (paper eqs. (17) and (18): dynamics, boundary conditions)."""
 
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def test_uniform_couple_bends_into_circular_arc():
     m = uniform(40, damping=1.0)
     kappa = 2.0
     st = relax(RodSystem(m), RodLoads(couple=np.full(40, -kappa * EI)))
-    # eq. curvature_feedback statics with a fixed couple: kappa = -u/EI at every joint
+    # eq. (20) statics with a fixed couple: kappa = -u/EI at every joint
     np.testing.assert_allclose(m.joint_curvature(st.theta), kappa, rtol=1e-8)
     x = chain.nodes(m, st.theta)
     # the nodes lie on the circle tangent to the base direction, centre (0, rc), every chord h

@@ -1,6 +1,6 @@
 """``contgrasp grasp`` and ``contgrasp figures``: optimal grasps (paper Sec. III, Fig. 2).
 
-``grasp`` solves eq. optimal_kappa for one object with the paper's settings by default
+``grasp`` solves eq. (9) for one object with the paper's settings by default
 (arm L = 2 L_o / 3 tapered L/20 -> L/200, rho_d = r(s), alpha_d = pi/2, chi = 10, the
 paper's (rho0, alpha0) per object) with the fast solver or the paper's sweep.
 ``figures`` regenerates the three Fig. 2 panels into a directory (default docs/figures).
@@ -29,7 +29,7 @@ def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()
     g = subparsers.add_parser(
         "grasp",
         parents=list(parents),
-        help="optimal grasping configuration of eq. optimal_kappa (paper Fig. 2)",
+        help="optimal grasping configuration of eq. (9) (paper Fig. 2)",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -42,7 +42,7 @@ def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()
     g.add_argument("--nodes", type=int, default=500, help="grid nodes along the arm (default 500)")
     g.add_argument("--solver", choices=("fast", "forward-backward"), default="fast", help="fast Newton (default) or the paper's forward-backward sweep")
     g.add_argument("--eta", type=float, default=1e-6, help="sweep step size (paper: 1e-6)")
-    g.add_argument("--gradient", choices=("paper", "exact"), default="paper", help="sweep costates (default: paper's eq. costates)")
+    g.add_argument("--gradient", choices=("paper", "exact"), default="paper", help="sweep costates (default: paper's eq. (12))")
     g.add_argument("--max-iterations", dest="max_iterations", type=int, default=None,
                    help="iteration limit (default 200 fast, 100000 forward-backward)")
     g.add_argument("--tol", type=float, default=None, help="stopping threshold on max|kappa + p2| (default 1e-9 fast, 1e-6 forward-backward)")

@@ -2,8 +2,8 @@
 
 From an initial contact state (rho0, alpha0, s_o0) the arm base pose is placed
 (``r0 = gamma(s_o0) - rho0 n``), a curvature profile kappa(s) is integrated twice:
-(1) through eq. rho_alpha_2 as an ODE in (rho, alpha, s_o), and (2) through eq. kinematics to
-the arm shape, which is then sensed geometrically (closest points, eq. rho_alpha_definition).
+(1) through eq. (8) as an ODE in (rho, alpha, s_o), and (2) through eq. (1) to
+the arm shape, which is then sensed geometrically (closest points, eq. (4)).
 ``max_discrepancy`` is the largest difference between the two, with lengths divided by the
 arm length L and angles in radians.
 """
@@ -93,7 +93,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "kinematics",
         parents=parents,
-        help="integrate the contact kinematics (eq. rho_alpha_2) and compare with geometric sensing",
+        help="integrate the contact kinematics (eq. (8)) and compare with geometric sensing",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

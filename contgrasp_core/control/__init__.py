@@ -1,8 +1,8 @@
 """Feedback control of continuum grasping (paper Sec. V-B).
 
-* :mod:`.law` - the law (eq. dynamic_feedback) and its static curvature form (eq.
-  curvature_feedback), its gradient, Prop. 1's equilibrium, the Lyapunov function, the adaptive
-  ``mu2`` of the appendix and the static closed-loop kinematics;
+* :mod:`.law` - the law (eq. (19)) and its static curvature form (eq. (20)), its gradient,
+  Prop. 5.1's equilibrium, the Lyapunov function, the adaptive ``mu2`` of Appendix IV and the
+  static closed-loop kinematics;
 * :mod:`.gains` - the law's gains at the rod joints (:class:`FeedbackGains`, :func:`paper_gains`);
 * :mod:`.rod_feedback` - the law on the rod engine: continuous state feedback, the sampled law at
   the joints and its first-order hold, the static solution of Fig. 4.

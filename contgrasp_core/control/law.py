@@ -1,10 +1,10 @@
-"""Feedback control of continuum grasping (paper Sec. V-B, Prop. 1, appendix).
+"""Feedback control of continuum grasping (paper Sec. V-B, Prop. 5.1, Appendices II and IV).
 
-The law (eq. dynamic_feedback) ``u = -EI(-mu1 cos(alpha) + (rho - mu2) sin(alpha))`` and its
-static curvature form (eq. curvature_feedback) ``kappa = -mu1 cos(alpha) + (rho - mu2) sin(alpha)``
+The law (eq. (19)) ``u = -EI(-mu1 cos(alpha) + (rho - mu2) sin(alpha))`` and its
+static curvature form (eq. (20)) ``kappa = -mu1 cos(alpha) + (rho - mu2) sin(alpha)``
 are **not dimensionally homogeneous**: ``mu1`` is dimensionless, ``rho - mu2`` is a length and the
 result is a curvature. Their numerical value therefore depends on the length unit in which the
-law is evaluated. The paper's gains (``mu1 = 1`` and the adaptive ``mu2`` of the appendix) are
+law is evaluated. The paper's gains (``mu1 = 1`` and the adaptive ``mu2`` of Appendix IV) are
 meant in centimetres, so every function here takes ``length_unit`` (metres per law unit) with
 the default :data:`CENTIMETRE` = 0.01. Inputs and outputs are SI (metres, 1/m, N m); the gain
 ``mu2`` is given *in law units* (cm by default), exactly as the paper writes it. Conversion to
@@ -65,7 +65,7 @@ def _finite_result(name: str, fn: Callable[[], Any]) -> Any:
 
 
 def _law(rho: ArrayLike, alpha: ArrayLike, mu1: ArrayLike, mu2: ArrayLike, lu: float) -> np.ndarray:
-    """eq. curvature_feedback in 1/m (no checks)."""
+    """eq. (20) in 1/m (no checks)."""
     a = np.asarray(alpha, dtype=float)
     kappa_u = -np.asarray(mu1, dtype=float) * np.cos(a) + (np.asarray(rho, dtype=float) / lu - np.asarray(mu2, dtype=float)) * np.sin(a)
     return kappa_u / lu
@@ -74,10 +74,10 @@ def _law(rho: ArrayLike, alpha: ArrayLike, mu1: ArrayLike, mu2: ArrayLike, lu: f
 def adaptive_mu2(
     radius: ArrayLike, object_radius: float, *, length_unit: float = CENTIMETRE
 ) -> np.ndarray:
-    """Adaptive gain ``mu2(s) = r(s) - 1/(r_obj + r(s))`` of the paper's appendix, in law units.
+    """Adaptive gain ``mu2(s) = r(s) - 1/(r_obj + r(s))`` of the paper's Appendix IV, in law units.
 
-    Obtained from eq. dvds with ``rho_d = r(s)`` and ``kbar = 1/r_obj``, so that the
-    equilibrium contact distance (eq. quadratic) equals the local arm radius.
+    Obtained from eq. (A-2) with ``rho_d = r(s)`` and ``kbar = 1/r_obj``, so that the
+    equilibrium contact distance (eq. (21)) equals the local arm radius.
 
     ``radius`` and ``object_radius`` are in metres; the result is in law units (cm by default).
     """
@@ -97,7 +97,7 @@ def curvature_feedback(
     *,
     length_unit: float = CENTIMETRE,
 ) -> np.ndarray:
-    """Closed-loop curvature (eq. curvature_feedback), in 1/m.
+    """Closed-loop curvature (eq. (20)), in 1/m.
 
     ``kappa_u = -mu1 cos(alpha) + (rho_u - mu2) sin(alpha)`` is evaluated in law units
     (``rho_u = rho / length_unit``; ``mu2`` already in law units) and converted to SI,
@@ -116,11 +116,11 @@ def feedback_couple(
     *,
     length_unit: float = CENTIMETRE,
 ) -> np.ndarray:
-    """Internal couple control (eq. dynamic_feedback), in N m.
+    """Internal couple control (eq. (19)), in N m.
 
     ``u = -EI (-mu1 cos(alpha) + (rho - mu2) sin(alpha))`` with the bracket evaluated in law
     units and converted to 1/m, so ``u = -EI * curvature_feedback(...)``; ``EI`` in N m^2.
-    It enters the moment balance (eq. dynamics) as ``u_s``; the total couple is ``EI kappa + u``.
+    It enters the moment balance (eq. (17)) as ``u_s``; the total couple is ``EI kappa + u``.
     """
     lu = _check_unit(length_unit)
     ei = _stiffness(bending_stiffness)
@@ -143,7 +143,7 @@ def feedback_couple_gradient(
     *,
     length_unit: float = CENTIMETRE,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Partial derivatives of eq. dynamic_feedback: ``du/drho = -EI sin(alpha) / l^2`` (N m/m)
+    """Partial derivatives of eq. (19): ``du/drho = -EI sin(alpha) / l^2`` (N m/m)
     and ``du/dalpha = -EI (mu1 sin(alpha) + (rho/l - mu2) cos(alpha)) / l`` (N m/rad), with
     ``l`` the law's length unit."""
     lu = _check_unit(length_unit)
@@ -161,19 +161,19 @@ def feedback_couple_gradient(
 
 def _check_prop1(kbar: float, mu2: float) -> None:
     if not np.isfinite(kbar) or kbar < 0:
-        raise InvalidParameterError(f"object curvature kbar must be finite and >= 0 (Prop. 1), got {kbar!r}")
+        raise InvalidParameterError(f"object curvature kbar must be finite, >= 0 (Prop. 5.1), got {kbar!r}")
     if not np.isfinite(mu2) or mu2 <= -kbar:
-        raise InvalidParameterError(f"mu2 must be > -kbar = {-kbar!r} (Prop. 1), got {mu2!r}")
+        raise InvalidParameterError(f"mu2 must be > -kbar = {-kbar!r} (Prop. 5.1), got {mu2!r}")
 
 
 def equilibrium_distance(kbar: float, mu2: float, *, length_unit: float = 1.0) -> float:
-    """Desired contact distance ``rho_d``: the admissible root of eq. quadratic (Prop. 1).
+    """Desired contact distance ``rho_d``: the admissible root of eq. (21) (Prop. 5.1).
 
     ``kbar rho^2 + (1 - mu2 kbar) rho - (mu2 + kbar) = 0`` in law units. For ``kbar > 0`` and
     ``mu2 > -kbar`` the roots have negative product, so exactly one is positive; for
     ``kbar = 0`` the root is ``mu2`` (which must be > 0). ``kbar`` in 1/m and ``mu2`` in law
     units; result in metres. With the default ``length_unit=1`` everything is in one
-    consistent (e.g. dimensionless) unit, as in Prop. 1.
+    consistent (e.g. dimensionless) unit, as in Prop. 5.1.
     """
     lu = _check_unit(length_unit)
     mu2 = real("mu2", mu2)
@@ -193,7 +193,7 @@ def equilibrium_distance(kbar: float, mu2: float, *, length_unit: float = 1.0) -
 
 
 def lyapunov(rho: ArrayLike, alpha: ArrayLike, mu2: float, kbar: float) -> np.ndarray:
-    """Lyapunov function of Prop. 1 (appendix), in consistent units:
+    """Lyapunov function of Prop. 5.1 (Appendix II), in consistent units:
 
     ``V = -ln(sin alpha) + (rho - mu2)^2 / 2 - ln(1 + rho kbar)``.
     """
@@ -206,7 +206,7 @@ def lyapunov(rho: ArrayLike, alpha: ArrayLike, mu2: float, kbar: float) -> np.nd
 
 
 def lyapunov_rate(alpha: ArrayLike, mu1: float) -> np.ndarray:
-    """``dV/ds = -mu1 cos^2(alpha) / sin(alpha)`` along the closed loop (Prop. 1 proof)."""
+    """``dV/ds = -mu1 cos^2(alpha) / sin(alpha)`` along the closed loop (proof of Prop. 5.1, Appendix II)."""
 
     def rate() -> np.ndarray:
         a = np.asarray(alpha, dtype=float)
@@ -257,10 +257,10 @@ def closed_loop_kinematics(
     rtol: float = 1e-9,
     atol: float = 1e-12,
 ) -> ClosedLoopKinematics:
-    """Integrate eq. rho_alpha_2 with the feedback curvature eq. curvature_feedback.
+    """Integrate eq. (8) with the feedback curvature eq. (20).
 
     ``drho/ds = -cos(alpha)``, ``dalpha/ds = -kappa + kappa_o sin(alpha) / (1 + rho kappa_o)``,
-    ``ds_o/ds = sin(alpha) / (1 + rho kappa_o)`` (eq. object_speed), with
+    ``ds_o/ds = sin(alpha) / (1 + rho kappa_o)`` (eq. (7)), with
     ``kappa = curvature_feedback(rho, alpha, mu1(s), mu2(s))``. ``object_curvature`` is a constant
     (1/m) or a function of the object arclength ``s_o`` (m). Gains may be scalars or callables of
     ``s`` (m); ``mu2`` in law units. Raises :class:`InvalidParameterError` for a start outside

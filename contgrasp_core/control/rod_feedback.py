@@ -1,25 +1,25 @@
-"""The feedback law applied to the rod engine (paper Sec. V-B on the rod of Sec. V, appendix D).
+"""The feedback law applied to the rod engine (paper Sec. V-B on the rod of Sec. V, Appendix IV).
 
-Two ways the couple of eq. dynamic_feedback reaches the rod:
+Two ways the couple of eq. (19) reaches the rod:
 
 * :class:`StateFeedback` - continuous feedback, the law evaluated on the rod's own state inside
   every implicit step;
 * :func:`feedback_at_joints` + :class:`HeldExpansion` - the sampled law (what the ROS controller
   sends once per control period), held to first order in the state between samples.
 
-:func:`static_solution` is the static closed loop (eq. rho_alpha_2 with eq. curvature_feedback)
+:func:`static_solution` is the static closed loop (eq. (8) with eq. (20))
 the dynamic loop is compared with in Fig. 4.
 
-With a zero-order hold the couple of eq. dynamic_feedback is sampled every control period and
+With a zero-order hold the couple of eq. (19) is sampled every control period and
 held; the loop then inherits a sampling-rate stability limit (the law acts at the element scale,
 where the tapered tip has bending frequencies of thousands of rad/s). :class:`StateFeedback`
 instead evaluates the law inside every Newton iteration of the implicit step, at the new state,
 and supplies its derivative ``du/dtheta`` to the Newton matrix, so the continuous-time loop of
-paper Prop. 2 is integrated with the same unconditional stability as the elastic forces.
+paper Prop. 5.2 is integrated with the same unconditional stability as the elastic forces.
 
 Sensing is at the joints ``s_k = k h`` (the clamp and the internal nodes; the tip carries no
 couple): ``rho_k`` the signed distance of node ``k`` to the boundary, ``alpha_k = phi + pi/2 -
-theta_k`` with ``theta_k`` the mean angle of the adjacent elements (eq. rho_alpha_definition).
+theta_k`` with ``theta_k`` the mean angle of the adjacent elements (eq. (4)).
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ __all__ = ["StateFeedback", "JointSensing", "sense_joints", "joint_couple_jacobi
 
 @dataclass(frozen=True)
 class StateFeedback:
-    """``u(theta)`` of eq. dynamic_feedback sensed on the rod itself, with its Jacobian."""
+    """``u(theta)`` of eq. (19) sensed on the rod itself, with its Jacobian."""
 
     model: RodModel
     obstacle: Obstacle
@@ -75,11 +75,11 @@ class StateFeedback:
 
 @dataclass(frozen=True)
 class JointSensing:
-    """(rho, alpha) at the N joints (eq. rho_alpha_definition; alpha not wrapped: it is used in
+    """(rho, alpha) at the N joints (eq. (4); alpha not wrapped: it is used in
     differences and trigonometric functions), the outward normal at the foot (N, 2) and
     ``foot_turn = kappa_o / (1 + rho kappa_o)`` (1/m), the rate at which the foot's tangent angle
     turns per unit tangential motion of the joint (0 where ``1 + rho kappa_o`` is not safely
-    positive: there the closest point is degenerate, paper Sec. III ``nu_o``)."""
+    positive: there the closest point is degenerate, paper Sec. II-C ``nu_o``)."""
 
     rho: np.ndarray
     alpha: np.ndarray
@@ -130,7 +130,7 @@ class FeedbackExpansion:
 
 
 def feedback_at_joints(model: RodModel, gains: FeedbackGains, rho: Array, alpha: Array) -> FeedbackExpansion:
-    """Couple of eq. dynamic_feedback at the N joints from (rho, alpha) sensed at the N+1 nodes,
+    """Couple of eq. (19) at the N joints from (rho, alpha) sensed at the N+1 nodes,
     with its partial derivatives ``du/drho = -EI sin(alpha) / l^2`` and
     ``du/dalpha = -EI (mu1 sin(alpha) + (rho/l - mu2) cos(alpha)) / l`` (l the law's length unit)."""
     rho, alpha = np.asarray(rho, dtype=float), np.asarray(alpha, dtype=float)
@@ -176,7 +176,7 @@ class HeldExpansion:
 
 
 def static_solution(res: "ClosedLoopResult", obstacle_radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The theoretical static closed loop (eq. rho_alpha_2 with eq. curvature_feedback) from the
+    """The theoretical static closed loop (eq. (8) with eq. (20)) from the
     rod's base state, for a circular object: (s, rho, alpha) on the rod nodes."""
     m, g = res.model, res.gains
     s = m.s_nodes

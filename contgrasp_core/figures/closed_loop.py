@@ -42,7 +42,7 @@ def snapshot_indices(res: ClosedLoopResult, count: int = 6) -> np.ndarray:
 
 def plot_fig4(res: ClosedLoopResult, boundary: Boundary, path: str, obstacle_radius: float | None = None) -> None:
     """Paper Fig. 4: six snapshots of the arm (with its radius) around the object; rho/rho_d and
-    alpha along s at several times, the static solution of eq. curvature_feedback dashed."""
+    alpha along s at several times, the static solution of eq. (20) dashed."""
     m = res.model
     r = m.radius(m.s_nodes)
     fig = Figure(figsize=(7.0, 7.5))
@@ -57,7 +57,7 @@ def plot_fig4(res: ClosedLoopResult, boundary: Boundary, path: str, obstacle_rad
     ax0.set_aspect("equal")
     ax0.set_xlabel("x [cm]")
     ax0.set_ylabel("y [cm]")
-    ax0.set_title("closed-loop grasp (eq. dynamic_feedback), six time instances")
+    ax0.set_title("closed-loop grasp (eq. (19)), six time instances")
     ax1 = fig.add_subplot(2, 2, 3)
     ax2 = fig.add_subplot(2, 2, 4)
     s_n = m.s_nodes / m.length

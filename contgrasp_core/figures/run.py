@@ -1,7 +1,7 @@
 """Figures of a graph run (Fig. 4 style, and the grasp quality over time), drawn from what travelled over the topics.
 
 Top: six snapshots of the arm (with its radius) around the object. Bottom: rho/rho_d and
-alpha along s at those times, with the static theoretical solution of eq. curvature_feedback
+alpha along s at those times, with the static theoretical solution of eq. (20)
 (closed-loop kinematics from the base's contact state, :func:`contgrasp_core.control.closed_loop_kinematics`)
 dashed.
 """

@@ -1,10 +1,10 @@
-"""Optimal grasping configuration (paper Sec. III, eq. optimal_kappa).
+"""Optimal grasping configuration (paper Sec. III, the problem of eq. (9)).
 
 * :func:`grasp_problem`, :func:`paper_problem`, :func:`problem_from_base` build a validated,
   discretised instance (:class:`GraspProblem`).
 * :func:`solve` - the fast default solver: Newton on the KKT system of the discretised problem
   with the exact discrete adjoint gradient (including d kappa_o / d s_o).
-* :func:`forward_backward` - the paper's forward-backward sweep (eq. forward_backward), kept as the
+* :func:`forward_backward` - the paper's forward-backward sweep (eq. (13)), kept as the
   reference baseline (eta = 1e-6, chi = 10 by default).
 * :func:`gradient` - the exact gradient of the discretised cost (for checks and custom solvers).
 
@@ -58,7 +58,7 @@ def _states(problem: GraspProblem, u: NDArray[np.float64]) -> NDArray[np.float64
 
 
 def cost(problem: GraspProblem, kappa: ArrayLike) -> float:
-    """Discretised cost J(kappa) of eq. optimal_kappa (trapezoid rule, no constraint penalty)."""
+    """Discretised cost J(kappa) of eq. (9) (trapezoid rule, no constraint penalty)."""
     u = check_control(problem, kappa)
     x = _states(problem, u)
     return evaluate(problem.disc, u, x, PenaltyState.zero(problem.nodes, problem.penalty)).cost
@@ -69,7 +69,7 @@ def gradient(
 ) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
     """(J, dJ/dkappa (N,), costates p (N, 3)) of the discretised cost, by the exact adjoint.
 
-    ``frozen=True`` gives the paper's eq. costates (kappa_o treated as a given function of s),
+    ``frozen=True`` gives the paper's costates, eq. (12) (kappa_o treated as a given function of s),
     which is NOT the gradient of J unless kappa_o is constant along the boundary.
     ``penalty=True`` adds the state-constraint penalty (zero multipliers) to J and its gradient.
     """

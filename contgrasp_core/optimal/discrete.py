@@ -1,10 +1,10 @@
-"""The discretised optimal-grasp problem (eq. optimal_kappa): dynamics, cost, exact adjoint.
+"""The discretised optimal-grasp problem (eq. (9)): dynamics, cost, exact adjoint.
 
 Discretisation (shared by every solver, so "the same discretised problem" is literal):
 
 * ``N`` equally spaced nodes ``s_i = i h`` on ``[0, L]``; control ``u_i = kappa(s_i)``;
   state ``x_i = (rho_i, alpha_i, sigma_i)`` with ``sigma = s_o`` the shadow-point arclength.
-* Dynamics: eq. rho_alpha_2 with ``s_o' = nu_o`` (eq. object_speed), discretised by the
+* Dynamics: eq. (8) with ``s_o' = nu_o`` (eq. (7)), discretised by the
   implicit trapezoidal rule ``c_i = x_{i+1} - x_i - h/2 (f(x_i, u_i) + f(x_{i+1}, u_{i+1})) = 0``
   with ``x_0 = (rho0, alpha0, s_o0)`` given (second order).
 * Cost: trapezoid rule ``J = sum_i w_i l(x_i, u_i)``, ``l = u^2/2 + chi (1/2 (rho - rho_d)^2
@@ -20,11 +20,11 @@ Discretisation (shared by every solver, so "the same discretised problem" is lit
 The adjoint ``lambda_i`` (one 3-vector per step ``c_i``) solves ``(dc/dx)^T lambda = -dJ/dx``;
 the reduced gradient is ``dJ/du_j = w_j u_j + h/2 (lambda_{j-1,2} + lambda_{j,2})``. The nodal
 costates ``p_j = h / (2 w_j) (lambda_{j-1} + lambda_j)`` are the discrete counterparts of
-eq. costates (plus the third costate of s_o), so the gradient reads ``w_j (kappa_j + p_{j,2})``
+eq. (12) (plus the third costate of s_o), so the gradient reads ``w_j (kappa_j + p_{j,2})``
 and the discrete PMP condition is exactly ``kappa_j = -p_{j,2}``.
 
 With ``frozen=True`` the derivative of kappa_o(s_o(s)) with respect to the state is dropped:
-that is the gradient of the paper's eq. costates, which are written for a given kappa_o(s).
+that is the gradient of the paper's costate equations (12), which are written for a given kappa_o(s).
 """
 
 from __future__ import annotations
@@ -184,8 +184,8 @@ class Linearisation:
     the forward solve, the adjoint, the Lagrangian Hessian and the KKT matrix.
 
     ``k, k1, k2``: kappa_o and its first two derivatives at s_o (:class:`CurvatureTable`);
-    ``S, C``: sin, cos alpha; ``D = 1 + rho kappa_o``; ``f`` (n, 3) of eqs. rho_alpha_2 and
-    object_speed; ``A = df/dx`` (n, 3, 3), formed on first use.
+    ``S, C``: sin, cos alpha; ``D = 1 + rho kappa_o``; ``f`` (n, 3) of eqs. (8) and
+    (7); ``A = df/dx`` (n, 3, 3), formed on first use.
     """
 
     x: Array
@@ -203,7 +203,7 @@ class Linearisation:
         return self.jacobian()
 
     def jacobian(self, frozen: bool = False) -> Array:
-        """df/dx, shape (n, 3, 3); ``frozen`` drops the s_o dependence of kappa_o (eq. costates)."""
+        """df/dx, shape (n, 3, 3); ``frozen`` drops the s_o dependence of kappa_o (eq. (12))."""
         rho, S, C, D, k = self.x[:, 0], self.S, self.C, self.D, self.k
         k1 = np.zeros_like(k) if frozen else self.k1
         SD2 = S / (D * D)
@@ -228,7 +228,7 @@ class Trajectory:
 
     u: Array  # (N,)
     x: Array  # (N, 3)
-    cost: float  # J of eq. optimal_kappa (discretised), without the penalty
+    cost: float  # J of eq. (9) (discretised), without the penalty
     penalty: float  # augmented-Lagrangian term
     lin: Linearisation | None = None
 
@@ -239,7 +239,7 @@ class Trajectory:
 
 # ----------------------------------------------------------------------------- dynamics
 def linearise(x: Array, u: Array, table: CurvatureTable) -> Linearisation:
-    """Evaluate f(x, u) of eqs. rho_alpha_2 / object_speed and the pieces of its derivatives."""
+    """Evaluate f(x, u) of eqs. (8) / (7) and the pieces of its derivatives."""
     rho, alpha, sig = x[:, 0], x[:, 1], x[:, 2]
     k, k1, k2 = table(sig)
     S, C = np.sin(alpha), np.cos(alpha)
@@ -253,7 +253,7 @@ def linearise(x: Array, u: Array, table: CurvatureTable) -> Linearisation:
 
 
 def dynamics(x: Array, u: Array, table: CurvatureTable) -> Array:
-    """f(x, u) of eqs. rho_alpha_2 and object_speed, vectorised over rows of ``x`` (n, 3)."""
+    """f(x, u) of eqs. (8) and (7), vectorised over rows of ``x`` (n, 3)."""
     return linearise(x, u, table).f
 
 
@@ -378,7 +378,7 @@ class ForwardSolveError(RunFailure):
 def solve_states(
     d: Discretisation, u: Array, guess: Array | None = None, *, tol: float = 1e-13, max_newton: int = 12
 ) -> Array:
-    """States x (N, 3) with c(x, u) = 0 (the forward integration of eq. rho_alpha_2).
+    """States x (N, 3) with c(x, u) = 0 (the forward integration of eq. (8)).
 
     Newton's method on the whole block-bidiagonal trapezoidal system, started from ``guess``
     (e.g. the previous iterate; one increase of the defects in a row is tolerated, as happens in
@@ -565,7 +565,7 @@ def _constraint_jacobian(
 def evaluate(
     d: Discretisation, u: Array, x: Array, pen: PenaltyState, lin: Linearisation | None = None
 ) -> Trajectory:
-    """Discrete cost (trapezoid rule of eq. optimal_kappa's integrand) and penalty.
+    """Discrete cost (trapezoid rule of eq. (9)'s integrand) and penalty.
 
     ``lin``: the dynamics linearised at (x, u) if known; kept in the returned trajectory.
     """
@@ -600,7 +600,7 @@ def adjoint(d: Discretisation, traj: Trajectory, pen: PenaltyState, frozen: bool
     """Exact discrete adjoint: multipliers lambda (N-1, 3) and the reduced gradient dJ/du (N,).
 
     Solves ``(dc/dx)^T lambda = -d(J + P)/dx`` (block upper-bidiagonal, one banded solve).
-    With ``frozen`` the kappa_o(s_o) dependence is dropped (paper's eq. costates).
+    With ``frozen`` the kappa_o(s_o) dependence is dropped (paper's costates, eq. (12)).
     Uses ``traj.lin`` when present.
     """
     lin = traj.lin if traj.lin is not None else linearise(traj.x, traj.u, d.table)

@@ -1,4 +1,4 @@
-"""Fast solver of the discretised eq. optimal_kappa: Newton's method on the KKT conditions.
+"""Fast solver of the discretised eq. (9): Newton's method on the KKT conditions.
 
 A cold start runs three stages (``docs/optimal.md`` has the derivation and measurements):
 
@@ -86,7 +86,7 @@ def solve(
     cost_tol: float | None = None,
     coarse_tol: float = 1.0,
 ) -> GraspResult:
-    """Solve eq. optimal_kappa (discretised) by Newton's method on the KKT conditions.
+    """Solve eq. (9) (discretised) by Newton's method on the KKT conditions.
 
     ``initial``: 'approach' (default), 'zero', N curvatures, or a previous GraspResult
     (warm start; its augmented-Lagrangian multipliers are reused when the grids match; no

@@ -1,16 +1,16 @@
-"""The paper's forward-backward sweep (Sec. III-B, eq. forward_backward), the reference baseline.
+"""The paper's forward-backward sweep (Sec. III-A, the update eq. (13)), the reference baseline.
 
-Every iteration: (1) integrate the contact kinematics eq. rho_alpha_2 forward for the current
+Every iteration: (1) integrate the contact kinematics eq. (8) forward for the current
 curvature (trapezoidal rule of :mod:`.discrete`, the same discretisation as the fast solver;
 warm-started Newton on the trajectory); (2) integrate the costates backward from
-p(L) = 0 - by default the paper's eq. costates, i.e. with kappa_o(s) frozen along the arm
+p(L) = 0 - by default the paper's costates, eq. (12), i.e. with kappa_o(s) frozen along the arm
 (``gradient='paper'``), or the exact discrete adjoint including d kappa_o / d s_o
 (``gradient='exact'``); (3) update ``kappa <- kappa + eta (-p_2 - kappa)``.
 
 The paper's defaults are eta = 1e-6 and chi = 10. Iterates that leave the admissible set
 (rho <= 0: the arm passing through the object; alpha outside (0, pi)) are counted and
 reported, not treated as errors; only a singular forward integration
-(1 + rho kappa_o <= 0, where eq. rho_alpha_2 is undefined) or a non-finite cost stops it.
+(1 + rho kappa_o <= 0, where eq. (8) is undefined) or a non-finite cost stops it.
 The state constraints enter through the same augmented-Lagrangian penalty as the fast
 solver (multipliers 0, weight ``problem.penalty``), as the paper's footnote says.
 """
@@ -42,7 +42,7 @@ def forward_backward(
     target_cost: float | None = None,
     time_budget: float | None = None,
 ) -> GraspResult:
-    """Run the forward-backward sweep of eq. forward_backward.
+    """Run the forward-backward sweep of eq. (13).
 
     Stops when ``max |kappa + p_2| <= tol`` (with the costates of ``gradient``), when the cost
     reaches ``target_cost`` (used by the benchmark), after ``max_iterations`` or
@@ -101,7 +101,7 @@ def forward_backward(
         if time_budget is not None and time.perf_counter() - t_start > time_budget:
             message = f"time budget {time_budget:.3g} s exhausted after {k} iterations"
             break
-        u_new = u - eta * grad / d.w  # eq. forward_backward: kappa + eta (-p2 - kappa)
+        u_new = u - eta * grad / d.w  # eq. (13): kappa + eta (-p2 - kappa)
         try:
             x, lin = solve_states_linearised(d, u_new, traj.x)
         except ForwardSolveError as exc:

@@ -4,7 +4,7 @@
   the arm once: steer the contact angle towards ``alpha_ref = pi/2 - c (rho - rho_d)``
   (clipped to [0.3, pi - 0.3]) so that rho approaches rho_d, with
   ``kappa = kappa_o nu_o + k_alpha (alpha - alpha_ref)`` (the first term keeps alpha constant
-  in eq. rho_alpha_2). Gains: ``k_alpha = 20 / L``, ``c = 6 / L``. It only seeds the solvers.
+  in eq. (8)). Gains: ``k_alpha = 20 / L``, ``c = 6 / L``. It only seeds the solvers.
 * ``"zero"``: the straight arm kappa = 0 (may be singular for non-convex objects: a straight arm
   can pass a concave part at a distance beyond its focal distance, 1 + rho kappa_o <= 0).
 * an array of N curvatures, or a previous :class:`GraspResult` (its curvature is

@@ -1,7 +1,7 @@
-"""The optimal-grasp problem (eq. optimal_kappa) and the result both solvers return.
+"""The optimal-grasp problem (eq. (9), minimise J over kappa) and the result both solvers return.
 
 :func:`grasp_problem` validates the inputs and builds a :class:`GraspProblem`;
-:func:`paper_problem` builds the paper's Fig. 2 settings (Sec. III-B); :func:`problem_from_base`
+:func:`paper_problem` builds the paper's Fig. 2 settings (Sec. III-A); :func:`problem_from_base`
 derives the initial contact state from an arm base pose by closest-point projection.
 """
 
@@ -45,7 +45,7 @@ PAPER_SETTINGS: dict[str, tuple[float, float]] = {
     "ellipse": (5.3, 1.8),
     "deformed": (4.7, 1.4),
 }
-"""Paper Sec. III-B: initial (rho0, alpha0) of each object of Fig. 2."""
+"""Paper Sec. III-A: initial (rho0, alpha0) of each object of Fig. 2."""
 
 DEFAULT_MARGINS = (1e-3, 1e-3, 1e-3)
 DEFAULT_PENALTY = 1e3
@@ -53,7 +53,7 @@ DEFAULT_PENALTY = 1e3
 
 @dataclass(frozen=True, eq=False)
 class GraspProblem:
-    """A discretised instance of eq. optimal_kappa.
+    """A discretised instance of eq. (9).
 
     ``boundary`` the object; ``arm`` its length and radius; ``disc`` the arrays the solvers use
     (grid, weights, initial state, desired profiles, chi, tabulated kappa_o);
@@ -136,10 +136,10 @@ def grasp_problem(
     margins: tuple[float, float, float] = DEFAULT_MARGINS,
     penalty: float = DEFAULT_PENALTY,
 ) -> GraspProblem:
-    """Build and validate an instance of eq. optimal_kappa.
+    """Build and validate an instance of eq. (9).
 
     ``arm`` defaults to the paper's tapered arm of length ``2 L_o / 3``; ``rho_d`` defaults to
-    the arm radius r(s) (paper Sec. III-B) and ``alpha_d`` to pi/2. Profiles are scalars,
+    the arm radius r(s) (paper Sec. III-A) and ``alpha_d`` to pi/2. Profiles are scalars,
     arrays of length ``nodes`` or callables of s. ``margins`` are the distances kept from the
     boundaries of rho > 0, 0 < alpha < pi and 1 + rho kappa_o > 0 by the constraint penalty.
     Raises InvalidParameterError (bad chi, nodes, profiles) or ContactValidityError
@@ -233,7 +233,7 @@ def problem_from_base(boundary: Boundary, base: BasePose, **kwargs: Any) -> Gras
 
 
 def paper_problem(obj: str | ObjectSpec, *, nodes: int = 500, **kwargs: Any) -> GraspProblem:
-    """The paper's Sec. III-B optimal-grasp problem for an object.
+    """The paper's Sec. III-A optimal-grasp problem for an object.
 
     ``obj`` is an :class:`~contgrasp_core.objects.ObjectSpec` or its text (``'circle'``,
     ``'ellipse:6,3'``, ...; paper units). Settings: L = 2 L_o / 3, tapered radius L/20 -> L/200,
@@ -274,7 +274,7 @@ class ConstraintStatus:
 
 
 def constraint_status(problem: GraspProblem, x: Array, **counts: Any) -> ConstraintStatus:
-    """Check the state constraints of eq. optimal_kappa at every node of ``x`` (N, 3)."""
+    """Check the state constraints of eq. (9) at every node of ``x`` (N, 3)."""
     k, _, _ = problem.disc.table(x[:, 2])
     speed = 1.0 + x[:, 0] * k
     ok = bool(
@@ -295,12 +295,12 @@ def constraint_status(problem: GraspProblem, x: Array, **counts: Any) -> Constra
 
 @dataclass(frozen=True, eq=False)
 class GraspResult:
-    """Solution of eq. optimal_kappa from either solver.
+    """Solution of eq. (9) from either solver.
 
     Arrays over the arm grid ``s``: ``kappa`` (control), ``rho``, ``alpha``, ``s_o`` (state,
-    s_o unwrapped), ``costates`` (N, 3) = (p_1, p_2, p_s_o) (eq. costates plus the s_o
+    s_o unwrapped), ``costates`` (N, 3) = (p_1, p_2, p_s_o) (eq. (12) plus the s_o
     costate), ``kappa_o`` = kappa_o(s_o(s)) (tabulated curvature), ``shape`` (arm centreline
-    r(s), theta(s) from ``r = gamma(s_o) - rho n``; computed lazily). ``cost`` is J of eq. optimal_kappa (trapezoid rule) without
+    r(s), theta(s) from ``r = gamma(s_o) - rho n``; computed lazily). ``cost`` is J of eq. (9) (trapezoid rule) without
     the constraint penalty (``penalty``). ``residual`` = max_s |kappa + p_2| (the discrete
     PMP residual, in curvature units). ``history`` holds per-iteration ``cost`` and
     ``residual`` arrays (and ``step`` for the fast solver).

@@ -1,4 +1,4 @@
-"""Planar Cosserat/Kirchhoff rod dynamics (paper eq. dynamics, eq. boundary_conditions).
+"""Planar Cosserat/Kirchhoff rod dynamics (paper eqs. (17), (18): dynamics, boundary conditions).
 
 Reduced coordinates (element angles; exactly inextensible and unshearable), implicit
 time stepping with Newton, drag, damping, couple control and penalty contact with any

@@ -1,4 +1,4 @@
-"""Reduced-coordinate kinematics of the discrete rod (eq. kinematics, eq. boundary_conditions).
+"""Reduced-coordinate kinematics of the discrete rod (eq. (1), arm kinematics; eq. (18), clamped base).
 
 Generalised coordinates are the element angles ``theta`` (N,). With ``a_j = (cos, sin)(theta_j)``
 and ``b_j = R(pi/2) a_j``, the nodes are ``x_k = r0 + h sum_{j<k} a_j`` and the element centres

@@ -4,10 +4,10 @@ Two ways to close the loop:
 
 * ``control_period=None`` (default): continuous feedback. The law is evaluated on the rod's own
   state inside every implicit step (:class:`~contgrasp_core.control.StateFeedback`), which is
-  the continuous-time loop of paper Prop. 2 and stays stable at large steps ``dt``.
+  the continuous-time loop of paper Prop. 5.2 and stays stable at large steps ``dt``.
 * ``control_period=T``: sampled feedback. Every ``T`` seconds the runner senses ``(rho, alpha)``
-  at the rod nodes from the current centreline (eq. rho_alpha_definition), evaluates the couple of
-  eq. dynamic_feedback at the joints and holds it (zero-order hold) while the integrator advances
+  at the rod nodes from the current centreline (eq. (4)), evaluates the couple of
+  eq. (19) at the joints and holds it (zero-order hold) while the integrator advances
   with steps ``dt`` dividing ``T``. This is what a lock-step ROS loop does; it needs ``T`` well
   below the fastest bending period of the tip (see docs/rod.md) or the loop flutters.
 
@@ -41,7 +41,7 @@ __all__ = ["NodeSensing", "sense_nodes", "ClosedLoopConfig",
 class NodeSensing:
     """Sensed contact geometry at the rod nodes: ``rho`` (signed distance of the centreline to the
     boundary, m), ``alpha`` (rad, in (-pi, pi]), ``s_o``, ``foot`` (N+1, 2) and the surface
-    penetration ``delta = r(s) - rho`` (paper eq. delta)."""
+    penetration ``delta = r(s) - rho`` (paper eq. (5))."""
 
     rho: np.ndarray
     alpha: np.ndarray
@@ -51,7 +51,7 @@ class NodeSensing:
 
 
 def sense_nodes(model: RodModel, obstacle: Obstacle, theta: np.ndarray) -> NodeSensing:
-    """Geometric sensing (eq. rho_alpha_definition) at the nodes of the rod with angles ``theta``.
+    """Geometric sensing (eq. (4)) at the nodes of the rod with angles ``theta``.
 
     Same definitions as :func:`contgrasp_core.contact.sense` (checked in the tests), using the
     fast :class:`Obstacle` projection.
@@ -154,7 +154,7 @@ def _single_thread_blas() -> contextlib.AbstractContextManager[object]:
 
 def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig = ClosedLoopConfig(),
                     state: RodState | None = None) -> ClosedLoopResult:
-    """Run the feedback loop (eq. dynamic_feedback on the rod of eq. dynamics) from ``state``
+    """Run the feedback loop (eq. (19) on the rod of eq. (17)) from ``state``
     (default: straight at rest) until settled or ``config.duration``."""
     if system.obstacle is None:
         raise InvalidParameterError("the closed loop needs an obstacle to sense (RodSystem.obstacle is None)")

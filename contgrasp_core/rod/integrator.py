@@ -1,4 +1,4 @@
-"""Implicit time integration of the reduced-coordinate rod (paper eq. dynamics, boundary_conditions).
+"""Implicit time integration of the reduced-coordinate rod (paper eqs. (17), (18)).
 
 Equations of motion (Lagrange, generalised coordinates ``theta``):
 
@@ -75,7 +75,7 @@ class CoupleFeedback(Protocol):
 @dataclass(frozen=True)
 class RodLoads:
     """Applied loads: internal couple control ``couple`` at the joints ``s_k = k h`` (N,) in N m
-    (eq. dynamics ``u``, held over the step), point forces on the nodes (N+1, 2) in N, and an
+    (eq. (17) ``u``, held over the step), point forces on the nodes (N+1, 2) in N, and an
     optional state feedback (a :class:`CoupleFeedback`, e.g.
     :class:`~contgrasp_core.control.StateFeedback`) whose couple is evaluated implicitly at the new
     state and added to ``couple``."""

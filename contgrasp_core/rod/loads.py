@@ -1,8 +1,8 @@
-"""External loads on the rod's element centres and their linearisations (paper eq. dynamics).
+"""External loads on the rod's element centres and their linearisations (paper eq. (17), the rod dynamics).
 
-* Fluid drag ``f^drag`` (appendix D): per unit length
+* Fluid drag ``f^drag`` (Appendix IV): per unit length
   ``-c_n d |v.b| (v.b) b - c_t d |v.a| (v.a) a`` with the local diameter ``d = 2 r(s)``.
-* Contact with a fixed object (paper Remark "Contact forces", Sec. V-C "modeled as an
+* Contact with a fixed object (paper Remark 2, "Contact forces", Sec. V-C "modeled as an
   obstacle, rudimentary repulsive contact forces"): the rod's outer surface at element ``i``
   penetrates the object by ``p_i = r_i - n_i . (c_i - foot_i)`` where ``foot_i`` and the outward
   normal ``n_i`` come from the closest-point projection at the start of the time step (the

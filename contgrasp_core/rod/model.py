@@ -1,10 +1,10 @@
-"""Material and discretisation of the planar Kirchhoff rod (paper eq. dynamics, appendix D).
+"""Material and discretisation of the planar Kirchhoff rod (paper eq. (17), the rod dynamics; Appendix IV).
 
 The rod of length ``L`` is cut into ``N`` equal elements of length ``h = L/N``. Element ``i``
 carries the tangent angle ``theta_i`` at its centre ``s = (i + 1/2) h`` (reduced coordinates:
 the rod is exactly inextensible and unshearable). Bending joints sit at the nodes
 ``s_k = k h``, ``k = 0..N-1``; joint 0 is the clamp (distance ``h/2`` to the first centre),
-the free tip ``s = L`` carries no couple (eq. boundary_conditions).
+the free tip ``s = L`` carries no couple (eq. (18)).
 
 The cross-section is a circle whose radius tapers linearly from ``radius_base`` to
 ``radius_tip``; ``A = pi r^2``, ``I = pi r^4 / 4`` from the local radius.

@@ -10,7 +10,7 @@ per call; the rod engine queries the boundary every time step. :class:`Obstacle`
   osculating circle of that sample (error ``O(ds^3 kappa^2)``, about 1e-10 of the object size
   with the default 8192 samples; checked against ``Boundary.project`` in the tests).
 
-It returns the same geometric quantities as the paper's sensing (eq. rho_alpha_definition):
+It returns the same geometric quantities as the paper's sensing (eq. (4)):
 foot, object arclength, tangent angle ``phi``, curvature, and the signed distance (> 0 outside).
 """
 

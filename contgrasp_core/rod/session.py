@@ -5,8 +5,8 @@ One control cycle k (paper Sec. V-B):
 1. :meth:`LoopSession.observe` - the rod state k as arrays at the nodes (what the simulator
    publishes) and the settle/duration bookkeeping;
 2. :func:`sense_observation` - geometric sensing of (rho, alpha, delta, s_o) from those arrays
-   (:func:`contgrasp_core.contact.sense`, eq. rho_alpha_definition) (what the sensor does);
-3. :func:`contgrasp_core.control.feedback_at_joints` - the couple of eq. dynamic_feedback at the joints and its
+   (:func:`contgrasp_core.contact.sense`, eq. (4)) (what the sensor does);
+3. :func:`contgrasp_core.control.feedback_at_joints` - the couple of eq. (19) at the joints and its
    first-order expansion in (rho, alpha) (what the controller does);
 4. :meth:`LoopSession.advance` - hold the couple, to first order in the state
    (:class:`contgrasp_core.control.HeldExpansion`), for one control period (the integrator's substeps) to reach
@@ -228,7 +228,7 @@ class LoopSession:
 
 
 def sense_observation(obs: Observation, boundary: Boundary, tol: float = 0.0) -> ContactState:
-    """Geometric sensing at the rod nodes (eq. rho_alpha_definition, eq. delta, Definition 1)."""
+    """Geometric sensing at the rod nodes (eq. (4), eq. (5), Definition 1)."""
     return sense(ArmShape(s=obs.s, r=obs.x, theta=obs.theta), boundary, obs.radius, tol=tol)
 
 

@@ -1,7 +1,7 @@
 """boundary_sensor: rod state + object boundary -> contact state (rho, alpha, delta, s_o, contact set).
 
 Thin wrapper of :func:`contgrasp_ros.evaluate.sense_rod_state` (:func:`contgrasp_core.contact.sense`,
-paper eqs. rho_alpha_definition, delta, Definition 1). Malformed rod states or objects, bad
+paper eqs. (4), (5), Definition 1). Malformed rod states or objects, bad
 stamps and states whose sensing fails are dropped with a throttled warning and counted per
 reason (``/diagnostics``); see :mod:`contgrasp_ros.runtime`.
 """

@@ -1,8 +1,8 @@
-"""grasp_controller: contact state -> internal couple control u(s) (paper eq. dynamic_feedback).
+"""grasp_controller: contact state -> internal couple control u(s) (paper eq. (19)).
 
 Thin wrapper of :func:`contgrasp_core.rod.session.feedback_at_joints`: the same function the
 core-only closed loop calls, so a lock-step ROS run reproduces it exactly. Gains (mu1, mu2 or
-the adaptive mu2 of the appendix, the law's length unit) are parameters; a change takes effect
+the adaptive mu2 of Appendix IV, the law's length unit) are parameters; a change takes effect
 at the next contact message (a set that gives unusable gains is refused). The rod geometry
 parameters (read-only) must match the simulator's. Malformed contact states, bad stamps and
 states of another rod size are dropped and counted (``/diagnostics``).
@@ -46,9 +46,9 @@ class GraspController(Node):
         sim_time_by_default(self)
         self.model = declare_rod_model(self)
         paper = PAPER.node_parameters("grasp_controller")
-        declare(self, "mu1", paper["mu1"], "gain mu1 > 0 of eq. dynamic_feedback", lo=1e-9, hi=1e6)
+        declare(self, "mu1", paper["mu1"], "gain mu1 > 0 of eq. (19)", lo=1e-9, hi=1e6)
         declare(self, "mu2", paper["mu2"], "gain mu2 in law length units (used when adaptive_mu2 is false)", lo=-MU2_LIMIT, hi=MU2_LIMIT)
-        declare(self, "adaptive_mu2", paper["adaptive_mu2"], "use mu2(s) = r(s) - 1/(r_obj + r(s)) (paper appendix)")
+        declare(self, "adaptive_mu2", paper["adaptive_mu2"], "use mu2(s) = r(s) - 1/(r_obj + r(s)) (paper App. IV)")
         declare(self, "object_radius", paper["object_radius"], "object radius r_obj for the adaptive mu2 [m]", lo=1e-9, hi=1e3)
         declare(self, "length_unit", paper["length_unit"], "metres per length unit of the law (paper: cm)", lo=1e-9, hi=1e3)
         self.drops = DropCounter(self)

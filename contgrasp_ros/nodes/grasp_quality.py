@@ -1,6 +1,6 @@
 """grasp_quality: contact state -> continuum grasp quality (W, Q1..Q3) at a configurable rate.
 
-Thin wrapper of :func:`contgrasp_ros.evaluate.contact_quality` (paper Sec. IV, Prop. 2).
+Thin wrapper of :func:`contgrasp_ros.evaluate.contact_quality` (paper Sec. IV, Prop. 4.1).
 Malformed contact states or objects, bad stamps and states that arrive before the object are
 dropped and counted (``/diagnostics``).
 """
