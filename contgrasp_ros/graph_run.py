@@ -32,8 +32,9 @@ from std_srvs.srv import SetBool
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos, topics
-from contgrasp_ros.analysis import contact_stats
+from contgrasp_ros.convert import stamp_seconds
 from contgrasp_ros.runtime import DropCounter, GuardedSpin, make_executor
+from contgrasp_ros.summary import FinalQuality, FinalState, RunSummary, build_summary, contact_stats
 
 __all__ = ["Monitor", "run_graph"]
 
@@ -122,35 +123,17 @@ def _overrides(values: dict[str, Any]) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-def _summary(mon: Monitor) -> dict[str, Any]:
-    st = mon.status
-
-    def num(key: str) -> float | None:
-        try:
-            return float(st[key])
-        except (KeyError, ValueError):
-            return None
-
-    out: dict[str, Any] = {
-        "settled": st.get("settled") == "true",
-        "settle_time_s": num("settle_time_s"),
-        "sim_time_s": num("sim_time_s"),
-        "missed_deadlines": int(num("missed_deadlines") or 0),
-        "max_penetration": num("max_penetration"),
-        "steps": int(num("step") or 0),
-        "simulator_state": st.get("state", "unknown"),
-        "loop_wall_time_s": mon.loop_wall_time,
-    }
-    rod = mon.rod
-    out["final"] = None if rod is None else {"s": list(rod.s), "x": list(rod.x), "y": list(rod.y), "theta": list(rod.theta)}
-    q = mon.quality
-    out["final_quality"] = None if q is None else {"Q1": q.q1, "Q2": q.q2, "Q3": q.q3, "valid": q.valid, "contact_length": q.contact_length}
-    out.update(contact_stats(mon.contact))
-    out["restarts"] = dict(mon.restarts)
-    out["faults"] = list(mon.faults)
-    out["launcher_errors"] = dict(mon.drops.counts)
-    out["history"] = mon.history
-    return out
+def _summary(mon: Monitor, wall_time_s: float | None = None) -> RunSummary:
+    """The run's :class:`~contgrasp_ros.summary.RunSummary` from what the monitor received."""
+    rod, q, c = mon.rod, mon.quality, mon.contact
+    return build_summary(
+        mon.status,
+        final=None if rod is None else FinalState.of(rod.step, stamp_seconds(rod.header), rod.s, rod.x, rod.y, rod.theta),
+        final_quality=None if q is None else FinalQuality.of(q.q1, q.q2, q.q3, q.valid, q.contact_length),
+        contact=contact_stats(None) if c is None else contact_stats(c.rho, c.delta, c.alpha, c.in_contact),
+        wall_time_s=wall_time_s,
+        loop_wall_time_s=mon.loop_wall_time,
+    )
 
 
 def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn: int = 0,
@@ -283,7 +266,8 @@ def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
 
 
 def bag_summary(path: Path) -> dict[str, Any]:
-    """What the finished recording holds: size, written messages per topic, the recorder's counts."""
+    """What the finished recording holds: size, wall-clock time from the first to the last
+    recorded message, written messages per topic, the recorder's counts."""
     from contgrasp_ros.bag import BagError
     from contgrasp_ros.bag.reader import info, open_recording
     from contgrasp_ros.bag.writer import RECORDER_RECORD
@@ -297,7 +281,7 @@ def bag_summary(path: Path) -> dict[str, Any]:
     return {
         "path": str(path),
         "size_bytes": meta["size_bytes"],
-        "duration_s": meta["duration_s"],
+        "wall_time_s": meta["duration_s"],  # log times are the recorder's wall clock at receipt
         "messages": meta["message_count"],
         "received": json.loads(counts.get("received", "null")),
         "written": json.loads(counts.get("written", "null")),
@@ -325,6 +309,7 @@ def run_graph(
     from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
     from contgrasp_ros.nodes.rod_simulator import RodSimulator
 
+    wall0 = time.perf_counter()
     sim_params = {**params["rod_simulator"], "start_paused": True}
     rclpy.init(args=[])
     executor = make_executor()
@@ -332,7 +317,8 @@ def run_graph(
     group = None
     tmp: Path | None = None
     code = 0
-    summary: dict[str, Any] = {}
+    mon: Monitor | None = None
+    extra: dict[str, Any] = {}
     on_recorder_lost: Callable[[], None] | None = None
     try:
         mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None)
@@ -390,9 +376,10 @@ def run_graph(
             error = _drive(mon, executor, group, timeout, respawn, on_recorder_lost)
         except (KeyboardInterrupt, ExternalShutdownException):
             error, code = "interrupted", 130
-        summary = _summary(mon)
+        extra = {"restarts": dict(mon.restarts), "faults": list(mon.faults), "launcher_errors": dict(mon.drops.counts),
+                 "history": mon.history}
         if error:
-            summary["error"] = error
+            extra["error"] = error
             code = code or 1
     finally:
         summary_codes: dict[str, int] = {}
@@ -406,6 +393,8 @@ def run_graph(
             n.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
+    # built from the monitor's plain values once everything is stopped (the wall time included)
+    summary = {**_summary(mon, time.perf_counter() - wall0).to_dict(), **extra} if mon is not None else {}
     if record is not None:
         summary["bag"] = bag_summary(Path(record["output"]))
     summary["exit_codes"] = summary_codes

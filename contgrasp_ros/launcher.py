@@ -17,7 +17,6 @@ import os
 import random
 import sys
 import tempfile
-import time
 from collections.abc import Sequence
 from dataclasses import replace
 from importlib import resources
@@ -170,10 +169,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.respawn < 0 or (args.respawn and args.in_process):
         raise InvalidParameterError(f"--respawn takes N >= 0 and applies to separate node processes only, got {args.respawn}"
                                     + (" with --in-process" if args.in_process else ""))
-    wall0 = time.perf_counter()
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
                               respawn=args.respawn, keep_history=args.plot is not None)
-    summary["wall_time_s"] = time.perf_counter() - wall0
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
     if args.plot is not None and summary.get("history"):
