@@ -9,7 +9,7 @@ the human-readable log on stderr stays as it is. Every event has ``event`` (its 
   tools), ``mode`` (``processes`` or ``in-process``); always the first event;
 * ``started``: ``node``, ``pid``, a node process was started; ``restarted``: the same, for a
   process started again after it exited;
-* ``exited``: ``node``, ``pid``, ``code`` (negative: killed by that signal), ``action`` (what
+* ``exited``: ``node``, ``pid``, ``exit_code`` (negative: killed by that signal), ``action`` (what
   the launcher did: ``restarted``, ``continued without it``, ``continued unrecorded``, ``run
   ended``) for a node process that exited during the run;
 * ``resumed``: ``restart`` (false: the run started; true: a restarted simulator was resumed);

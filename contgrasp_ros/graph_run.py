@@ -7,6 +7,9 @@ then waits for the simulator to report ``finished`` (or ``failed``) on ``/diagno
 With recording on, the ``mcap_recorder`` starts first, the simulator is resumed only once the
 recorder subscribes to every stream, and it is stopped last, after the other nodes, so the
 recording holds the whole run; the summary's ``bag`` entry is read back from the finished file.
+What to do when (resume, restart a dead node, go on without it, time out) is decided by
+:class:`contgrasp_ros.supervision.Supervisor`; ``_drive`` feeds it what rclpy and the process
+group show and carries out its actions. The summary is :class:`contgrasp_ros.summary.RunSummary`.
 """
 
 from __future__ import annotations

@@ -281,7 +281,7 @@ class Supervisor:
         """Record an exit (the run-ending one only as an event: the summary's error names it)."""
         if action != "run ended":
             self.faults.append({"node": e.node, "exit_code": e.code, "action": action})
-        out.append(Notify("exited", {"node": e.node, "pid": e.pid, "code": e.code, "action": action}))
+        out.append(Notify("exited", {"node": e.node, "pid": e.pid, "exit_code": e.code, "action": action}))
 
     def _resume_restarted(self, obs: Observation, out: list[Action]) -> None:
         # Wait until the new simulator's state publisher is discovered, and a grace period for

@@ -22,14 +22,14 @@ def test_each_event_is_one_json_object_per_line() -> None:
     w = EventWriter(buf)
     w("domain_id", domain_id=42, mode="processes")
     w("started", node="rod_simulator", pid=1234)
-    w("exited", node="rod_simulator", pid=1234, code=-9, action="restarted")
+    w("exited", node="rod_simulator", pid=1234, exit_code=-9, action="restarted")
     w("finished", exit_code=0, error=None)
     lines = buf.getvalue().splitlines()
     assert len(lines) == 4 and all(line.startswith("{") and line.endswith("}") for line in lines)
     got = list(read_events(lines))
     assert [e["event"] for e in got] == ["domain_id", "started", "exited", "finished"]
     assert got[1] == {"event": "started", "time": got[1]["time"], "node": "rod_simulator", "pid": 1234}
-    assert got[2]["code"] == -9 and got[3]["error"] is None
+    assert got[2]["exit_code"] == -9 and got[3]["error"] is None
     assert all(isinstance(e["time"], float) for e in got)
     assert got == [json.loads(line) for line in lines]
 

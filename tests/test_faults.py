@@ -101,7 +101,7 @@ def test_controller_and_sensor_killed_and_respawned_the_loop_resumes(tmp_path: P
     assert ev[0]["event"] == "domain_id" and ev[0]["mode"] == "processes"
     assert ev[-1]["event"] == "finished" and ev[-1]["exit_code"] == 0 and ev[-1]["error"] is None
     assert launch.pids == out["pids"]  # each node's latest pid
-    assert [(e["node"], e["code"], e["action"]) for e in ev if e["event"] == "exited"] == [
+    assert [(e["node"], e["exit_code"], e["action"]) for e in ev if e["event"] == "exited"] == [
         ("grasp_controller", -9, "restarted"), ("boundary_sensor", -9, "restarted")]
     assert sorted(e["node"] for e in ev if e["event"] == "restarted") == ["boundary_sensor", "grasp_controller"]
     assert [e["restart"] for e in ev if e["event"] == "resumed"] == [False]
@@ -143,7 +143,7 @@ def test_killed_simulator_stops_the_run_and_the_recording_is_complete(tmp_path: 
     assert code == 1 and out["error"] == "node 'rod_simulator' exited with code -9"
     ended = [e for e in launch.events if e["event"] in ("exited", "finished")]
     assert [e["event"] for e in ended] == ["exited", "finished"]
-    assert ended[0]["node"] == "rod_simulator" and ended[0]["action"] == "run ended" and ended[0]["code"] == -9
+    assert ended[0]["node"] == "rod_simulator" and ended[0]["action"] == "run ended" and ended[0]["exit_code"] == -9
     assert ended[1]["exit_code"] == 1 and ended[1]["error"] == out["error"]
     assert out["exit_codes"]["rod_simulator"] == -9
     assert all(out["exit_codes"][n] == 0 for n in NODES[1:]), out["exit_codes"]  # the others stopped cleanly

@@ -106,7 +106,7 @@ def test_a_node_dying_before_the_start_ends_the_run() -> None:
     run = Run()
     out = run.kill(SENSOR, 11, 2)
     assert out[-1] == Finish("node 'boundary_sensor' exited with code 2")
-    assert events(out) == [("exited", {"node": SENSOR, "pid": 11, "code": 2, "action": "run ended"})]
+    assert events(out) == [("exited", {"node": SENSOR, "pid": 11, "exit_code": 2, "action": "run ended"})]
     assert run.sup.faults == []  # (the error names it)
 
 
@@ -119,7 +119,7 @@ def test_a_node_dying_while_resuming_ends_the_run() -> None:
 def test_simulator_death_without_respawn_ends_the_run() -> None:
     run = Run()
     run.start()
-    assert run.kill(SIM, 10) == [Notify("exited", {"node": SIM, "pid": 10, "code": -9, "action": "run ended"}),
+    assert run.kill(SIM, 10) == [Notify("exited", {"node": SIM, "pid": 10, "exit_code": -9, "action": "run ended"}),
                                  Finish("node 'rod_simulator' exited with code -9")]
     assert run.sup.done
 
@@ -128,7 +128,7 @@ def test_sensor_death_beyond_respawn_continues_without_it() -> None:
     run = Run()
     run.start()
     out = run.kill(SENSOR, 11)
-    assert out == [Notify("exited", {"node": SENSOR, "pid": 11, "code": -9, "action": "continued without it"}),
+    assert out == [Notify("exited", {"node": SENSOR, "pid": 11, "exit_code": -9, "action": "continued without it"}),
                    Log("error", "node 'boundary_sensor' exited with code -9; the run continues without it "
                                 "(the simulator applies its timeout fallback)")]
     assert run.sup.lost == {SENSOR} and run.sup.phase is Phase.RUNNING
@@ -155,7 +155,7 @@ def test_recorder_death_continues_unrecorded_and_lowers_min_subscribers() -> Non
     run = Run(respawn=3, recording=True)
     run.start()
     out = run.kill(REC, 20, 1)
-    assert out == [Notify("exited", {"node": REC, "pid": 20, "code": 1, "action": "continued unrecorded"}),
+    assert out == [Notify("exited", {"node": REC, "pid": 20, "exit_code": 1, "action": "continued unrecorded"}),
                    Log("error", "the recorder exited with code 1; the run continues unrecorded"),
                    Unrecorded(), SetMinSubscribers(2)]
     assert not run.sup.recording and REC not in run.sup.restarts  # never restarted
