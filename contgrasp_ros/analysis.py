@@ -8,9 +8,9 @@ numpy arrays; :func:`recompute` repeats the sensing (paper eqs. (4) and
 Q2 = det W, Q3 = lambda_min / lambda_max) from the recorded rod states with exactly the
 functions the nodes call (:mod:`contgrasp_ros.evaluate`), so on a genuine recording the
 recomputation agrees with the recorded topics to rounding (in practice bitwise);
-:func:`summarize` builds the launcher's summary (:func:`contact_stats` is its contact
-statistics) plus the recomputation errors. :func:`write_csv` and :func:`write_plots` export
-the run.
+:func:`summarize` builds the launcher's summary (with the launcher's own builder,
+:func:`contgrasp_ros.summary.build_summary`) plus the recomputation errors. :func:`write_csv`
+and :func:`write_plots` export the run.
 
 Recordings may be decimated (the recorder keeps rod state/contact/couple only every so many
 seconds of sim time, plus the last message of each topic): messages are paired by their
@@ -41,6 +41,7 @@ from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
 from contgrasp_core.scenario import PAPER
 from contgrasp_ros.convert import ContactArrays, RodArrays, boundary_from_msg, contact_arrays, rod_state_arrays, stamp_seconds
 from contgrasp_ros.evaluate import contact_quality, sense_rod_state
+from contgrasp_ros.summary import FinalQuality, FinalState, build_summary, contact_stats
 
 __all__ = [
     "RodSeries",
@@ -49,7 +50,6 @@ __all__ = [
     "RunData",
     "Recomputation",
     "load_run",
-    "contact_stats",
     "recompute",
     "summarize",
     "write_csv",
@@ -276,25 +276,6 @@ def load_run(path: str | Path) -> RunData:
     )
 
 
-def contact_stats(msg: Any | None) -> dict[str, float | None]:
-    """Contact statistics of one contact state (a ContactState message, decoded or not, or
-    :class:`~contgrasp_ros.convert.ContactArrays`): over the nodes in contact, the mean of
-    |rho / rho_d - 1| with rho_d = r = delta + rho (eq. (5): delta = r - rho) and the mean of
-    |alpha - pi/2| (eq. (4)); None without a message or contact."""
-    none: dict[str, float | None] = {"mean_abs_rho_ratio_minus_1_contact": None, "mean_abs_alpha_minus_half_pi_contact": None}
-    if msg is None:
-        return none
-    rho = np.asarray(msg.rho)
-    radius = np.asarray(msg.delta) + rho
-    mask = np.asarray(msg.in_contact, dtype=bool)
-    if not mask.any():
-        return none
-    return {
-        "mean_abs_rho_ratio_minus_1_contact": float(np.mean(np.abs(rho[mask] / radius[mask] - 1.0))),
-        "mean_abs_alpha_minus_half_pi_contact": float(np.mean(np.abs(np.asarray(msg.alpha)[mask] - np.pi / 2))),
-    }
-
-
 @dataclass
 class Recomputation:
     """Recomputed contact and quality and their differences from the recorded topics."""
@@ -500,46 +481,27 @@ def history(run: RunData, period: float = 0.01) -> list[dict[str, Any]]:
     return out
 
 
-def _last_contact(c: ContactSeries | None) -> Any:
-    if c is None:
-        return None
-    return ContactArrays(int(c.step[-1]), float(c.t[-1]), c.s[-1], c.rho[-1], c.alpha[-1], c.delta[-1], c.s_o[-1],
-                         np.stack([c.shadow_x[-1], c.shadow_y[-1]], -1), c.in_contact[-1], float(c.tol[-1]))
-
-
 def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
-    """The JSON result: the launcher's summary rebuilt from the recording (last rod state,
-    contact, quality and simulator status) plus the recomputation and recording checks."""
-    st = run.status
-
-    def num(key: str) -> float | None:
-        try:
-            return float(st[key])
-        except (KeyError, ValueError):
-            return None
-
-    rod, q = run.rod, run.quality
+    """The JSON result: the run's :class:`~contgrasp_ros.summary.RunSummary` built from the
+    recording (simulator status, last rod state, contact and quality; by the launcher's own
+    :func:`~contgrasp_ros.summary.build_summary`) plus the recomputation and recording checks."""
+    rod, c, q = run.rod, run.contact, run.quality
     settled_re, settle_re = settle_recomputed(run)
     gaps = step_gaps(run)
-    out: dict[str, Any] = {
+    summary = build_summary(
+        run.status,
+        final=FinalState.of(int(rod.step[-1]), float(rod.t[-1]), rod.s[-1], rod.x[-1], rod.y[-1], rod.theta[-1]),
+        final_quality=None if q is None else FinalQuality.of(q.q1[-1], q.q2[-1], q.q3[-1], q.valid[-1], q.contact_length[-1]),
+        contact=contact_stats(None) if c is None else contact_stats(c.rho[-1], c.delta[-1], c.alpha[-1], c.in_contact[-1]),
+    )
+    return {
         "path": str(run.path),
         "topics": run.topics,
-        "duration_s": float(rod.t[-1] - rod.t[0]),
-        "settled": st.get("settled") == "true",
-        "settle_time_s": num("settle_time_s"),
+        **summary.to_dict(),
+        "recorded_sim_time_s": float(rod.t[-1] - rod.t[0]),
         "settled_recomputed": settled_re,
         "settle_time_recomputed_s": settle_re,
-        "sim_time_s": num("sim_time_s"),
-        "steps": int(num("step") or 0),
-        "simulator_state": st.get("state", "unknown"),
-        "missed_deadlines": int(num("missed_deadlines") or 0),
-        "max_penetration": num("max_penetration"),
         "max_penetration_recomputed": float(rod.max_penetration.max()) if gaps["contiguous"] and gaps["first_step"] == 0 else None,
-        "final": {"step": int(rod.step[-1]), "t": float(rod.t[-1]), "s": rod.s[-1].tolist(), "x": rod.x[-1].tolist(),
-                  "y": rod.y[-1].tolist(), "theta": rod.theta[-1].tolist()},
-        "final_quality": None if q is None else {"Q1": float(q.q1[-1]), "Q2": float(q.q2[-1]), "Q3": float(q.q3[-1]),
-                                                  "valid": bool(q.valid[-1]), "contact_length": float(q.contact_length[-1])},
-        **contact_stats(_last_contact(run.contact)),
         "max_recompute_error": rc.max_error,
         "recompute_errors": rc.errors,
         "recomputed_pairs": {"contact": rc.contact_pairs, "quality": rc.quality_pairs},
@@ -547,12 +509,11 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
         "recompute_failures": rc.failures[:20],
         "recompute_parameters": rc.parameters,
         "step_gaps": gaps,
-        "messages": {"rod_state": len(rod.step), "contact": 0 if run.contact is None else len(run.contact.step),
+        "messages": {"rod_state": len(rod.step), "contact": 0 if c is None else len(c.step),
                      "quality": 0 if q is None else len(q.step)},
         "recorder": run.recorder,
         "run": run.run_info or None,
     }
-    return out
 
 
 def _long_rows(t: Array, steps: IntArray, cols: list[Any], extra: Sequence[Any] = ()) -> Iterator[list[Any]]:

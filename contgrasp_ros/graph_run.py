@@ -7,6 +7,9 @@ then waits for the simulator to report ``finished`` (or ``failed``) on ``/diagno
 With recording on, the ``mcap_recorder`` starts first, the simulator is resumed only once the
 recorder subscribes to every stream, and it is stopped last, after the other nodes, so the
 recording holds the whole run; the summary's ``bag`` entry is read back from the finished file.
+What to do when (resume, restart a dead node, go on without it, time out) is decided by
+:class:`contgrasp_ros.supervision.Supervisor`; ``_drive`` feeds it what rclpy and the process
+group show and carries out its actions. The summary is :class:`contgrasp_ros.summary.RunSummary`.
 """
 
 from __future__ import annotations
@@ -32,13 +35,28 @@ from std_srvs.srv import SetBool
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos, topics
-from contgrasp_ros.analysis import contact_stats
+from contgrasp_ros.convert import stamp_seconds
+from contgrasp_ros.events import EventSink
 from contgrasp_ros.runtime import DropCounter, GuardedSpin, make_executor
+from contgrasp_ros.supervision import (
+    RECORDER,
+    Exit,
+    Finish,
+    Log,
+    Notify,
+    Observation,
+    Phase,
+    Restart,
+    Resume,
+    SetMinSubscribers,
+    Supervisor,
+    Unrecorded,
+)
+from contgrasp_ros.summary import FinalQuality, FinalState, RunSummary, build_summary, contact_stats
 
 __all__ = ["Monitor", "run_graph"]
 
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
-RECORDER = "mcap_recorder"
 DECIMATED_STREAMS = (topics.ROD_STATE, topics.CONTACT, topics.COUPLE)  # the bulky per-step topics
 RECORDED_STREAMS = (topics.OBJECT, topics.ROD_STATE, topics.CONTACT, topics.COUPLE, topics.QUALITY, topics.CLOCK)
 
@@ -62,10 +80,6 @@ class Monitor(Node):
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diag, qos.STREAM)
         self.pause = self.create_client(SetBool, "/rod_simulator/pause")
         self.sim_params = AsyncParameterClient(self, "/rod_simulator")
-        self.loop_wall_time: float | None = None
-        self.restarts: dict[str, int] = {}
-        self.lost: set[str] = set()
-        self.faults: list[dict[str, Any]] = []
         self.drops = DropCounter(self)  # (only rclpy take failures: see GuardedSpin)
 
     def _on_rod(self, msg: RodState) -> None:
@@ -122,148 +136,72 @@ def _overrides(values: dict[str, Any]) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-def _summary(mon: Monitor) -> dict[str, Any]:
-    st = mon.status
-
-    def num(key: str) -> float | None:
-        try:
-            return float(st[key])
-        except (KeyError, ValueError):
-            return None
-
-    out: dict[str, Any] = {
-        "settled": st.get("settled") == "true",
-        "settle_time_s": num("settle_time_s"),
-        "sim_time_s": num("sim_time_s"),
-        "missed_deadlines": int(num("missed_deadlines") or 0),
-        "max_penetration": num("max_penetration"),
-        "steps": int(num("step") or 0),
-        "simulator_state": st.get("state", "unknown"),
-        "loop_wall_time_s": mon.loop_wall_time,
-    }
-    rod = mon.rod
-    out["final"] = None if rod is None else {"s": list(rod.s), "x": list(rod.x), "y": list(rod.y), "theta": list(rod.theta)}
-    q = mon.quality
-    out["final_quality"] = None if q is None else {"Q1": q.q1, "Q2": q.q2, "Q3": q.q3, "valid": q.valid, "contact_length": q.contact_length}
-    out.update(contact_stats(mon.contact))
-    out["restarts"] = dict(mon.restarts)
-    out["faults"] = list(mon.faults)
-    out["launcher_errors"] = dict(mon.drops.counts)
-    out["history"] = mon.history
-    return out
+def _summary(mon: Monitor, loop_wall_time_s: float | None = None, wall_time_s: float | None = None) -> RunSummary:
+    """The run's :class:`~contgrasp_ros.summary.RunSummary` from what the monitor received."""
+    rod, q, c = mon.rod, mon.quality, mon.contact
+    return build_summary(
+        mon.status,
+        final=None if rod is None else FinalState.of(rod.step, stamp_seconds(rod.header), rod.s, rod.x, rod.y, rod.theta),
+        final_quality=None if q is None else FinalQuality.of(q.q1, q.q2, q.q3, q.valid, q.contact_length),
+        contact=contact_stats(None) if c is None else contact_stats(c.rho, c.delta, c.alpha, c.in_contact),
+        wall_time_s=wall_time_s,
+        loop_wall_time_s=loop_wall_time_s,
+    )
 
 
-def _drive(mon: Monitor, executor: Executor, group: Any, timeout: float, respawn: int = 0,
-           on_recorder_lost: Callable[[], None] | None = None) -> str | None:
-    """Connect, resume, wait for the end. Returns an error text or None.
+def _drive(mon: Monitor, sup: Supervisor, executor: Executor, group: Any,
+           on_recorder_lost: Callable[[], None] | None = None, emit: EventSink | None = None) -> str | None:
+    """Run ``sup`` (:class:`~contgrasp_ros.supervision.Supervisor`, which decides) on what the
+    monitor and the process group show, and perform its actions. Returns an error text or None.
 
-    A node process that exits is restarted up to ``respawn`` times (a restarted simulator starts
-    again from the initial state and is resumed here). Beyond that, the simulator's exit ends
-    the run; a sensor, controller or quality node that stays dead is reported and the run goes
-    on (the lock-step simulator applies its timeout fallback). The recorder is never restarted
-    (its file would exist): the run goes on unrecorded, and ``on_recorder_lost`` is called (a
-    simulator restarted later must not wait for the recorder to match it).
-    """
-    end = time.monotonic() + timeout
+    ``on_recorder_lost`` is called when the recorder died (a simulator restarted later must not
+    wait for the recorder to match it); ``emit`` receives the supervisor's launcher events."""
     spin = GuardedSpin(executor, mon.drops)
-    resume: dict[str, Any] = {"pending": False, "future": None, "sent": 0.0, "started": False, "seen": None, "old": set()}
+    resume_fut: Any = None
+    params_fut: Any = None
 
-    def dead() -> str | None:
-        if group is None:
+    def params_result() -> bool | None:
+        if params_fut is None or not params_fut.done():
             return None
-        for c in group.exited():
-            code = c.proc.returncode
-            if c.name == RECORDER:
-                if mon.recording:  # a failed recorder is reported, but the run goes on without it
+        return params_fut.exception() is None and all(r.successful for r in params_fut.result().results)
+
+    while True:
+        obs = Observation(
+            now=time.monotonic(),
+            exited=tuple(Exit(c.name, c.proc.pid, c.proc.returncode) for c in group.exited()) if group is not None else (),
+            connected=sup.phase is Phase.CONNECTING and mon.connected(),
+            simulator_state=mon.status.get("state"),
+            simulator_message=mon.status.get("message", ""),
+            pause_ready=mon.pause.service_is_ready(),
+            resume_answered=resume_fut is not None and resume_fut.done(),
+            params_ready=mon.sim_params.services_are_ready(),
+            params_result=params_result(),
+            rod_state_publishers=frozenset(tuple(i.endpoint_gid) for i in mon.get_publishers_info_by_topic(topics.ROD_STATE)),
+        )
+        for action in sup.step(obs):
+            match action:
+                case Resume():
+                    resume_fut = mon.pause.call_async(SetBool.Request(data=False))
+                case Restart(node=name):
+                    group.restart(next(c for c in group.children if c.name == name))
+                case Unrecorded():
                     mon.recording = False
-                    mon.faults.append({"node": RECORDER, "exit_code": code, "action": "continued unrecorded"})
-                    mon.get_logger().error(f"the recorder exited with code {code}; the run continues unrecorded")
                     if on_recorder_lost is not None:
                         on_recorder_lost()
-                        lower["pending"] = True
-                continue
-            if c.name in mon.lost:
-                continue
-            n = mon.restarts.get(c.name, 0)
-            if n >= respawn:
-                if c.name == "rod_simulator" or not resume["started"]:  # (before the start the graph cannot connect)
-                    return f"node '{c.name}' exited with code {code}"
-                # the simulator's lock-step timeout applies its fallback couple from now on
-                mon.lost.add(c.name)
-                mon.faults.append({"node": c.name, "exit_code": code, "action": "continued without it"})
-                mon.get_logger().error(f"node '{c.name}' exited with code {code}; the run continues without it "
-                                       "(the simulator applies its timeout fallback)")
-                continue
-            mon.restarts[c.name] = n + 1
-            mon.faults.append({"node": c.name, "exit_code": code, "action": "restarted"})
-            mon.get_logger().error(f"node '{c.name}' exited with code {code}; restarting it ({n + 1}/{respawn})")
-            group.restart(c)
-            if c.name == "rod_simulator":
-                resume["pending"], resume["seen"] = True, None
-                resume["old"] = {tuple(i.endpoint_gid) for i in mon.get_publishers_info_by_topic(topics.ROD_STATE)}
-        return None
-
-    lower: dict[str, Any] = {"pending": False, "future": None}
-
-    def lower_min_subscribers() -> None:
-        # the running simulator must not wait for a dead recorder to match its first state
-        fut = lower["future"]
-        if fut is not None and fut.done():
-            ok = fut.exception() is None and all(r.successful for r in fut.result().results)
-            lower["pending"], lower["future"] = not ok, None
-        elif fut is None and mon.sim_params.services_are_ready():
-            lower["future"] = mon.sim_params.set_parameters([Parameter("min_subscribers", value=2)])
-
-    def resume_restarted_simulator() -> None:
-        # Wait until the new simulator's state publisher is discovered, and a grace period for
-        # the subscribers (sensor, recorder) to match it, so its first state is not lost; the
-        # dead simulator's service may still be listed: resend until the new one answers.
-        if resume["seen"] is None:
-            pubs = mon.get_publishers_info_by_topic(topics.ROD_STATE)
-            if any(tuple(i.endpoint_gid) not in resume["old"] for i in pubs):
-                resume["seen"] = time.monotonic()
-            return
-        if time.monotonic() - resume["seen"] < 1.0:
-            return
-        fut = resume["future"]
-        if fut is not None and fut.done():
-            resume["pending"], resume["future"] = False, None
-            return
-        if mon.pause.service_is_ready() and time.monotonic() - resume["sent"] > 2.0:
-            resume["future"], resume["sent"] = mon.pause.call_async(SetBool.Request(data=False)), time.monotonic()
-
-    while not mon.connected():
-        spin(0.05)
-        if lower["pending"]:
-            lower_min_subscribers()
-        if (err := dead()) or time.monotonic() > end:
-            return err or "timed out waiting for the graph to connect"
-    loop_start = time.perf_counter()
-    fut = mon.pause.call_async(SetBool.Request(data=False))
-    while not fut.done():
-        spin(0.05)
-        if (err := dead()) or time.monotonic() > end:
-            return err or "timed out resuming the simulator"
-    resume["started"] = True
-    mon.get_logger().info("graph connected; the simulator is running")
-    while mon.status.get("state") not in ("finished", "failed") or resume["pending"]:
-        spin(0.05)
-        if err := dead():
-            return err
-        if resume["pending"]:
-            resume_restarted_simulator()
-        if lower["pending"]:
-            lower_min_subscribers()
-        if time.monotonic() > end:
-            return "wall-clock timeout"
-    mon.loop_wall_time = time.perf_counter() - loop_start
-    # let the last contact/quality of the final state arrive
-    settle_end = time.monotonic() + 1.0
-    while time.monotonic() < settle_end:
-        spin(0.02)
-    if mon.status.get("state") == "failed":
-        return f"simulator failed: {mon.status.get('message', '')}"
-    return None
+                case SetMinSubscribers(value=value):
+                    params_fut = mon.sim_params.set_parameters([Parameter("min_subscribers", value=value)])
+                case Log(level="info", text=text):
+                    mon.get_logger().info(text)
+                case Log(text=text):
+                    mon.get_logger().error(text)
+                case Notify(event=event, fields=fields):
+                    if emit is not None:
+                        emit(event, **fields)
+                case Finish():
+                    pass
+        if sup.done:
+            return sup.error
+        spin(sup.spin_period)
 
 
 def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
@@ -283,7 +221,8 @@ def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
 
 
 def bag_summary(path: Path) -> dict[str, Any]:
-    """What the finished recording holds: size, written messages per topic, the recorder's counts."""
+    """What the finished recording holds: size, wall-clock time from the first to the last
+    recorded message, written messages per topic, the recorder's counts."""
     from contgrasp_ros.bag import BagError
     from contgrasp_ros.bag.reader import info, open_recording
     from contgrasp_ros.bag.writer import RECORDER_RECORD
@@ -297,7 +236,7 @@ def bag_summary(path: Path) -> dict[str, Any]:
     return {
         "path": str(path),
         "size_bytes": meta["size_bytes"],
-        "duration_s": meta["duration_s"],
+        "wall_time_s": meta["duration_s"],  # log times are the recorder's wall clock at receipt
         "messages": meta["message_count"],
         "received": json.loads(counts.get("received", "null")),
         "written": json.loads(counts.get("written", "null")),
@@ -316,15 +255,19 @@ def run_graph(
     record: dict[str, Any] | None = None,
     respawn: int = 0,
     keep_history: bool = True,
+    events: EventSink | None = None,
 ) -> tuple[dict[str, Any], int]:
     """Run the graph once (recording it when ``record`` gives an ``output``, restarting crashed
     node processes up to ``respawn`` times each); returns (summary, exit code). SIGINT/SIGTERM
-    end the run early with exit code 130, everything stopped and the recording finalised."""
+    end the run early with exit code 130, everything stopped and the recording finalised.
+    ``events`` receives the node processes' ``started``/``restarted``/``exited`` events and
+    ``resumed`` (:mod:`contgrasp_ros.events`)."""
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
     from contgrasp_ros.nodes.grasp_controller import GraspController
     from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
     from contgrasp_ros.nodes.rod_simulator import RodSimulator
 
+    wall0 = time.perf_counter()
     sim_params = {**params["rod_simulator"], "start_paused": True}
     rclpy.init(args=[])
     executor = make_executor()
@@ -332,7 +275,9 @@ def run_graph(
     group = None
     tmp: Path | None = None
     code = 0
-    summary: dict[str, Any] = {}
+    mon: Monitor | None = None
+    sup: Supervisor | None = None
+    extra: dict[str, Any] = {}
     on_recorder_lost: Callable[[], None] | None = None
     try:
         mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None)
@@ -359,7 +304,7 @@ def run_graph(
 
             from contgrasp_ros.processes import ProcessGroup
 
-            group = ProcessGroup(dict(os.environ, PYTHONUNBUFFERED="1"))
+            group = ProcessGroup(dict(os.environ, PYTHONUNBUFFERED="1"), events=events)
             # Launcher overrides go in a second parameter file: a node's own section in the user's
             # file would beat a plain ``-p name:=value`` (rcl gives node-specific entries priority).
             overrides: dict[str, Any] = {name: {"ros__parameters": {"use_sim_time": True}} for name in NODES}
@@ -386,13 +331,16 @@ def run_graph(
                                    "--params-file", str(params_file), "--params-file", str(override_file)])
         for n in nodes:
             executor.add_node(n)
+        sup = Supervisor(start=time.monotonic(), timeout=timeout, respawn=respawn, recording=record is not None)
         try:
-            error = _drive(mon, executor, group, timeout, respawn, on_recorder_lost)
+            error = _drive(mon, sup, executor, group, on_recorder_lost, events)
         except (KeyboardInterrupt, ExternalShutdownException):
-            error, code = "interrupted", 130
-        summary = _summary(mon)
+            sup.interrupted()
+            error, code = sup.error, 130
+        extra = {"restarts": dict(sup.restarts), "faults": list(sup.faults), "launcher_errors": dict(mon.drops.counts),
+                 "history": mon.history}
         if error:
-            summary["error"] = error
+            extra["error"] = error
             code = code or 1
     finally:
         summary_codes: dict[str, int] = {}
@@ -406,6 +354,8 @@ def run_graph(
             n.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
+    # built from the monitor's plain values once everything is stopped (the wall time included)
+    summary = {**_summary(mon, sup.loop_wall_time_s if sup else None, time.perf_counter() - wall0).to_dict(), **extra} if mon is not None else {}
     if record is not None:
         summary["bag"] = bag_summary(Path(record["output"]))
     summary["exit_codes"] = summary_codes

@@ -1,9 +1,10 @@
 """Run ``contgrasp-launch`` in the background and follow it: child pids, log lines, result.
 
 Used by the fault-injection tests and the soak benchmark (and handy for scripting runs): the
-launcher announces each node process it starts (``[launcher] started NAME (pid N)``) on stderr;
-:class:`LaunchHandle` reads that stream in a thread, so callers can wait for a log line, signal
-one node by its pid, and collect the JSON summary at the end.
+launcher writes its events (:mod:`contgrasp_ros.events`: each node process it starts, with its
+pid, exits, resumes, the end) as JSON lines to a pipe it inherits (``--events fd:N``), and its
+human-readable log to stderr; :class:`LaunchHandle` reads both in threads, so callers can wait
+for an event or a log line, signal one node by its pid, and collect the JSON summary at the end.
 """
 
 from __future__ import annotations
@@ -19,24 +20,37 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["LaunchHandle"]
+from contgrasp_ros.events import parse_event
 
-_STARTED = re.compile(r"\[launcher\] started (\w+) \(pid (\d+)\)")
+__all__ = ["LaunchHandle"]
 
 
 class LaunchHandle:
-    """``contgrasp-launch --json ARGS`` as a child process with its stderr followed."""
+    """``contgrasp-launch --json --events fd:N ARGS`` as a child process with its events and
+    stderr followed: ``events`` (every event so far, as dicts), ``pids`` (each node's latest
+    pid, from the ``started``/``restarted`` events), ``lines`` (the log)."""
 
     def __init__(self, *args: str, env: dict[str, str] | None = None, echo: bool = False) -> None:
         exe = Path(sys.executable).parent / "contgrasp-launch"
         env = dict(os.environ if env is None else env, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
-        self.proc = subprocess.Popen([str(exe), "--json", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        read_fd, write_fd = os.pipe()
+        try:
+            self.proc = subprocess.Popen([str(exe), "--json", "--events", f"fd:{write_fd}", *args], stdout=subprocess.PIPE,
+                                         stderr=subprocess.PIPE, text=True, env=env, pass_fds=(write_fd,))
+        except BaseException:
+            os.close(read_fd)
+            raise
+        finally:
+            os.close(write_fd)  # the launcher holds the only write end: EOF when it exits
         self.lines: list[str] = []
+        self.events: list[dict[str, Any]] = []
         self.pids: dict[str, int] = {}
         self._echo = echo
         self._stdout: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
+        self._event_reader = threading.Thread(target=self._read_events, args=(os.fdopen(read_fd),), daemon=True)
+        self._event_reader.start()
         # stdout (the JSON summary) is drained by its own thread: communicate() would also read
         # stderr and steal lines from the log reader
         stdout = self.proc.stdout
@@ -50,8 +64,29 @@ class LaunchHandle:
             self.lines.append(line)
             if self._echo:
                 sys.stderr.write(line)
-            if m := _STARTED.match(line):
-                self.pids[m.group(1)] = int(m.group(2))
+
+    def _read_events(self, stream: Any) -> None:
+        with stream:
+            for line in stream:
+                if not line.strip():
+                    continue
+                event = parse_event(line)
+                if event["event"] in ("started", "restarted"):
+                    self.pids[event["node"]] = int(event["pid"])
+                self.events.append(event)
+
+    def wait_event(self, event: str, timeout: float = 120.0, start: int = 0, **fields: Any) -> int:
+        """Index of the first event from ``start`` on of kind ``event`` with these field values;
+        AssertionError on timeout or when the launcher ended without it."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            for i, e in enumerate(self.events[start:], start):
+                if e["event"] == event and all(e.get(k) == v for k, v in fields.items()):
+                    return i
+            if not self._event_reader.is_alive():
+                break
+            time.sleep(0.05)
+        raise AssertionError(f"no {event!r} event with {fields}; events: {self.events[-20:]}\nlast lines:\n{''.join(self.lines[-30:])}")
 
     def wait_for(self, pattern: str, timeout: float = 120.0, start: int = 0) -> int:
         """Index of the first log line from ``start`` on matching ``pattern``; AssertionError on timeout."""
@@ -74,6 +109,7 @@ class LaunchHandle:
         self.proc.wait(timeout=timeout)
         self._out_reader.join(timeout=30)
         self._reader.join(timeout=30)
+        self._event_reader.join(timeout=30)
         return self.proc.returncode, json.loads("".join(self._stdout))
 
     def close(self) -> None:

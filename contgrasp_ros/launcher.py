@@ -17,7 +17,6 @@ import os
 import random
 import sys
 import tempfile
-import time
 from collections.abc import Sequence
 from dataclasses import replace
 from importlib import resources
@@ -29,11 +28,12 @@ import yaml
 
 from contgrasp_core.cli import ArgumentParser, report
 from contgrasp_core.cli.common import add_object_arguments, object_from_args
-from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.errors import InvalidParameterError, exit_code, one_line
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
 from contgrasp_core.scenario import CONTROLLER, NODES, QUALITY, SIMULATOR, Scenario
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
+from contgrasp_ros.events import EventWriter, open_events
 
 
 __all__ = ["main", "default_params_file", "load_params"]
@@ -109,6 +109,9 @@ def _parser() -> argparse.ArgumentParser:
                         "one file); bounds the recorder's memory in long runs")
     p.add_argument("--max-bag-size", type=int, default=0, metavar="BYTES",
                    help=f"split the bag folder into files of about BYTES each (default 0: one file; else >= {MIN_BAG_SIZE})")
+    p.add_argument("--events", default=None, metavar="FILE|-|fd:N",
+                   help="write the launcher's events (domain id, node processes started/restarted/exited, simulator "
+                        "resumed, finished) as JSON lines to FILE, stdout (-) or an inherited file descriptor (fd:N)")
     p.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
     return p
 
@@ -121,15 +124,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     1 otherwise (:class:`~contgrasp_core.errors.RunFailure`, any other exception); ``--debug``
     shows the traceback."""
     args = _parser().parse_args(argv)
+    events: EventWriter | None = None
     try:
-        return _launch(args, argv)
+        if args.events is not None:
+            if args.events == "-" and args.json:
+                raise InvalidParameterError("--events - and --json both write to stdout: give --events a file")
+            events = open_events(args.events)
+        return _launch(args, argv, events)
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback (--debug shows it)
+        if events is not None:
+            events("finished", exit_code=exit_code(exc), error=one_line(exc) or type(exc).__name__)
         if args.debug:
             raise
         return report("contgrasp-launch", exc)
+    finally:
+        if events is not None:
+            events.close()
 
 
-def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventWriter | None = None) -> int:
     params_file = args.params or default_params_file()
     params = load_params(params_file)
     if args.duration is not None:
@@ -142,6 +155,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if not 0 <= domain <= 232:
         raise InvalidParameterError(f"--domain-id must be in 0..232, got {domain}")
     os.environ["ROS_DOMAIN_ID"] = str(domain)
+    if events is not None:
+        events("domain_id", domain_id=domain, mode="in-process" if args.in_process else "processes")
     if args.executor:
         if not args.in_process:
             raise InvalidParameterError("--executor applies to --in-process runs only")
@@ -170,10 +185,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.respawn < 0 or (args.respawn and args.in_process):
         raise InvalidParameterError(f"--respawn takes N >= 0 and applies to separate node processes only, got {args.respawn}"
                                     + (" with --in-process" if args.in_process else ""))
-    wall0 = time.perf_counter()
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
-                              respawn=args.respawn, keep_history=args.plot is not None)
-    summary["wall_time_s"] = time.perf_counter() - wall0
+                              respawn=args.respawn, keep_history=args.plot is not None, events=events)
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
     if args.plot is not None and summary.get("history"):
@@ -185,6 +198,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.summary_file is not None:
         args.summary_file.parent.mkdir(parents=True, exist_ok=True)
         args.summary_file.write_text(json.dumps(summary, indent=1))
+    if events is not None:
+        events("finished", exit_code=code, error=summary.get("error"))
     if args.json:
         print(json.dumps(summary))
     else:

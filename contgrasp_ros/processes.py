@@ -12,6 +12,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import IO
 
+from contgrasp_ros.events import EventSink
+
 __all__ = ["Child", "ProcessGroup"]
 
 _COLOURS = ("\033[36m", "\033[35m", "\033[33m", "\033[32m", "\033[34m", "\033[31m")
@@ -33,11 +35,13 @@ class ProcessGroup:
 
     Each child's stdout and stderr are merged and echoed line by line to ``sink`` (stderr by
     default, so the launcher's stdout stays free for ``--json``), prefixed with ``[name]`` and
-    coloured when the sink is a terminal.
+    coloured when the sink is a terminal. Each start is announced on ``sink`` and, given
+    ``events``, as a ``started``/``restarted`` event (:mod:`contgrasp_ros.events`).
     """
 
-    def __init__(self, env: dict[str, str], sink: IO[str] | None = None) -> None:
+    def __init__(self, env: dict[str, str], sink: IO[str] | None = None, events: EventSink | None = None) -> None:
         self.env = env
+        self.events = events
         self.sink = sink if sink is not None else sys.stderr
         self.children: list[Child] = []
         self._colour = hasattr(self.sink, "isatty") and self.sink.isatty()
@@ -51,12 +55,14 @@ class ProcessGroup:
         pump.start()
         child = Child(name, cmd, proc, pump)
         self.children.append(child)
-        self._announce(child)
+        self._announce(child, "started")
         return child
 
-    def _announce(self, child: Child) -> None:
+    def _announce(self, child: Child, event: str) -> None:
         with self._lock:
             print(f"[launcher] started {child.name} (pid {child.proc.pid})", file=self.sink, flush=True)
+        if self.events is not None:
+            self.events(event, node=child.name, pid=child.proc.pid)
 
     def _pump(self, proc: subprocess.Popen[bytes], prefix: str) -> None:
         assert proc.stdout is not None
@@ -74,7 +80,7 @@ class ProcessGroup:
         pump = threading.Thread(target=self._pump, args=(proc, f"{colour}[{child.name}]{_RESET if colour else ''} "), daemon=True)
         pump.start()
         self.children[i] = Child(child.name, child.cmd, proc, pump)
-        self._announce(self.children[i])
+        self._announce(self.children[i], "restarted")
         return self.children[i]
 
     def exited(self) -> list[Child]:

@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +19,10 @@ from conftest import fresh_domain_id
 
 from contgrasp_core.cli import main
 from contgrasp_ros import cli_analyze
-from contgrasp_ros.analysis import analyze, contact_stats, load_run, recompute
+from contgrasp_ros.analysis import analyze, load_run, recompute
 from contgrasp_ros.bag.reader import iter_decoded, iter_raw, open_recording
 from contgrasp_ros.bag.writer import BagWriter
+from contgrasp_ros.summary import ContactStats, FinalQuality, FinalState, RunSummary, build_summary, contact_stats
 
 BIN = Path(sys.executable).parent
 ROOT = Path(__file__).resolve().parents[1]
@@ -87,7 +89,14 @@ def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -
     topics = {t["name"]: t for t in r["topics"]}
     assert topics[ROD]["count"] == summary["steps"] + 1 and topics[ROD]["type"] == "contgrasp_msgs/msg/RodState"
     assert r["recorder"]["received"] == r["recorder"]["written"] == summary["bag"]["messages"]
-    assert r["duration_s"] == pytest.approx(summary["sim_time_s"], abs=1e-9)
+    assert r["recorded_sim_time_s"] == pytest.approx(summary["sim_time_s"], abs=1e-9)
+    # one builder: every RunSummary key agrees between the launcher and the recording (the
+    # wall-clock times only the launcher measures)
+    for key in RunSummary.__dataclass_fields__:
+        if key not in ("wall_time_s", "loop_wall_time_s"):
+            assert r[key] == summary[key], key
+    assert r["wall_time_s"] is None and summary["wall_time_s"] > summary["loop_wall_time_s"] > 0
+    assert summary["contact_nodes"] > 0 and summary["bag"]["wall_time_s"] > 0
 
 
 def test_cli_writes_csv_and_plots(recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -205,17 +214,34 @@ def test_recomputation_is_not_vacuous(recording: tuple[Path, dict]) -> None:
 
 
 def test_contact_stats() -> None:
-    class Msg:
-        rho = [0.02, 0.011, 0.05]
-        delta = [-0.01, -0.001, -0.04]
-        alpha = [1.0, 1.5, 2.0]
-        in_contact = [False, True, False]
+    rho, delta, alpha = [0.02, 0.011, 0.05], [-0.01, -0.001, -0.04], [1.0, 1.5, 2.0]
+    stats = contact_stats(rho, delta, alpha, [False, True, False])
+    assert stats.mean_abs_rho_ratio_minus_1_contact == pytest.approx(0.1)
+    assert stats.mean_abs_alpha_minus_half_pi_contact == pytest.approx(np.pi / 2 - 1.5)
+    assert stats.contact_nodes == 1
+    assert contact_stats(rho, delta, alpha, [False] * 3) == ContactStats(None, None, 0)
+    assert contact_stats(None) == ContactStats(None, None, None)  # no contact state at all
 
-    stats = contact_stats(Msg())
-    assert stats["mean_abs_rho_ratio_minus_1_contact"] == pytest.approx(0.1)
-    assert stats["mean_abs_alpha_minus_half_pi_contact"] == pytest.approx(np.pi / 2 - 1.5)
-    Msg.in_contact = [False] * 3
-    assert set(contact_stats(Msg()).values()) == {None} and set(contact_stats(None).values()) == {None}
+
+def test_summary_builder_reads_the_simulator_status() -> None:
+    """One builder for the launcher and analyze: the simulator's /diagnostics values parsed,
+    missing or garbled ones None/0, the JSON keys the field names."""
+    status = {"state": "finished", "settled": "true", "settle_time_s": "1.5", "sim_time_s": "2.0", "step": "1000",
+              "missed_deadlines": "3", "max_penetration": "nan?"}
+    final = FinalState.of(1000, 2.0, np.array([0.0, 0.1]), [0.0, 0.1], (0.0, 0.0), np.zeros(2))
+    s = build_summary(status, final=final, final_quality=FinalQuality.of(np.float64(1.0), 2.0, 0.5, np.bool_(True), 0.1),
+                      contact=contact_stats(None), wall_time_s=4.0)
+    d = s.to_dict()
+    assert d["simulator_state"] == "finished" and d["settled"] is True and d["settle_time_s"] == 1.5
+    assert d["steps"] == 1000 and d["missed_deadlines"] == 3 and d["max_penetration"] is None
+    assert d["final"] == {"step": 1000, "t": 2.0, "s": [0.0, 0.1], "x": [0.0, 0.1], "y": [0.0, 0.0], "theta": [0.0, 0.0]}
+    assert d["final_quality"] == {"Q1": 1.0, "Q2": 2.0, "Q3": 0.5, "valid": True, "contact_length": 0.1}
+    assert d["wall_time_s"] == 4.0 and d["loop_wall_time_s"] is None and d["contact_nodes"] is None
+    assert list(d) == [f.name for f in fields(RunSummary)]
+    json.dumps(d, allow_nan=False)  # plain JSON types
+    empty = build_summary({}, final=None, final_quality=None, contact=ContactStats()).to_dict()
+    assert empty["simulator_state"] == "unknown" and empty["settled"] is False and empty["steps"] == 0
+    assert empty["final"] is None and empty["sim_time_s"] is None
 
 
 def test_bad_input_is_one_line_and_exit_code_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

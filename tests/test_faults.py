@@ -79,7 +79,7 @@ def test_controller_and_sensor_killed_and_respawned_the_loop_resumes(tmp_path: P
         running(launch)
         launch.signal("grasp_controller", signal.SIGKILL)
         i = launch.wait_for(r"'grasp_controller' exited with code -9; restarting it \(1/2\)")
-        i = launch.wait_for(r"started grasp_controller", start=i)
+        launch.wait_event("restarted", node="grasp_controller")
         launch.wait_for(r"couples are back", start=i)  # the loop closed again with the new controller
         launch.signal("boundary_sensor", signal.SIGKILL)
         launch.wait_for(r"'boundary_sensor' exited with code -9; restarting it \(1/2\)")
@@ -96,6 +96,15 @@ def test_controller_and_sensor_killed_and_respawned_the_loop_resumes(tmp_path: P
     assert recorded_steps(bag) == list(range(out["steps"] + 1))  # the recorder kept everything
     assert out["bag"]["received"] == out["bag"]["written"]
     assert not any(alive(pid) for pid in out["pids"].values())
+    # the events: the domain first, every start and restart with its pid, the exits, the end
+    ev = launch.events
+    assert ev[0]["event"] == "domain_id" and ev[0]["mode"] == "processes"
+    assert ev[-1]["event"] == "finished" and ev[-1]["exit_code"] == 0 and ev[-1]["error"] is None
+    assert launch.pids == out["pids"]  # each node's latest pid
+    assert [(e["node"], e["exit_code"], e["action"]) for e in ev if e["event"] == "exited"] == [
+        ("grasp_controller", -9, "restarted"), ("boundary_sensor", -9, "restarted")]
+    assert sorted(e["node"] for e in ev if e["event"] == "restarted") == ["boundary_sensor", "grasp_controller"]
+    assert [e["restart"] for e in ev if e["event"] == "resumed"] == [False]
 
 
 def test_a_dead_controller_without_respawn_degrades_to_the_fallback(tmp_path: Path) -> None:
@@ -132,6 +141,10 @@ def test_killed_simulator_stops_the_run_and_the_recording_is_complete(tmp_path: 
     finally:
         launch.close()
     assert code == 1 and out["error"] == "node 'rod_simulator' exited with code -9"
+    ended = [e for e in launch.events if e["event"] in ("exited", "finished")]
+    assert [e["event"] for e in ended] == ["exited", "finished"]
+    assert ended[0]["node"] == "rod_simulator" and ended[0]["action"] == "run ended" and ended[0]["exit_code"] == -9
+    assert ended[1]["exit_code"] == 1 and ended[1]["error"] == out["error"]
     assert out["exit_codes"]["rod_simulator"] == -9
     assert all(out["exit_codes"][n] == 0 for n in NODES[1:]), out["exit_codes"]  # the others stopped cleanly
     assert out["exit_codes"]["mcap_recorder"] == 0
@@ -196,6 +209,7 @@ def test_killed_simulator_with_respawn_restarts_the_run(tmp_path: Path) -> None:
         launch.close()
     assert code == 0, "".join(launch.lines[-40:])
     assert out["restarts"] == {"rod_simulator": 1} and out["simulator_state"] == "finished"
+    assert [e["restart"] for e in launch.events if e["event"] == "resumed"] == [False, True]
     assert out["sim_time_s"] == pytest.approx(1.0)
     steps = recorded_steps(bag)
     restart = next(i for i in range(1, len(steps)) if steps[i] <= steps[i - 1])  # the second run starts over

@@ -19,6 +19,7 @@ pytest.importorskip("contgrasp_msgs.msg")
 from contgrasp_core.errors import InvalidParameterError  # noqa: E402
 from contgrasp_core.rod.session import run_sampled  # noqa: E402
 from contgrasp_core.scenario import Scenario  # noqa: E402
+from contgrasp_ros.events import read_events  # noqa: E402
 from contgrasp_ros.launcher import default_params_file, load_params  # noqa: E402
 
 from conftest import fresh_domain_id  # noqa: E402
@@ -82,9 +83,15 @@ def test_ros2_run_finds_and_runs_the_executables() -> None:
 
 def test_graph_in_process_equals_the_core_loop(tmp_path: Path) -> None:
     params = small_params(tmp_path)
-    proc = launch("--in-process", "--json", "--params", str(params), "--bag", str(tmp_path / "inproc.mcap"))
+    events = tmp_path / "events.jsonl"
+    proc = launch("--in-process", "--json", "--params", str(params), "--bag", str(tmp_path / "inproc.mcap"), "--events", str(events))
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout)
+    # in-process: no node processes, so only the launcher's own events
+    got = list(read_events(events.read_text().splitlines()))
+    assert [e["event"] for e in got] == ["domain_id", "resumed", "finished"]
+    assert got[0] == {**got[0], "domain_id": out["domain_id"], "mode": "in-process"}
+    assert got[-1]["exit_code"] == 0 and got[-1]["error"] is None
     assert out["missed_deadlines"] == 0
     assert out["bag"]["received"] == out["bag"]["written"] == out["bag"]["messages"] > 0
     assert out["bag"]["topics"]["/contgrasp/rod_state"] == out["steps"] + 1

@@ -1,0 +1,95 @@
+"""The launcher's machine-readable events: JSON lines on a channel of their own.
+
+``contgrasp-launch --events FILE`` (``-`` for stdout, ``fd:N`` for an inherited file
+descriptor) writes one JSON object per line and flushes it, so a program can follow a run while
+the human-readable log on stderr stays as it is. Every event has ``event`` (its kind) and
+``time`` (Unix time, s); the kinds and their fields:
+
+* ``domain_id``: ``domain_id`` (the ``ROS_DOMAIN_ID`` of the graph, to attach with ``ros2``
+  tools), ``mode`` (``processes`` or ``in-process``); always the first event;
+* ``started``: ``node``, ``pid``, a node process was started; ``restarted``: the same, for a
+  process started again after it exited;
+* ``exited``: ``node``, ``pid``, ``exit_code`` (negative: killed by that signal), ``action`` (what
+  the launcher did: ``restarted``, ``continued without it``, ``continued unrecorded``, ``run
+  ended``) for a node process that exited during the run;
+* ``resumed``: ``restart`` (false: the run started; true: a restarted simulator was resumed);
+* ``finished``: ``exit_code``, ``error`` (null on success); always the last event.
+
+Nothing here imports rclpy.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import threading
+import time
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import IO, Any, Protocol
+
+from contgrasp_core.errors import InvalidParameterError, output_error
+
+__all__ = ["EVENTS", "EventSink", "EventWriter", "open_events", "parse_event", "read_events"]
+
+EVENTS = ("domain_id", "started", "restarted", "exited", "resumed", "finished")
+
+
+class EventSink(Protocol):
+    """Where the launcher reports an event: ``sink("started", node=..., pid=...)``."""
+
+    def __call__(self, event: str, /, **fields: Any) -> None: ...
+
+
+class EventWriter:
+    """Writes events as JSON lines to ``stream`` (thread-safe; each line flushed)."""
+
+    def __init__(self, stream: IO[str], close: bool = False) -> None:
+        self.stream = stream
+        self._close = close
+        self._lock = threading.Lock()
+
+    def __call__(self, event: str, /, **fields: Any) -> None:
+        if event not in EVENTS:
+            raise ValueError(f"unknown launcher event {event!r}")
+        line = json.dumps({"event": event, "time": time.time(), **fields}, allow_nan=False)
+        with self._lock:
+            self.stream.write(line + "\n")
+            self.stream.flush()
+
+    def close(self) -> None:
+        if self._close:
+            self.stream.close()
+
+
+def open_events(target: str) -> EventWriter:
+    """The :class:`EventWriter` for ``--events TARGET``: ``-`` (stdout), ``fd:N`` (an open file
+    descriptor, e.g. a pipe the caller passed down) or a file path (created or truncated)."""
+    if target == "-":
+        return EventWriter(sys.stdout)
+    if target.startswith("fd:"):
+        try:
+            fd = int(target[3:])
+            return EventWriter(os.fdopen(fd, "w", buffering=1), close=True)
+        except (ValueError, OSError) as exc:
+            raise InvalidParameterError(f"--events {target}: not an open file descriptor ({exc})") from exc
+    try:
+        return EventWriter(open(Path(target), "w", buffering=1), close=True)  # (closed by close())
+    except OSError as exc:
+        raise output_error(f"the events file {target}", exc) from exc
+
+
+def parse_event(line: str) -> dict[str, Any]:
+    """One event line as a dict; ValueError unless it is a JSON object with a known ``event``."""
+    obj = json.loads(line)
+    if not isinstance(obj, dict) or obj.get("event") not in EVENTS:
+        raise ValueError(f"not a launcher event: {line.strip()!r}")
+    return obj
+
+
+def read_events(lines: Iterable[str]) -> Iterator[dict[str, Any]]:
+    """The events of a stream of lines (blank lines skipped)."""
+    for line in lines:
+        if line.strip():
+            yield parse_event(line)

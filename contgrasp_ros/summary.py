@@ -1,0 +1,164 @@
+"""The summary of one graph run: one type, built by one function, for the launcher and ``analyze``.
+
+``contgrasp-launch`` builds it from what its monitor received over the topics during the run,
+``contgrasp analyze`` from a recording of the same topics; both call :func:`build_summary` with
+the same plain values (the simulator's last ``/diagnostics`` status, the last rod state, contact
+state and grasp quality as arrays), so the two agree key for key and value for value on the
+same run. Each caller adds its own entries to :meth:`RunSummary.to_dict` (the launcher: restarts,
+faults, the recording's ``bag`` block, exit codes; ``analyze``: the recomputation checks).
+
+Times are suffixed with their unit and say which clock: ``sim_time_s`` is simulated time (the
+simulator's clock), ``wall_time_s``/``loop_wall_time_s`` are wall-clock seconds (only the
+launcher measures them; ``None`` from a recording). Nothing here imports rclpy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FinalState", "FinalQuality", "ContactStats", "RunSummary", "contact_stats", "build_summary"]
+
+FloatSeq = Sequence[float] | np.ndarray
+
+
+@dataclass(frozen=True)
+class FinalState:
+    """The last rod state: its ``step``, stamp ``t`` (sim time, s) and per-node arrays."""
+
+    step: int
+    t: float
+    s: list[float]
+    x: list[float]
+    y: list[float]
+    theta: list[float]
+
+    @classmethod
+    def of(cls, step: int, t: float, s: FloatSeq, x: FloatSeq, y: FloatSeq, theta: FloatSeq) -> FinalState:
+        """From per-node arrays (numpy or message sequences), as plain floats."""
+        def floats(v: FloatSeq) -> list[float]:
+            out: list[float] = np.asarray(v, dtype=float).tolist()
+            return out
+
+        return cls(int(step), float(t), floats(s), floats(x), floats(y), floats(theta))
+
+
+@dataclass(frozen=True)
+class FinalQuality:
+    """The last grasp quality (paper Sec. IV): Q1 = lambda_min(W), Q2 = det W, Q3 = lambda_min /
+    lambda_max, whether it is valid (the arm touches the object) and the contact length (m)."""
+
+    Q1: float  # (the paper's names, and the JSON keys)
+    Q2: float
+    Q3: float
+    valid: bool
+    contact_length: float
+
+    @classmethod
+    def of(cls, q1: float, q2: float, q3: float, valid: bool, contact_length: float) -> FinalQuality:
+        """From message fields or numpy scalars, as plain floats and a bool."""
+        return cls(float(q1), float(q2), float(q3), bool(valid), float(contact_length))
+
+
+@dataclass(frozen=True)
+class ContactStats:
+    """Contact statistics of one contact state over its ``contact_nodes`` nodes in contact: the
+    mean of |rho / rho_d - 1| with rho_d = r = delta + rho (eq. (5): delta = r - rho) and the
+    mean of |alpha - pi/2| (eq. (4)); the means are ``None`` without contact,
+    ``contact_nodes`` is ``None`` without a contact state."""
+
+    mean_abs_rho_ratio_minus_1_contact: float | None = None
+    mean_abs_alpha_minus_half_pi_contact: float | None = None
+    contact_nodes: int | None = None
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What a graph run did. The JSON keys (:meth:`to_dict`) are the field names.
+
+    ``simulator_state``, ``settled``, ``settle_time_s`` (sim time, ``None`` if not settled),
+    ``sim_time_s``, ``steps``, ``missed_deadlines`` (lock-step timeouts that applied the
+    fallback couple) and ``max_penetration`` (m) are the simulator's last ``/diagnostics``
+    status; ``final``, ``final_quality`` and the contact statistics the last rod state, grasp
+    quality and contact state; ``wall_time_s`` (the whole launcher run) and ``loop_wall_time_s``
+    (from resuming the simulator to its end) are wall-clock seconds, ``None`` from a recording.
+    """
+
+    simulator_state: str
+    settled: bool
+    settle_time_s: float | None
+    sim_time_s: float | None
+    steps: int
+    missed_deadlines: int
+    max_penetration: float | None
+    final: FinalState | None
+    final_quality: FinalQuality | None
+    mean_abs_rho_ratio_minus_1_contact: float | None
+    mean_abs_alpha_minus_half_pi_contact: float | None
+    contact_nodes: int | None
+    wall_time_s: float | None = None
+    loop_wall_time_s: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The summary as JSON-ready values (nested dicts for ``final`` and ``final_quality``)."""
+        return asdict(self)
+
+
+def contact_stats(rho: FloatSeq | None, delta: FloatSeq | None = None, alpha: FloatSeq | None = None,
+                  in_contact: Sequence[bool] | np.ndarray | None = None) -> ContactStats:
+    """:class:`ContactStats` of one contact state given as its per-node arrays (``rho`` None: no
+    contact state)."""
+    if rho is None or delta is None or alpha is None or in_contact is None:
+        return ContactStats()
+    r = np.asarray(rho, dtype=float)
+    radius = np.asarray(delta, dtype=float) + r
+    mask = np.asarray(in_contact, dtype=bool)
+    n = int(np.count_nonzero(mask))
+    if n == 0:
+        return ContactStats(contact_nodes=0)
+    return ContactStats(
+        mean_abs_rho_ratio_minus_1_contact=float(np.mean(np.abs(r[mask] / radius[mask] - 1.0))),
+        mean_abs_alpha_minus_half_pi_contact=float(np.mean(np.abs(np.asarray(alpha, dtype=float)[mask] - np.pi / 2))),
+        contact_nodes=n,
+    )
+
+
+def _num(status: Mapping[str, str], key: str) -> float | None:
+    try:
+        return float(status[key])
+    except (KeyError, ValueError):
+        return None
+
+
+def build_summary(
+    status: Mapping[str, str],
+    *,
+    final: FinalState | None,
+    final_quality: FinalQuality | None,
+    contact: ContactStats,
+    wall_time_s: float | None = None,
+    loop_wall_time_s: float | None = None,
+) -> RunSummary:
+    """The :class:`RunSummary` of a run from the simulator's last ``/diagnostics`` key/values
+    (``state``, ``settled``, ``settle_time_s``, ``sim_time_s``, ``step``, ``missed_deadlines``,
+    ``max_penetration``; missing or unparsable ones give ``None``/0), the last rod state and
+    quality, and the contact statistics of the last contact state (:func:`contact_stats`)."""
+    return RunSummary(
+        simulator_state=status.get("state", "unknown"),
+        settled=status.get("settled") == "true",
+        settle_time_s=_num(status, "settle_time_s"),
+        sim_time_s=_num(status, "sim_time_s"),
+        steps=int(_num(status, "step") or 0),
+        missed_deadlines=int(_num(status, "missed_deadlines") or 0),
+        max_penetration=_num(status, "max_penetration"),
+        final=final,
+        final_quality=final_quality,
+        mean_abs_rho_ratio_minus_1_contact=contact.mean_abs_rho_ratio_minus_1_contact,
+        mean_abs_alpha_minus_half_pi_contact=contact.mean_abs_alpha_minus_half_pi_contact,
+        contact_nodes=contact.contact_nodes,
+        wall_time_s=wall_time_s,
+        loop_wall_time_s=loop_wall_time_s,
+    )
