@@ -6,7 +6,8 @@ the run's parameters. :func:`load_run` decodes it (``mcap_ros2``, no message pac
 numpy arrays; :func:`recompute` repeats the sensing (paper eqs. rho_alpha_definition and
 delta, Definition 1) and the grasp quality (Sec. IV: W = int_S G G^T ds, Q1 = lambda_min(W),
 Q2 = det W, Q3 = lambda_min / lambda_max) from the recorded rod states with exactly the
-functions the nodes call (:mod:`contgrasp_ros.evaluate`), so on a genuine recording the
+functions the nodes call (:func:`contgrasp_core.contact.sense`,
+:func:`contgrasp_ros.evaluate.contact_quality`), so on a genuine recording the
 recomputation agrees with the recorded topics to rounding (in practice bitwise);
 :func:`summarize` builds the launcher's summary (:func:`contact_stats` is its contact
 statistics) plus the recomputation errors. :func:`write_csv` and :func:`write_plots` export
