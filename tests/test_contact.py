@@ -112,6 +112,22 @@ def test_sense_outward_normal_points_from_the_foot_to_the_arm() -> None:
         np.testing.assert_allclose(np.hypot(*geo.normal_out.T), 1.0, atol=1e-12)
 
 
+@pytest.mark.parametrize("start,crosses", [(0.5 * np.pi, False), (-0.25, True)], ids=["no-seam", "across-the-seam"])
+def test_sense_unwraps_s_o_like_numpy(start: float, crosses: bool) -> None:
+    """s_o is np.unwrap of the projection's arclengths (sense skips the call when no step can
+    cross the seam s_o = 0, which must not change a bit)."""
+    b = circle(1.0)
+    s = np.linspace(0, 0.5 * np.pi * 1.2, 80)  # a quarter turn at distance 0.2, counter-clockwise
+    base = BasePose(1.2 * np.cos(start), 1.2 * np.sin(start), start + np.pi / 2)
+    shape = shape_from_curvature(s, np.full_like(s, 1 / 1.2), base)
+    for obj in (b, Obstacle(b)):
+        wrapped = obj.project(shape.r).s_o
+        assert bool(np.any(np.diff(wrapped) < 0)) == crosses
+        geo = sense(shape, obj, 0.1)
+        np.testing.assert_array_equal(geo.s_o, np.unwrap(wrapped, period=b.length))
+        assert np.all(np.diff(geo.s_o) > 0)
+
+
 def test_sense_rejects_what_is_not_an_object() -> None:
     shape = ArmShape(s=np.zeros(1), r=np.zeros((1, 2)), theta=np.zeros(1))
     with pytest.raises(InvalidParameterError, match="Boundary or an Obstacle"):
