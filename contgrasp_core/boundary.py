@@ -70,7 +70,9 @@ class Projection:
     ``foot`` (n, 2) the closest boundary points gamma(s_o); ``s_o`` (n,) their arclength in
     ``[0, L_o)``; ``distance`` (n,) >= 0; ``signed_distance`` (n,) positive outside the object,
     negative inside; ``side`` (n,) +1 outside, -1 inside (0 exactly on the boundary);
-    ``phi`` (n,) and ``kappa_o`` (n,) the tangent angle and curvature at the foot.
+    ``phi`` (n,) and ``kappa_o`` (n,) the tangent angle and curvature at the foot;
+    ``normal_out`` (n, 2) the outward unit normal there (as in
+    :class:`~contgrasp_core.rod.obstacle.ObstacleProjection`).
     """
 
     foot: NDArray[np.float64]
@@ -80,6 +82,11 @@ class Projection:
     side: NDArray[np.int_]
     phi: NDArray[np.float64]
     kappa_o: NDArray[np.float64]
+
+    @property
+    def normal_out(self) -> NDArray[np.float64]:
+        """Outward unit normal ``(sin phi, -cos phi)`` at the foot (n, 2): ``-n(s_o)``."""
+        return np.stack([np.sin(self.phi), -np.cos(self.phi)], axis=-1)
 
 
 def _rot(vec_cos_sin_shift: int, t: NDArray[np.float64]) -> NDArray[np.float64]:

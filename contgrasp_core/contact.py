@@ -4,7 +4,9 @@ Three views of the same relative geometry:
 
 * :func:`sense` - geometric sensing: from an arm shape, the shadow point s_o(s) (closest
   boundary point), contact distance rho, contact angle alpha (eq. (4)),
-  contact depth delta (eq. (5)) and the contact set (Definition 1).
+  contact depth delta (eq. (5)) and the contact set (Definition 1). It is the one sensing
+  function of the project: the library, the rod's closed loops, the feedback law's Jacobian
+  and the ROS boundary sensor all call it.
 * :func:`integrate_contact` - the contact kinematics ODE (eqs. (7), (8))
   in s with state (rho, alpha, s_o), driven by a curvature profile kappa(s).
 * :func:`shape_from_contact` - the reverse map from (rho, alpha, s_o)(s) to the arm shape.
@@ -30,6 +32,7 @@ from ._validate import float_array, instance, real
 from .arm import ArmShape, BasePose, curvature_spline
 from .boundary import Boundary
 from .errors import ContactValidityError, IntegrationError, InvalidParameterError
+from .rod.obstacle import Obstacle
 
 __all__ = [
     "ContactState",
@@ -50,11 +53,19 @@ DEFAULT_CONTACT_TOL = 0.0
 
 @dataclass(frozen=True)
 class ContactState:
-    """Geometric contact state along the arm (arrays over the arm grid ``s``).
+    """Geometric contact state along the arm (arrays over the arm grid ``s``), from :func:`sense`.
 
-    ``s_o`` is unwrapped along the arm (continuous, may exceed L_o); ``foot`` = gamma(s_o);
-    ``nu_o`` = sin(alpha) / (1 + rho kappa_o) (eq. (7)); ``in_contact`` is
-    ``delta >= -tol``; ``valid`` marks points inside the admissible region.
+    ``rho`` (signed distance, > 0 outside the object) and ``alpha`` (in [-pi, pi)) of eq.
+    (4); ``delta = r_arm - rho`` (eq. (5)); ``s_o`` the shadow point's
+    arclength, unwrapped along the arm (continuous, may exceed L_o); ``foot`` = gamma(s_o) (n, 2);
+    ``kappa_o`` the boundary curvature there; ``nu_o`` = sin(alpha) / (1 + rho kappa_o) (eq.
+    (7)); ``foot_turn`` = kappa_o / (1 + rho kappa_o), the rate at which the foot's
+    tangent angle phi(s_o) turns per unit tangential motion of the arm point (so
+    ``nu_o kappa_o = sin(alpha) foot_turn``); ``normal_out`` = -n(s_o) (n, 2) the boundary's
+    outward unit normal at the foot (the direction of ``r - gamma`` outside the object);
+    ``in_contact`` is ``delta >= -tol`` (Definition 1); ``valid`` marks points inside the
+    admissible region (rho > 0, 0 < alpha < pi, 1 + rho kappa_o > 0). ``nu_o`` and
+    ``foot_turn`` are inf or meaningless where ``1 + rho kappa_o <= 0`` (not ``valid``).
     """
 
     s: NDArray[np.float64]
@@ -65,6 +76,8 @@ class ContactState:
     foot: NDArray[np.float64]
     kappa_o: NDArray[np.float64]
     nu_o: NDArray[np.float64]
+    foot_turn: NDArray[np.float64]
+    normal_out: NDArray[np.float64]
     in_contact: NDArray[np.bool_]
     valid: NDArray[np.bool_]
     tol: float
@@ -88,27 +101,52 @@ def _radius_array(radius: float | ArrayLike, n: int) -> NDArray[np.float64]:
     r = float_array("arm radius", radius)
     if r.shape not in ((), (n,)):
         raise InvalidParameterError(f"arm radius must be a scalar or one value per arm node ({n}), got shape {r.shape}")
-    r = np.broadcast_to(r, (n,)).copy()
-    if not np.all(np.isfinite(r)) or np.any(r < 0.0):
+    r = np.broadcast_to(r, (n,))  # (read only: delta = r - rho is a new array)
+    if not (r.min() >= 0.0 and r.max() < np.inf):  # (NaN fails the first)
         raise InvalidParameterError("arm radius must be finite and >= 0 along the arm")
     return r
 
 
+def _unwrap(s_o: NDArray[np.float64], length: float) -> NDArray[np.float64]:
+    """``np.unwrap(s_o, period=length)``, skipped when no step crosses the seam (the same result:
+    unwrap adds nothing then; saves most of its cost in the rod's inner loop)."""
+    if len(s_o) > 1 and np.any(np.abs(np.diff(s_o)) >= 0.5 * length):
+        return np.unwrap(s_o, period=length)
+    return s_o
+
+
 def sense(
     shape: ArmShape,
-    boundary: Boundary,
+    boundary: Boundary | Obstacle,
     radius: float | ArrayLike,
     *,
     tol: float = DEFAULT_CONTACT_TOL,
 ) -> ContactState:
-    """Geometric sensing of (rho, alpha, delta, s_o) and the contact set from an arm shape.
+    """Geometric sensing of the contact state (:class:`ContactState`) of an arm shape.
 
-    Implements eq. (4) with the closest boundary point as shadow point,
-    eq. (5) (``delta = r_arm - rho``) and Definition 1 with tolerance ``tol``
+    Vectorised over the arm's arclength: one closest-point projection of all the points
+    ``shape.r``, then eq. (4) with the closest boundary point as shadow point
+    (``rho`` = signed distance, ``alpha = phi(s_o) + pi/2 - theta`` wrapped to [-pi, pi)),
+    eq. (5) (``delta = r_arm - rho``, ``radius`` a scalar or one value per point), eq.
+    (7) (``nu_o``, ``foot_turn``) and Definition 1 with tolerance ``tol``
     (``in_contact = delta >= -tol``).
+
+    ``boundary`` selects the projection, and this is the only place sensing calls it:
+
+    * a :class:`~contgrasp_core.boundary.Boundary` - :meth:`Boundary.project`, Newton's method
+      on the curve from several candidates, converged to rounding (the library, the sampled
+      loop of :mod:`contgrasp_core.rod.session` and the ROS boundary sensor);
+    * an :class:`~contgrasp_core.rod.obstacle.Obstacle` - its fast projection, analytic for
+      circles and one osculating-circle Newton step from a table otherwise (about 1e-10 of the
+      object size; the rod's continuous loop and the law's Jacobian inside every implicit step).
+
+    The two are different computations of the same closest point (they agree to rounding on
+    circles and to ~1e-10 elsewhere); each caller keeps the one it has always used, so the
+    sampled ROS loop and its core twin call this function on the same arrays and agree bitwise.
     """
     instance("shape", shape, ArmShape)
-    instance("boundary", boundary, Boundary)
+    if not isinstance(boundary, (Boundary, Obstacle)):
+        raise InvalidParameterError(f"boundary must be a Boundary or an Obstacle, got {type(boundary).__name__}")
     tol = real("contact tolerance", tol, lo=0.0)
     r = float_array("arm shape r", shape.r)
     theta = float_array("arm shape theta", shape.theta)
@@ -119,17 +157,23 @@ def sense(
     ss = float_array("arm shape s", shape.s)
     if ss.shape != theta.shape:
         raise InvalidParameterError(f"arm shape needs s of shape {theta.shape}, got {ss.shape}")
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(theta)) and np.all(np.isfinite(ss))):
+    # a finite sum has finite terms; only on overflow (|values| ~ 1e308) check one by one
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = r.sum() + theta.sum() + ss.sum()
+    if not np.isfinite(total) and not (
+        np.all(np.isfinite(r)) and np.all(np.isfinite(theta)) and np.all(np.isfinite(ss))
+    ):
         raise InvalidParameterError("arm shape contains NaN or infinite values")
     rad = _radius_array(radius, len(r))
     proj = boundary.project(r)
-    s_o = np.unwrap(proj.s_o, period=boundary.length)
+    s_o = _unwrap(proj.s_o, boundary.length)
     rho = proj.signed_distance
     alpha = _wrap_pi(proj.phi + 0.5 * np.pi - theta)
     kappa_o = proj.kappa_o
     one_plus = 1.0 + rho * kappa_o
     with np.errstate(divide="ignore", invalid="ignore"):
         nu_o = np.sin(alpha) / one_plus
+        foot_turn = kappa_o / one_plus
     delta = rad - rho
     valid = (rho > 0.0) & (alpha > 0.0) & (alpha < np.pi) & (one_plus > 0.0)
     return ContactState(
@@ -141,6 +185,8 @@ def sense(
         foot=proj.foot,
         kappa_o=kappa_o,
         nu_o=nu_o,
+        foot_turn=foot_turn,
+        normal_out=proj.normal_out,
         in_contact=delta >= -tol,
         valid=valid,
         tol=float(tol),

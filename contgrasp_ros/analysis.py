@@ -6,7 +6,8 @@ the run's parameters. :func:`load_run` decodes it (``mcap_ros2``, no message pac
 numpy arrays; :func:`recompute` repeats the sensing (paper eqs. (4) and
 (5), Definition 1) and the grasp quality (Sec. IV: W = int_S G G^T ds, Q1 = lambda_min(W),
 Q2 = det W, Q3 = lambda_min / lambda_max) from the recorded rod states with exactly the
-functions the nodes call (:mod:`contgrasp_ros.evaluate`), so on a genuine recording the
+functions the nodes call (:func:`contgrasp_core.contact.sense`,
+:func:`contgrasp_ros.evaluate.contact_quality`), so on a genuine recording the
 recomputation agrees with the recorded topics to rounding (in practice bitwise);
 :func:`summarize` builds the launcher's summary (with the launcher's own builder,
 :func:`contgrasp_ros.summary.build_summary`) plus the recomputation errors. :func:`write_csv`
@@ -33,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.boundary import Boundary
+from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError, InvalidParameterError, WriteError, output_error
 from contgrasp_core.rod.session import SettleDetector
 from contgrasp_ros import topics
@@ -40,7 +42,7 @@ from contgrasp_ros.bag import BagInputError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
 from contgrasp_core.scenario import PAPER
 from contgrasp_ros.convert import ContactArrays, RodArrays, boundary_from_msg, contact_arrays, rod_state_arrays, stamp_seconds
-from contgrasp_ros.evaluate import contact_quality, sense_rod_state
+from contgrasp_ros.evaluate import contact_quality
 from contgrasp_ros.summary import FinalQuality, FinalState, build_summary, contact_stats
 
 __all__ = [
@@ -338,8 +340,8 @@ def recompute(
     reference: tuple[float, float] | None = None,
 ) -> Recomputation:
     """Recompute the contact state of every recorded rod state that has a recorded contact state
-    of the same step (:func:`~contgrasp_ros.evaluate.sense_rod_state`, eqs. (4)
-    and (5)), and the quality of every recorded quality step whose rod state was recorded
+    of the same step (:func:`contgrasp_core.contact.sense`, as the boundary sensor; eqs.
+    (4) and (5)), and the quality of every recorded quality step whose rod state was recorded
     (rod state -> sensing -> :func:`~contgrasp_ros.evaluate.contact_quality`, Sec. IV,
     W = int_S G G^T ds); return the largest absolute differences per quantity.
 
@@ -359,9 +361,10 @@ def recompute(
     failures: list[str] = []
     sensed: dict[int, Any] = {}
 
-    def sense(i: int) -> Any:
+    def sensed_state(i: int) -> Any:
         if i not in sensed:
-            sensed[i] = sense_rod_state(run.rod.arrays(i), run.boundary, s_tol)
+            rod = run.rod.arrays(i)
+            sensed[i] = sense(rod.shape, run.boundary, rod.radius, tol=s_tol)
         return sensed[i]
 
     def bump(key: str, value: float) -> None:
@@ -375,7 +378,7 @@ def recompute(
             if i is None:
                 continue
             try:
-                st = sense(i)
+                st = sensed_state(i)
             except ContgraspError as exc:
                 failures.append(f"contact at step {k}: {exc}")
                 continue
@@ -400,7 +403,7 @@ def recompute(
             if i is None:
                 continue
             try:
-                st = sense(i)
+                st = sensed_state(i)
                 qq = contact_quality(_to_contact_arrays(int(k), float(run.rod.t[i]), st), run.boundary, q_tol, ref)
             except ContgraspError as exc:
                 failures.append(f"quality at step {k}: {exc}")

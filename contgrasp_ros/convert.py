@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from contgrasp_core.arm import ArmShape
 from contgrasp_core.boundary import Boundary, from_points
 from contgrasp_core.contact import ContactState
 from contgrasp_core.errors import ContgraspError, InputError
@@ -118,6 +119,11 @@ class RodArrays:
     theta: Array
     kappa: Array
     radius: Array
+
+    @property
+    def shape(self) -> ArmShape:
+        """The centreline at the nodes, what :func:`contgrasp_core.contact.sense` senses."""
+        return ArmShape(s=self.s, r=np.stack([self.x, self.y], -1), theta=self.theta)
 
 
 def rod_state_arrays(msg: RodStateMsg) -> RodArrays:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from contgrasp_core.arm import BasePose, shape_from_curvature
+from contgrasp_core.arm import ArmShape, BasePose, shape_from_curvature
 from contgrasp_core.boundary import circle, deformed_circle, ellipse
 from contgrasp_core.contact import (
     base_pose,
@@ -15,7 +15,8 @@ from contgrasp_core.contact import (
     sense,
     shape_from_contact,
 )
-from contgrasp_core.errors import ContactValidityError
+from contgrasp_core.errors import ContactValidityError, InvalidParameterError
+from contgrasp_core.rod import Obstacle
 
 
 @pytest.mark.parametrize(
@@ -60,6 +61,77 @@ def test_constant_distance_around_a_circle(rho: float) -> None:
     np.testing.assert_allclose(geo.alpha, np.pi / 2, atol=1e-10)
     np.testing.assert_allclose(geo.delta, 0.0, atol=1e-10)
     assert np.all(geo.in_contact | (geo.delta > -1e-9))
+
+
+@pytest.mark.parametrize("projection", ["boundary", "obstacle"])
+def test_sense_on_a_circle_matches_closed_forms(projection: str) -> None:
+    """Points at distance d and polar angle psi from a circle's centre c, with arm angle theta:
+    foot = c + R u (u = (cos psi, sin psi)), s_o = R psi, rho = d - R, alpha = psi + pi - theta
+    (the inward normal points along -u), normal_out = u = (x - c)/|x - c|, kappa_o = 1/R,
+    foot_turn = (1/R)/(1 + rho/R) = 1/d and nu_o = sin(alpha) R/d; eq. (5) and Definition 1.
+    Both projections sense() accepts (Boundary.project and the rod's Obstacle) give them."""
+    R, c = 0.7, np.array([0.3, -1.2])
+    b = circle(R, center=tuple(c))
+    rng = np.random.default_rng(11)
+    n = 40
+    psi = np.sort(rng.uniform(0.05, 2 * np.pi - 0.05, n))  # increasing: s_o needs no unwrapping
+    d = rng.uniform(0.3 * R, 3.0 * R, n)  # inside and outside the object
+    theta = rng.uniform(-3.0, 3.0, n)
+    u = np.stack([np.cos(psi), np.sin(psi)], axis=1)
+    x = c + d[:, None] * u
+    radius = rng.uniform(0.0, 0.5, n)
+    shape = ArmShape(s=np.arange(n, dtype=float), r=x, theta=theta)
+    geo = sense(shape, b if projection == "boundary" else Obstacle(b), radius, tol=0.05)
+    rho = d - R
+    alpha = np.mod(psi + np.pi - theta + np.pi, 2 * np.pi) - np.pi
+    np.testing.assert_allclose(geo.rho, rho, atol=1e-12)
+    np.testing.assert_allclose(geo.alpha, alpha, atol=1e-12)
+    assert np.all((geo.alpha >= -np.pi) & (geo.alpha < np.pi))
+    np.testing.assert_allclose(geo.s_o, R * psi, atol=1e-12)
+    np.testing.assert_allclose(geo.foot, c + R * u, atol=1e-12)
+    np.testing.assert_allclose(geo.kappa_o, 1.0 / R, rtol=1e-12)
+    np.testing.assert_allclose(geo.normal_out, (x - c) / np.hypot(*(x - c).T)[:, None], atol=1e-12)
+    np.testing.assert_allclose(geo.foot_turn, (1.0 / R) / (1.0 + rho / R), rtol=1e-12)
+    np.testing.assert_allclose(geo.foot_turn, 1.0 / d, rtol=1e-12)
+    np.testing.assert_allclose(geo.nu_o, np.sin(alpha) * R / d, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(geo.delta, radius - rho, atol=1e-12)
+    np.testing.assert_array_equal(geo.in_contact, radius - rho >= -0.05)
+    np.testing.assert_array_equal(geo.valid, (rho > 0) & (alpha > 0) & (alpha < np.pi))
+    np.testing.assert_array_equal(geo.s, shape.s)
+    assert geo.tol == 0.05
+
+
+def test_sense_outward_normal_points_from_the_foot_to_the_arm() -> None:
+    """On any boundary, r - foot = rho normal_out (the foot is the closest point)."""
+    b = ellipse(3.0, 1.5, center=(0.5, 0.2), angle=0.4)
+    s = np.linspace(0, 6, 50)
+    shape = shape_from_curvature(s, np.full_like(s, 0.25), BasePose(4.0, -1.0, np.pi / 2))
+    for obj in (b, Obstacle(b)):
+        geo = sense(shape, obj, 0.1)
+        np.testing.assert_allclose(shape.r - geo.foot, geo.rho[:, None] * geo.normal_out, atol=1e-9)
+        np.testing.assert_allclose(np.hypot(*geo.normal_out.T), 1.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("start,crosses", [(0.5 * np.pi, False), (-0.25, True)], ids=["no-seam", "across-the-seam"])
+def test_sense_unwraps_s_o_like_numpy(start: float, crosses: bool) -> None:
+    """s_o is np.unwrap of the projection's arclengths (sense skips the call when no step can
+    cross the seam s_o = 0, which must not change a bit)."""
+    b = circle(1.0)
+    s = np.linspace(0, 0.5 * np.pi * 1.2, 80)  # a quarter turn at distance 0.2, counter-clockwise
+    base = BasePose(1.2 * np.cos(start), 1.2 * np.sin(start), start + np.pi / 2)
+    shape = shape_from_curvature(s, np.full_like(s, 1 / 1.2), base)
+    for obj in (b, Obstacle(b)):
+        wrapped = obj.project(shape.r).s_o
+        assert bool(np.any(np.diff(wrapped) < 0)) == crosses
+        geo = sense(shape, obj, 0.1)
+        np.testing.assert_array_equal(geo.s_o, np.unwrap(wrapped, period=b.length))
+        assert np.all(np.diff(geo.s_o) > 0)
+
+
+def test_sense_rejects_what_is_not_an_object() -> None:
+    shape = ArmShape(s=np.zeros(1), r=np.zeros((1, 2)), theta=np.zeros(1))
+    with pytest.raises(InvalidParameterError, match="Boundary or an Obstacle"):
+        sense(shape, "circle", 0.1)  # type: ignore[arg-type]
 
 
 def test_contact_set_and_tolerance() -> None:

@@ -15,8 +15,8 @@ Accepted, and therefore not fuzzed:
 * user callables (a kappa(s) or mu(s) profile, ``object_curvature(s_o)``, ``rho_d(s)``) are
   trusted: what they raise propagates unchanged;
 * results that are legitimately non-finite by definition: ``PoseResult.Q`` of an invalid pose
-  (NaN), ``GraspQuality.contact_length`` when unknown (NaN), ``ContactState.nu_o`` where
-  ``1 + rho kappa_o = 0`` (the ``valid`` flags say so);
+  (NaN), ``GraspQuality.contact_length`` when unknown (NaN), ``ContactState.nu_o`` and
+  ``ContactState.foot_turn`` where ``1 + rho kappa_o = 0`` (the ``valid`` flags say so);
 * an optimal-grasp solve that does not converge is a result (``converged=False``), not an error;
 * :func:`contgrasp_ros.analysis.analyze` is fuzzed through its recording path, and its
   overrides of the wrong type are checked in :func:`test_analyze_overrides_of_the_wrong_type`.
@@ -311,7 +311,7 @@ def test_integrate_contact(b, s, kappa, rho, alpha, s_o, rtol, atol) -> None:  #
        s_o0=num(-40.0, 40.0), use_shape=st.booleans())
 def test_sensing_and_shapes(b, s, r, theta, radius, tol, rho, alpha, so, distance, s_o0, use_shape) -> None:  # type: ignore[no-untyped-def]
     shape = A.ArmShape(s=s, r=r, theta=theta) if use_shape else theta
-    call(C.sense, shape, b, radius, tol=tol, finite=lambda c: [c.rho, c.alpha, c.delta, c.s_o, c.foot, c.kappa_o])
+    call(C.sense, shape, b, radius, tol=tol, finite=lambda c: [c.rho, c.alpha, c.delta, c.s_o, c.foot, c.kappa_o, c.normal_out])
     call(C.shape_from_contact, s, rho, alpha, so, b, finite=lambda sh: [sh.r, sh.theta])
     call(C.offset_curvature, b, s, distance, s_o0)
 

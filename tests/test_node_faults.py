@@ -542,7 +542,7 @@ def test_unexpected_exception_is_counted_and_the_node_keeps_working(make, monkey
 
     assert spin_until(lambda: pub.get_subscription_count() > 0 and probe.count_publishers(topics.CONTACT) > 0)
     arrays = rod_arrays(11, 10.0, (0.0, 0.0, 0.0))
-    monkeypatch.setattr(boundary_sensor, "sense_rod_state", _boom)
+    monkeypatch.setattr(boundary_sensor, "sense", _boom)
     pub.publish(RodState(step=1, **arrays))
     assert spin_until(lambda: node.drops.total == 1)
     assert node.drops.counts == {"/contgrasp/rod_state: internal error: RuntimeError": 1}
@@ -798,7 +798,7 @@ def test_deep_penetration_fails_the_run_at_once(make) -> None:  # type: ignore[n
 def test_paper_scale_limits_do_not_trip_a_normal_run(make) -> None:  # type: ignore[no-untyped-def]
     """A short lock-step run with the controller's law: no failure with the default limits."""
     from contgrasp_core.control import paper_gains
-    from contgrasp_core.rod.session import sense_observation
+    from contgrasp_core.contact import sense
     from contgrasp_core.control import feedback_at_joints
     from contgrasp_ros.convert import couple_to_msg
     from contgrasp_ros.nodes.rod_simulator import _stamp
@@ -807,7 +807,7 @@ def test_paper_scale_limits_do_not_trip_a_normal_run(make) -> None:  # type: ign
     gains = paper_gains(sim.model, 0.025)
     for _ in range(60):
         obs = sim.session.observe()
-        c = sense_observation(obs, OBJ)
+        c = sense(obs.shape, OBJ, obs.radius)
         sim.on_couple(couple_to_msg(sim.model.joint_s, feedback_at_joints(sim.model, gains, c.rho, c.alpha),
                                     Header(stamp=_stamp(obs.t)), obs.k))
     assert not sim.failure and sim.session.k == 60 and sim.drops.total == 0

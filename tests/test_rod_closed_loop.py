@@ -14,7 +14,7 @@ from contgrasp_core.boundary import circle, deformed_circle, ellipse
 from contgrasp_core.contact import sense
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import Obstacle, RodSystem, chain
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop, sense_nodes
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
 from contgrasp_core.control import paper_gains
 from contgrasp_core.scenario import PAPER
 
@@ -34,16 +34,27 @@ def test_obstacle_projection_matches_boundary_project(b):
     np.testing.assert_allclose(_wrap(got.phi - b.tangent_angle(ref.s_o)), 0.0, atol=1e-6)
 
 
-def test_node_sensing_matches_foundation_sense():
+@pytest.mark.parametrize("b", [PAPER.object.boundary(), ellipse(0.03, 0.018, (0.08, 0.07), 0.3),
+                               deformed_circle(0.025, center=(0.08, 0.08))], ids=["circle", "ellipse", "deformed"])
+def test_rod_sensing_with_the_obstacle_matches_the_boundary(b):
+    """The rod's sensing (``sense`` with the fast Obstacle projection, at the nodes of
+    ``chain.arm_shape``) gives the library's contact state (``sense`` with Boundary.project)."""
     m = replace(PAPER.rod, n_elements=40)
     theta = np.linspace(0.0, 2.5, 40)
-    b = PAPER.object.boundary()
-    sn = sense_nodes(m, Obstacle(b), theta)
-    shape = ArmShape(s=m.s_nodes, r=chain.nodes(m, theta), theta=chain.node_angles(m, theta))
-    cs = sense(shape, b, m.radius(m.s_nodes))
-    np.testing.assert_allclose(sn.rho, cs.rho, atol=1e-10)
-    np.testing.assert_allclose(_wrap(sn.alpha - cs.alpha), 0.0, atol=1e-8)
-    np.testing.assert_allclose(sn.delta, cs.delta, atol=1e-10)
+    shape = chain.arm_shape(m, theta)
+    assert isinstance(shape, ArmShape)
+    np.testing.assert_array_equal(shape.r, chain.nodes(m, theta))
+    np.testing.assert_array_equal(shape.theta, chain.node_angles(m, theta))
+    fast = sense(shape, Obstacle(b), m.radius(m.s_nodes))
+    exact = sense(shape, b, m.radius(m.s_nodes))
+    for name in ("rho", "delta", "s_o", "foot"):
+        np.testing.assert_allclose(getattr(fast, name), getattr(exact, name), atol=1e-8, err_msg=name)
+    # angles: one Newton step on the osculating circle leaves ~1e-8 rad (cf. the projection test)
+    np.testing.assert_allclose(fast.normal_out, exact.normal_out, atol=1e-6)
+    np.testing.assert_allclose(_wrap(fast.alpha - exact.alpha), 0.0, atol=1e-6)
+    # the Obstacle's kappa_o is the curvature at the nearest table sample, not at the foot
+    np.testing.assert_allclose(fast.foot_turn, exact.foot_turn, rtol=1e-2)
+    np.testing.assert_array_equal(fast.valid, exact.valid)
 
 
 @pytest.fixture(scope="module")
@@ -141,7 +152,7 @@ def test_held_expansion_is_the_law_to_first_order() -> None:
     from contgrasp_core.rod.closed_loop import ClosedLoopConfig
     from contgrasp_core.control import paper_gains
     from contgrasp_core.scenario import PAPER
-    from contgrasp_core.rod.session import LoopSession, sense_observation
+    from contgrasp_core.rod.session import LoopSession
     from contgrasp_core.control import feedback_at_joints, HeldExpansion
 
     model, obj = replace(PAPER.rod, n_elements=30), PAPER.object.boundary()
@@ -154,7 +165,8 @@ def test_held_expansion_is_the_law_to_first_order() -> None:
     def law(theta):  # type: ignore[no-untyped-def]
         session.state = type(session.state)(t=0.0, theta=theta, omega=session.state.omega)
         session._observed = None
-        c = sense_observation(session.observe(), obj)
+        obs = session.observe()
+        c = sense(obs.shape, obj, obs.radius)
         return feedback_at_joints(model, gains, c.rho, c.alpha)
 
     e = law(theta0)

@@ -171,7 +171,8 @@ def _contact_case(method: str, feedback: str):
     damping, drag, friction, a held couple, node forces and optionally the feedback couple."""
     from contgrasp_core.boundary import circle, deformed_circle
     from contgrasp_core.rod import Obstacle
-    from contgrasp_core.rod.closed_loop import sense_nodes
+    from contgrasp_core.contact import sense
+    from contgrasp_core.rod import chain
     from contgrasp_core.control import paper_gains, StateFeedback
     from contgrasp_core.control import feedback_at_joints, HeldExpansion
 
@@ -190,7 +191,7 @@ def _contact_case(method: str, feedback: str):
     if feedback in ("state", "deformed"):
         fb = StateFeedback(model, system.obstacle, paper_gains(model, 0.03))
     elif feedback == "held":  # the law expanded about a nearby state
-        sensed = sense_nodes(model, system.obstacle, state.theta + 0.01)
+        sensed = sense(chain.arm_shape(model, state.theta + 0.01), system.obstacle, model.radius(model.s_nodes))
         fb = HeldExpansion(model, system.obstacle, feedback_at_joints(model, paper_gains(model, 0.03), sensed.rho, sensed.alpha))
     return system, state, RodLoads(couple=couple, node_forces=forces, feedback=fb)
 

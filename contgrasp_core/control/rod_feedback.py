@@ -17,7 +17,9 @@ instead evaluates the law inside every Newton iteration of the implicit step, at
 and supplies its derivative ``du/dtheta`` to the Newton matrix, so the continuous-time loop of
 paper Prop. 5.2 is integrated with the same unconditional stability as the elastic forces.
 
-Sensing is at the joints ``s_k = k h`` (the clamp and the internal nodes; the tip carries no
+Sensing is :func:`contgrasp_core.contact.sense` at the N+1 rod nodes
+(:func:`contgrasp_core.rod.chain.arm_shape`, the fast :class:`Obstacle` projection); the law reads
+it at the joints ``s_k = k h``, k = 0..N-1 (the clamp and the internal nodes; the tip carries no
 couple): ``rho_k`` the signed distance of node ``k`` to the boundary, ``alpha_k = phi + pi/2 -
 theta_k`` with ``theta_k`` the mean angle of the adjacent elements (eq. (4)).
 """
@@ -30,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.control.gains import FeedbackGains
 from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_gradient
 from contgrasp_core.errors import InvalidParameterError
@@ -42,8 +45,10 @@ if TYPE_CHECKING:
 
 Array = NDArray[np.float64]
 
-__all__ = ["StateFeedback", "JointSensing", "sense_joints", "joint_couple_jacobian", "FeedbackExpansion",
-           "feedback_at_joints", "HeldExpansion", "static_solution"]
+__all__ = ["StateFeedback", "joint_couple_jacobian", "FeedbackExpansion", "feedback_at_joints", "HeldExpansion",
+           "static_solution"]
+
+_SAFE_ONE_PLUS = 0.05  # below this 1 + rho kappa_o the foot's turning rate is dropped from the Jacobian
 
 
 @dataclass(frozen=True)
@@ -63,52 +68,35 @@ class StateFeedback:
         """``u`` (N,) and ``du/dtheta`` (N, N) (:func:`joint_couple_jacobian`). ``nodes``
         (N+1, 2) and element ``normals`` (N, 2) may be passed when already computed."""
         m, g = self.model, self.gains
-        js = sense_joints(m, self.obstacle, theta, nodes)
+        c = sense(chain.arm_shape(m, theta, nodes), self.obstacle, m.radius(m.s_nodes))
+        rho, alpha = c.rho[:-1], c.alpha[:-1]
         ei = m.joint_ei
-        u = feedback_couple(js.rho, js.alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
+        u = feedback_couple(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         if not jacobian:
             return u, None
-        g_rho, g_alpha = feedback_couple_gradient(js.rho, js.alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
+        g_rho, g_alpha = feedback_couple_gradient(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         b = chain.frames(theta)[1] if normals is None else normals
-        return u, joint_couple_jacobian(m, g_rho, g_alpha, js, b)
+        return u, joint_couple_jacobian(m, g_rho, g_alpha, c, b)
 
 
-@dataclass(frozen=True)
-class JointSensing:
-    """(rho, alpha) at the N joints (eq. (4); alpha not wrapped: it is used in
-    differences and trigonometric functions), the outward normal at the foot (N, 2) and
-    ``foot_turn = kappa_o / (1 + rho kappa_o)`` (1/m), the rate at which the foot's tangent angle
-    turns per unit tangential motion of the joint (0 where ``1 + rho kappa_o`` is not safely
-    positive: there the closest point is degenerate, paper Sec. II-C ``nu_o``)."""
-
-    rho: np.ndarray
-    alpha: np.ndarray
-    normal_out: np.ndarray
-    foot_turn: np.ndarray
-
-
-def sense_joints(model: RodModel, obstacle: Obstacle, theta: np.ndarray, nodes: np.ndarray | None = None) -> JointSensing:
-    """Sensing at the joints ``s_k = k h``, k = 0..N-1 (see :class:`JointSensing`)."""
-    x = (chain.nodes(model, theta) if nodes is None else nodes)[:-1]
-    th_n = chain.node_angles(model, theta)[:-1]
-    pr = obstacle.project(x)
-    den = 1.0 + pr.signed_distance * pr.kappa_o
-    turn = np.where(den > 0.05, pr.kappa_o / np.where(den > 0.05, den, 1.0), 0.0)
-    return JointSensing(rho=pr.signed_distance, alpha=pr.phi + 0.5 * np.pi - th_n, normal_out=pr.normal_out, foot_turn=turn)
-
-
-def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarray, sensing: JointSensing,
+def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarray, sensing: ContactState,
                           b: np.ndarray) -> np.ndarray:
-    """``du/dtheta`` (N, N) of a joint couple with partials ``g_rho``, ``g_alpha`` (N,).
+    """``du/dtheta`` (N, N) of a joint couple with partials ``g_rho``, ``g_alpha`` (N,), from the
+    rod's contact state ``sensing`` at its N+1 nodes (:func:`contgrasp_core.contact.sense`; the
+    joints are nodes 0..N-1).
 
     Node k moves by ``h b_l`` per unit ``theta_l``, ``l < k``: ``d rho_k / d theta_l = h n_k . b_l``
-    and the foot's tangent angle turns by ``h foot_turn_k t_k . b_l`` (``t_k`` the boundary
-    tangent at the foot). The node angle is the mean of the adjacent elements:
-    ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2``.
+    (``n_k`` the outward normal ``normal_out`` at the foot) and the foot's tangent angle turns by
+    ``h foot_turn_k t_k . b_l`` (``t_k`` the boundary tangent at the foot, ``foot_turn =
+    kappa_o / (1 + rho kappa_o)``, eq. (7); taken as 0 where ``1 + rho kappa_o`` is not
+    safely positive: there the closest point is degenerate). The node angle is the mean of the
+    adjacent elements: ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2``.
     """
-    n_out = sensing.normal_out
+    n_out = sensing.normal_out[:-1]
+    safe = 1.0 + sensing.rho[:-1] * sensing.kappa_o[:-1] > _SAFE_ONE_PLUS
+    turn = np.where(safe, sensing.foot_turn[:-1], 0.0)
     tangent = np.stack([-n_out[:, 1], n_out[:, 0]], axis=1)
-    direction = g_rho[:, None] * n_out + (g_alpha * sensing.foot_turn)[:, None] * tangent
+    direction = g_rho[:, None] * n_out + (g_alpha * turn)[:, None] * tangent
     du = model.h * np.tril(direction @ b.T, -1)
     coef = -0.5 * g_alpha
     k = np.arange(1, model.n_elements)
@@ -166,13 +154,13 @@ class HeldExpansion:
     ) -> tuple[Array, Array | None]:
         """Deviation of the couple from the held value (N,) and its derivative (N, N)."""
         m, e = self.model, self.expansion
-        js = sense_joints(m, self.obstacle, theta, nodes)
-        d_alpha = np.mod(js.alpha - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
-        du = e.g_rho * (js.rho - e.rho_ref) + e.g_alpha * d_alpha
+        c = sense(chain.arm_shape(m, theta, nodes), self.obstacle, m.radius(m.s_nodes))
+        d_alpha = np.mod(c.alpha[:-1] - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
+        du = e.g_rho * (c.rho[:-1] - e.rho_ref) + e.g_alpha * d_alpha
         if not jacobian:
             return du, None
         b = chain.frames(theta)[1] if normals is None else normals
-        return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, js, b)
+        return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, c, b)
 
 
 def static_solution(res: "ClosedLoopResult", obstacle_radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

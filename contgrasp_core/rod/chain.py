@@ -14,6 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from contgrasp_core.arm import ArmShape
 from contgrasp_core.rod.model import RodModel
 
 __all__ = [
@@ -21,6 +22,7 @@ __all__ = [
     "nodes",
     "centres",
     "node_angles",
+    "arm_shape",
     "centre_velocities",
     "centripetal_accelerations",
     "generalized_from_centre_forces",
@@ -63,6 +65,14 @@ def node_angles(model: RodModel, theta: np.ndarray) -> np.ndarray:
     out[1:-1] = 0.5 * (theta[:-1] + theta[1:])
     out[-1] = theta[-1]
     return out
+
+
+def arm_shape(model: RodModel, theta: np.ndarray, node_positions: np.ndarray | None = None) -> ArmShape:
+    """The rod's centreline at its N+1 nodes (arclengths ``s_nodes``, :func:`nodes`,
+    :func:`node_angles`), the arm shape :func:`contgrasp_core.contact.sense` senses.
+    ``node_positions`` (N+1, 2) may be passed when already computed."""
+    x = nodes(model, theta) if node_positions is None else node_positions
+    return ArmShape(s=model.s_nodes, r=x, theta=node_angles(model, theta))
 
 
 def _prefix_excl(v: np.ndarray) -> np.ndarray:

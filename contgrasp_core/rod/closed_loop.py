@@ -6,7 +6,8 @@ Two ways to close the loop:
   state inside every implicit step (:class:`~contgrasp_core.control.StateFeedback`), which is
   the continuous-time loop of paper Prop. 5.2 and stays stable at large steps ``dt``.
 * ``control_period=T``: sampled feedback. Every ``T`` seconds the runner senses ``(rho, alpha)``
-  at the rod nodes from the current centreline (eq. (4)), evaluates the couple of
+  at the rod nodes from the current centreline (:func:`contgrasp_core.contact.sense` with the
+  fast :class:`Obstacle` projection, eq. (4)), evaluates the couple of
   eq. (19) at the joints and holds it (zero-order hold) while the integrator advances
   with steps ``dt`` dividing ``T``. This is what a lock-step ROS loop does; it needs ``T`` well
   below the fastest bending period of the tip (see docs/rod.md) or the loop flutters.
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from contgrasp_core.contact import sense
 from contgrasp_core.control.gains import FeedbackGains
 from contgrasp_core.control.law import feedback_couple
 from contgrasp_core.control.rod_feedback import StateFeedback
@@ -33,35 +35,7 @@ from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["NodeSensing", "sense_nodes", "ClosedLoopConfig",
-           "ClosedLoopResult", "run_closed_loop"]
-
-
-@dataclass(frozen=True)
-class NodeSensing:
-    """Sensed contact geometry at the rod nodes: ``rho`` (signed distance of the centreline to the
-    boundary, m), ``alpha`` (rad, in (-pi, pi]), ``s_o``, ``foot`` (N+1, 2) and the surface
-    penetration ``delta = r(s) - rho`` (paper eq. (5))."""
-
-    rho: np.ndarray
-    alpha: np.ndarray
-    s_o: np.ndarray
-    foot: np.ndarray
-    delta: np.ndarray
-
-
-def sense_nodes(model: RodModel, obstacle: Obstacle, theta: np.ndarray) -> NodeSensing:
-    """Geometric sensing (eq. (4)) at the nodes of the rod with angles ``theta``.
-
-    Same definitions as :func:`contgrasp_core.contact.sense` (checked in the tests), using the
-    fast :class:`Obstacle` projection.
-    """
-    x = chain.nodes(model, theta)
-    th = chain.node_angles(model, theta)
-    pr = obstacle.project(x)
-    alpha = np.mod(pr.phi + 0.5 * np.pi - th + np.pi, 2.0 * np.pi) - np.pi
-    return NodeSensing(rho=pr.signed_distance, alpha=alpha, s_o=pr.s_o, foot=pr.foot,
-                       delta=model.radius(model.s_nodes) - pr.signed_distance)
+__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "run_closed_loop"]
 
 
 @dataclass(frozen=True)
@@ -181,7 +155,8 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     settled = False
     wall0 = time.perf_counter()
     for k in range(n_ctrl + 1):
-        sn = sense_nodes(m, obstacle, st.theta)
+        shape = chain.arm_shape(m, st.theta)
+        sn = sense(shape, obstacle, r_nodes)
         u = feedback_couple(sn.rho[:-1], sn.alpha[:-1], ei, gains.mu1, gains.mu2, length_unit=gains.length_unit)
         speed = _speeds(m, st)
         done = False
@@ -194,7 +169,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
             pen_c = m.r_centres - obstacle.project(chain.centres(m, st.theta)).signed_distance
             pen = max(float(sn.delta.max()), float(pen_c.max()), 0.0)
             ratio = max(float((sn.delta / r_nodes).max()), float((pen_c / m.r_centres).max()), 0.0)
-            for key, val in (("t", st.t), ("x", chain.nodes(m, st.theta)), ("theta", chain.node_angles(m, st.theta)),
+            for key, val in (("t", st.t), ("x", shape.r), ("theta", shape.theta),
                              ("rho", sn.rho), ("alpha", sn.alpha), ("couple", u), ("pen", pen), ("ratio", ratio),
                              ("speed", speed)):
                 rec[key].append(val)

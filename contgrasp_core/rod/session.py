@@ -4,8 +4,9 @@ One control cycle k (paper Sec. V-B):
 
 1. :meth:`LoopSession.observe` - the rod state k as arrays at the nodes (what the simulator
    publishes) and the settle/duration bookkeeping;
-2. :func:`sense_observation` - geometric sensing of (rho, alpha, delta, s_o) from those arrays
-   (:func:`contgrasp_core.contact.sense`, eq. (4)) (what the sensor does);
+2. :func:`contgrasp_core.contact.sense` of :attr:`Observation.shape` - geometric sensing of
+   (rho, alpha, delta, s_o) from those arrays (eqs. (4), (5), Definition 1,
+   with :meth:`Boundary.project <contgrasp_core.boundary.Boundary.project>`) (what the sensor does);
 3. :func:`contgrasp_core.control.feedback_at_joints` - the couple of eq. (19) at the joints and its
    first-order expansion in (rho, alpha) (what the controller does);
 4. :meth:`LoopSession.advance` - hold the couple, to first order in the state
@@ -27,8 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.arm import ArmShape
-from contgrasp_core.boundary import Boundary
-from contgrasp_core.contact import ContactState, sense
+from contgrasp_core.contact import sense
 from contgrasp_core.control.rod_feedback import FeedbackExpansion, HeldExpansion
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.scenario import Scenario
@@ -42,7 +42,6 @@ __all__ = [
     "LoopSession",
     "DivergenceLimits",
     "SimulationDivergedError",
-    "sense_observation",
     "run_sampled",
 ]
 
@@ -66,6 +65,11 @@ class Observation:
     kinetic_energy: float
     penetration: float
     max_speed: float
+
+    @property
+    def shape(self) -> ArmShape:
+        """The centreline at the nodes, what :func:`contgrasp_core.contact.sense` senses."""
+        return ArmShape(s=self.s, r=self.x, theta=self.theta)
 
 
 class SimulationDivergedError(RunFailure):
@@ -227,14 +231,10 @@ class LoopSession:
         self.k += 1
 
 
-def sense_observation(obs: Observation, boundary: Boundary, tol: float = 0.0) -> ContactState:
-    """Geometric sensing at the rod nodes (eq. (4), eq. (5), Definition 1)."""
-    return sense(ArmShape(s=obs.s, r=obs.x, theta=obs.theta), boundary, obs.radius, tol=tol)
-
-
 def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSession:
     """The scenario's sampled loop with the core functions only, stepped exactly as the ROS nodes
-    step it (observe, :func:`sense_observation` with the sensor's tolerance,
+    step it (observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
+    :class:`~contgrasp_core.boundary.Boundary` and the sensor's tolerance,
     :func:`~contgrasp_core.control.feedback_at_joints`, advance): a lock-step ROS run of the same
     scenario ends in the same state bit for bit. Returns the finished session."""
     from contgrasp_core.control import feedback_at_joints
@@ -247,5 +247,5 @@ def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSess
         obs = session.observe()
         if session.finished:
             return session
-        c = sense_observation(obs, boundary, scenario.sensing.contact_tolerance)
+        c = sense(obs.shape, boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
         session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha))

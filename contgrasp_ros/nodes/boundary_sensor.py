@@ -1,7 +1,7 @@
 """boundary_sensor: rod state + object boundary -> contact state (rho, alpha, delta, s_o, contact set).
 
-Thin wrapper of :func:`contgrasp_ros.evaluate.sense_rod_state` (:func:`contgrasp_core.contact.sense`,
-paper eqs. (4), (5), Definition 1). Malformed rod states or objects, bad
+Thin wrapper of :func:`contgrasp_core.contact.sense` of the rod state's arm shape (paper eqs.
+(4), (5), Definition 1; the object's ``Boundary.project``). Malformed rod states or objects, bad
 stamps and states whose sensing fails are dropped with a throttled warning and counted per
 reason (``/diagnostics``); see :mod:`contgrasp_ros.runtime`.
 """
@@ -12,12 +12,12 @@ from typing import Any
 
 from rclpy.node import Node
 
+from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, RodState
 from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import RodArrays, contact_to_msg, require_finite, rod_state_arrays
-from contgrasp_ros.evaluate import sense_rod_state
 from contgrasp_ros.runtime import (
     Diagnostics,
     DropCounter,
@@ -71,7 +71,7 @@ class BoundarySensor(Node):
         boundary = self.object.boundary
         assert boundary is not None  # (sensed only once the object is known)
         try:
-            state = sense_rod_state(rod, boundary, float(self.get_parameter("contact_tolerance").value))
+            state = sense(rod.shape, boundary, rod.radius, tol=float(self.get_parameter("contact_tolerance").value))
             require_finite("the sensed contact state", state.rho, state.alpha, state.delta, state.s_o, state.foot)
         except ContgraspError as exc:
             self.drops.drop_error(topics.ROD_STATE, exc)

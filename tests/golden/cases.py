@@ -29,7 +29,8 @@ def lockstep_paper_run() -> dict[str, Any]:
     from contgrasp_core.rod.closed_loop import ClosedLoopConfig
     from contgrasp_core.control import paper_gains
     from contgrasp_core.boundary import circle
-    from contgrasp_core.rod.session import LoopSession, sense_observation
+    from contgrasp_core.contact import sense
+    from contgrasp_core.rod.session import LoopSession
     from contgrasp_core.control import feedback_at_joints
 
     model = RodModel(length=0.20, n_elements=100, radius_base=0.01, radius_tip=0.001, density=1042.0,
@@ -43,7 +44,7 @@ def lockstep_paper_run() -> dict[str, Any]:
         obs = session.observe()
         if session.finished:
             return {"k": obs.k, "t": obs.t, "settle_time": session.settle_time, "x": obs.x, "theta": obs.theta}
-        c = sense_observation(obs, boundary, 0.0)
+        c = sense(obs.shape, boundary, obs.radius, tol=0.0)
         session.advance(feedback_at_joints(model, gains, c.rho, c.alpha))
 
 
