@@ -192,6 +192,10 @@ class DropCounter:
         self._last_log: dict[str, tuple[float, int]] = {}  # key -> (wall time, count then)
         self.on_first_drop: Callable[[], None] | None = None
 
+    def stopping(self) -> bool:
+        """The node's context was shut down (SIGINT/SIGTERM): failures from now on are not faults."""
+        return not self._node.context.ok()
+
     @property
     def total(self) -> int:
         return sum(self.counts.values())
@@ -258,6 +262,10 @@ def _call_guarded(drops: DropCounter, where: str, fn: Callable[..., Any], args: 
     except FatalNodeError:
         raise
     except Exception as exc:
+        if drops.stopping():
+            # SIGINT/SIGTERM shut the context down while this callback ran (its publish failed):
+            # the node is stopping, not broken
+            return None if on_error is None else on_error(exc, args)
         drops.internal_error(where, exc)
         return None if on_error is None else on_error(exc, args)
 

@@ -867,3 +867,27 @@ def test_guarded_spin_survives_a_message_rclpy_cannot_take(ros_context) -> None:
             persistent(0.0)
     finally:
         node.destroy_node()
+
+
+def test_a_callback_failing_because_the_node_is_stopping_is_not_an_internal_error() -> None:
+    """SIGINT shuts the context down while a callback publishes: that is the node stopping,
+    not a fault; the same failure on a live context is counted (and logged with its traceback)."""
+    from rclpy.context import Context
+
+    from contgrasp_ros.runtime import DropCounter
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=fresh_domain_id())
+    node = rclpy.create_node("stopping_probe", context=ctx)
+    drops = DropCounter(node)
+
+    def publish_fails() -> None:
+        raise RuntimeError("Failed to publish: publisher's context is invalid")
+
+    guarded_cb = drops.guard("/contgrasp/couple", publish_fails)
+    guarded_cb()
+    assert drops.counts == {"/contgrasp/couple: internal error: RuntimeError": 1}
+    rclpy.shutdown(context=ctx)
+    guarded_cb()
+    assert drops.counts == {"/contgrasp/couple: internal error: RuntimeError": 1}
+    node.destroy_node()
