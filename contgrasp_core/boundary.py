@@ -313,7 +313,8 @@ class Boundary:
         return np.mod(t, TWO_PI)
 
     def __repr__(self) -> str:
-        return f"Boundary(kind={self.kind!r}, length={self.length:.6g}, params={self.params})"
+        shown = {k: v for k, v in self.params.items() if k != "points"}
+        return f"Boundary(kind={self.kind!r}, length={self.length:.6g}, params={shown})"
 
 
 # ---------------------------------------------------------------------- constructors
@@ -550,7 +551,11 @@ def from_points(
         raise SelfIntersectionError(
             "the smooth curve fitted through the points crosses itself; add points or smooth more"
         )
-    return Boundary(curve, bp, kind="points", params={"n_points": len(p), "smoothing": smoothing})
+    # the points the spline interpolates (distinct, counter-clockwise): from_points(points,
+    # closed=True, smoothing=...) rebuilds this very curve (the ROS object message carries them)
+    through = np.array(p, dtype=float)
+    through.flags.writeable = False
+    return Boundary(curve, bp, kind="points", params={"n_points": len(p), "smoothing": smoothing, "points": through})
 
 
 def load_points(path: str) -> NDArray[np.float64]:

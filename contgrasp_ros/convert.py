@@ -253,7 +253,9 @@ _SHAPE = {"circle": "circle", "ellipse": "ellipse", "deformed_circle": "deformed
 
 
 def boundary_to_msg(boundary: Boundary, header: Header, samples: int = 256) -> ObjectBoundary:
-    """ObjectBoundary message: kind, named parameters and ``samples`` points equally spaced in s_o."""
+    """ObjectBoundary message: kind, named parameters and ``samples`` points equally spaced in s_o;
+    a user's outline (kind ``points``) carries its own points instead, so the receiver rebuilds
+    the very same curve (:func:`boundary_from_msg`)."""
     params = dict(boundary.params)
     center = params.pop("center", None)
     if center is not None:
@@ -265,7 +267,10 @@ def boundary_to_msg(boundary: Boundary, header: Header, samples: int = 256) -> O
             values.append(float(val))
     from contgrasp_msgs.msg import ObjectBoundary
 
-    _, pts = boundary.sample(samples)
+    if boundary.kind == "points":
+        pts = np.asarray(boundary.params["points"])
+    else:
+        _, pts = boundary.sample(samples)
     return ObjectBoundary(
         header=header,
         kind=boundary.kind,
@@ -278,8 +283,9 @@ def boundary_to_msg(boundary: Boundary, header: Header, samples: int = 256) -> O
 
 
 def boundary_from_msg(msg: ObjectBoundary) -> Boundary:
-    """Rebuild the boundary: analytic kinds from their parameters, anything else (user outlines,
-    Fourier curves) from the samples as a closed spline.
+    """Rebuild the boundary: analytic kinds from their parameters, a user's outline from its
+    points (with its ``smoothing``: the sender's curve exactly), anything else (Fourier curves)
+    from the samples as a closed spline.
 
     Raises :class:`MessageError`: reason ``"length mismatch"`` / ``"too many samples"`` /
     ``"out of range"`` for malformed fields, ``"bad object: <error>"`` when the core refuses the
@@ -308,7 +314,8 @@ def boundary_from_msg(msg: ObjectBoundary) -> Boundary:
         pts = np.stack([np.asarray(msg.x, dtype=float), np.asarray(msg.y, dtype=float)], -1)
         if np.any(np.abs(pts) > MAX_ABS):
             raise MessageError(f"ObjectBoundary: outline points beyond +-{MAX_ABS:g}", reason="out of range")
-        return from_points(pts, closed=True)
+        smoothing = params.get("smoothing", 0.0) if msg.kind == "points" else 0.0
+        return from_points(pts, closed=True, smoothing=smoothing)
     except MessageError:
         raise
     except ContgraspError as exc:
