@@ -1,8 +1,13 @@
-"""Child-process management for the launcher: start, prefix output, stop in escalating steps."""
+"""Child-process management for the launcher: start, prefix output, stop in escalating steps,
+and clear the shared-memory files that stopped (above all killed) DDS participants leave."""
 
 from __future__ import annotations
 
+import contextlib
+import importlib.util
+import io
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -10,11 +15,12 @@ import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import IO
 
 from contgrasp_ros.events import EventSink
 
-__all__ = ["Child", "ProcessGroup"]
+__all__ = ["Child", "ProcessGroup", "clean_shared_memory"]
 
 _COLOURS = ("\033[36m", "\033[35m", "\033[33m", "\033[32m", "\033[34m", "\033[31m")
 _RESET = "\033[0m"
@@ -107,4 +113,38 @@ class ProcessGroup:
         for c in chosen:
             c.proc.wait()
             c.pump.join(timeout=2.0)
+        clean_shared_memory()
         return {c.name: int(c.proc.returncode) for c in chosen}
+
+
+def _fastdds_cleaner() -> Path | None:
+    """Fast DDS's own ``fastdds shm clean`` (``tools/fastdds/shm/clean.py`` under a prefix of the
+    ROS installation: ``AMENT_PREFIX_PATH``, then this Python's prefix, i.e. the venv)."""
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p] + [sys.prefix]
+    for prefix in prefixes:
+        tool = Path(prefix) / "tools" / "fastdds" / "shm" / "clean.py"
+        if tool.is_file():
+            return tool
+    return None
+
+
+def clean_shared_memory() -> int:
+    """Remove the Fast DDS shared-memory files (``/dev/shm/fastrtps_*``) no live process holds:
+    a participant that was killed, or that never ran its clean-up, leaves them behind. Files in
+    use (their lock is held) are kept, so this is safe while other graphs run. Returns the
+    number of zombie ports and segments removed (0 where the tool is not installed)."""
+    tool = _fastdds_cleaner()
+    if tool is None or os.name != "posix":
+        return 0
+    spec = importlib.util.spec_from_file_location("contgrasp_fastdds_shm_clean", tool)
+    if spec is None or spec.loader is None:
+        return 0
+    module = importlib.util.module_from_spec(spec)
+    out = io.StringIO()
+    try:
+        spec.loader.exec_module(module)
+        with contextlib.redirect_stdout(out):  # (it prints a report; the launcher's stdout is JSON)
+            module.Clean().run()
+    except Exception:  # noqa: BLE001 - a failed clean-up must never fail a run
+        return 0
+    return sum(int(n) for n in re.findall(r"(\d+) zombie (?:ports|segments) cleaned", out.getvalue()))

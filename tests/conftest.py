@@ -38,3 +38,12 @@ def ros_context():  # type: ignore[no-untyped-def]
     yield ctx
     if ctx.ok():
         rclpy.shutdown(context=ctx)
+
+
+def pytest_sessionfinish(session, exitstatus):  # type: ignore[no-untyped-def]
+    """Leave no Fast DDS shared-memory files of killed test processes in /dev/shm."""
+    try:
+        from contgrasp_ros.processes import clean_shared_memory
+    except ImportError:  # (a core-only environment)
+        return
+    clean_shared_memory()

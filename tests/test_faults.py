@@ -131,8 +131,30 @@ def test_a_dead_controller_without_respawn_degrades_to_the_fallback(tmp_path: Pa
     assert code == 0 and "error" not in out
 
 
+def zombie_shm_segments() -> set[str]:
+    """Fast DDS shared-memory segments in /dev/shm whose lock no live process holds (what a
+    killed participant leaves behind)."""
+    import fcntl
+
+    shm = Path("/dev/shm")
+    found = set()
+    for lock in shm.glob("fastrtps_*_el"):
+        try:
+            with open(lock, "ab") as fd:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(fd, fcntl.LOCK_UN)
+        except BlockingIOError:
+            continue  # held: in use
+        except OSError:
+            continue  # gone meanwhile
+        found.add(lock.name)
+    return found
+
+
 def test_killed_simulator_stops_the_run_and_the_recording_is_complete(tmp_path: Path) -> None:
+    """... and the killed node's shared-memory files do not stay behind in /dev/shm."""
     bag = tmp_path / "bag"
+    zombies_before = zombie_shm_segments()
     launch = Launch("--params", str(fault_params(tmp_path, duration=100.0)), "--bag", str(bag))
     try:
         running(launch)
@@ -141,6 +163,7 @@ def test_killed_simulator_stops_the_run_and_the_recording_is_complete(tmp_path: 
     finally:
         launch.close()
     assert code == 1 and out["error"] == "node 'rod_simulator' exited with code -9"
+    assert not zombie_shm_segments() - zombies_before
     ended = [e for e in launch.events if e["event"] in ("exited", "finished")]
     assert [e["event"] for e in ended] == ["exited", "finished"]
     assert ended[0]["node"] == "rod_simulator" and ended[0]["action"] == "run ended" and ended[0]["exit_code"] == -9
