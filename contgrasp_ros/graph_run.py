@@ -256,12 +256,14 @@ def run_graph(
     respawn: int = 0,
     keep_history: bool = True,
     events: EventSink | None = None,
+    foxglove: int | None = None,
 ) -> tuple[dict[str, Any], int]:
     """Run the graph once (recording it when ``record`` gives an ``output``, restarting crashed
     node processes up to ``respawn`` times each); returns (summary, exit code). SIGINT/SIGTERM
     end the run early with exit code 130, everything stopped and the recording finalised.
     ``events`` receives the node processes' ``started``/``restarted``/``exited`` events and
-    ``resumed`` (:mod:`contgrasp_ros.events`)."""
+    ``resumed`` (:mod:`contgrasp_ros.events`). ``foxglove``: serve the run live on this WebSocket
+    port (:mod:`contgrasp_ros.nodes.foxglove_bridge`, in the launcher's process; 0 = any)."""
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
     from contgrasp_ros.nodes.grasp_controller import GraspController
     from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
@@ -279,9 +281,16 @@ def run_graph(
     sup: Supervisor | None = None
     extra: dict[str, Any] = {}
     on_recorder_lost: Callable[[], None] | None = None
+    foxglove_url = ""
     try:
         mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None)
         nodes.append(mon)
+        if foxglove is not None:
+            from contgrasp_ros.nodes.foxglove_bridge import FoxgloveBridge
+
+            bridge = FoxgloveBridge(parameter_overrides=_overrides({"port": foxglove, "use_sim_time": True}))
+            nodes.append(bridge)
+            foxglove_url = f"ws://127.0.0.1:{bridge.port}"
         if in_process:
             for cls, name in ((RodSimulator, "rod_simulator"), (BoundarySensor, "boundary_sensor"),
                               (GraspController, "grasp_controller"), (GraspQualityNode, "grasp_quality")):
@@ -358,6 +367,8 @@ def run_graph(
     summary = {**_summary(mon, sup.loop_wall_time_s if sup else None, time.perf_counter() - wall0).to_dict(), **extra} if mon is not None else {}
     if record is not None:
         summary["bag"] = bag_summary(Path(record["output"]))
+    if foxglove_url:
+        summary["foxglove"] = foxglove_url
     summary["exit_codes"] = summary_codes
     summary["pids"] = {c.name: c.proc.pid for c in group.children} if group is not None else {}
     # a child's own non-zero exit code wins (negative codes are the signals we stopped it with)

@@ -97,6 +97,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--bag-layout", choices=("folder", "file"), default=None,
                    help="a rosbag2 bag folder with metadata.yaml (default) or one .mcap file (default when --bag ends in .mcap)")
     p.add_argument("--no-record", action="store_true", help="do not record the run")
+    p.add_argument("--foxglove", type=int, nargs="?", const=8765, default=None, metavar="PORT",
+                   help="serve the run live over the Foxglove WebSocket protocol on 127.0.0.1:PORT (default 8765; "
+                        "0 = any free port): open ws://127.0.0.1:PORT in the Foxglove app")
     p.add_argument("--respawn", type=int, nargs="?", const=3, default=0, metavar="N",
                    help="restart a node process that dies, up to N times per node (N = 3 if omitted); "
                         "a restarted simulator starts the run again from the initial state")
@@ -186,7 +189,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         raise InvalidParameterError(f"--respawn takes N >= 0 and applies to separate node processes only, got {args.respawn}"
                                     + (" with --in-process" if args.in_process else ""))
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
-                              respawn=args.respawn, keep_history=args.plot is not None, events=events)
+                              respawn=args.respawn, keep_history=args.plot is not None, events=events,
+                              foxglove=args.foxglove)
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
     if args.plot is not None and summary.get("history"):

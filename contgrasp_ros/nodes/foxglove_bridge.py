@@ -1,0 +1,140 @@
+"""foxglove_bridge: the running graph, live in the Foxglove app, without a ROS install.
+
+Serves the run over the Foxglove WebSocket protocol (the ``foxglove-sdk`` package; connect
+the app to ``ws://HOST:PORT``, default ``ws://127.0.0.1:8765``). Channels, each message logged
+at its header stamp (simulated time, so the app's timeline is the simulation's):
+
+* ``/contgrasp/scene`` (``foxglove.SceneUpdate``, frame ``world``): the arm (a line strip at
+  the rod's centreline), the object's outline and the nodes in contact; one per
+  ``scene_period`` of simulated time;
+* ``/contgrasp/rod_state`` (JSON: step, t, s, x, y, theta, kinetic_energy) for plots;
+* ``/contgrasp/contact`` (JSON: step, t, s, rho, alpha, delta, in_contact);
+* ``/contgrasp/quality`` (JSON: step, t, Q1, Q2, Q3, contact_length, valid);
+* ``/contgrasp/status`` (JSON: the simulator's status from ``/diagnostics``).
+
+The same node runs by hand (``ros2 run contgrasp_ros foxglove_bridge``) or inside
+``contgrasp-launch --foxglove [PORT]``. It only listens: the loop does not wait for it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import foxglove
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from foxglove.channels import SceneUpdateChannel
+from foxglove.messages import Color, LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity, SceneUpdate, Timestamp
+from rclpy.node import Node
+
+from contgrasp_core.boundary import Boundary
+from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
+from contgrasp_ros import qos, topics
+from contgrasp_ros.runtime import DropCounter, ObjectTracker, StampGate, declare, guarded, run_node, sim_time_by_default
+
+__all__ = ["FoxgloveBridge", "SCENE", "STATUS"]
+
+SCENE = "/contgrasp/scene"
+STATUS = "/contgrasp/status"
+_ARM = Color(r=0.85, g=0.33, b=0.10, a=1.0)
+_OBJECT = Color(r=0.2, g=0.2, b=0.2, a=1.0)
+_CONTACT = Color(r=0.0, g=0.45, b=0.74, a=1.0)
+
+
+def _ns(header: Any) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def _line(points: np.ndarray, color: Color, thickness: float, loop: bool = False) -> LinePrimitive:
+    kind = LinePrimitiveLineType.LineLoop if loop else LinePrimitiveLineType.LineStrip
+    return LinePrimitive(type=kind, thickness=thickness, scale_invariant=False, color=color,
+                         points=[Point3(x=float(x), y=float(y), z=0.0) for x, y in points])
+
+
+class FoxgloveBridge(Node):
+    """Republishes the graph's topics to a Foxglove WebSocket server."""
+
+    def __init__(self, **node_kwargs: Any) -> None:
+        super().__init__("foxglove_bridge", **node_kwargs)
+        sim_time_by_default(self)
+        host = declare(self, "host", "127.0.0.1", "address the WebSocket server listens on (loopback by default)",
+                       read_only=True)
+        port = declare(self, "port", 8765, "WebSocket port (0 = any free port)", lo=0, hi=65535, read_only=True)
+        declare(self, "scene_period", 0.02, "simulated seconds between scene updates (0 = every rod state)", lo=0.0, hi=1e6)
+        self.drops = DropCounter(self)
+        self.stamps = StampGate(self)
+        self.object = ObjectTracker(self, self.drops, self.stamps)
+        self.server = foxglove.start_server(name="contgrasp", host=host, port=port)
+        self.port = self.server.port
+        self.scene = SceneUpdateChannel(SCENE)
+        self.json = {name: foxglove.Channel(name, message_encoding="json") for name in
+                     (topics.ROD_STATE, topics.CONTACT, topics.QUALITY, STATUS)}
+        self.next_scene_t = 0.0
+        self.contact: ContactState | None = None
+        self.create_subscription(RodState, topics.ROD_STATE, self.on_rod_state, qos.STREAM)
+        self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM)
+        self.create_subscription(GraspQuality, topics.QUALITY, self.on_quality, qos.STREAM)
+        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_status, qos.STREAM)
+        self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.port} (open it in the Foxglove app)")
+
+    def destroy_node(self) -> None:
+        self.server.stop()
+        super().destroy_node()
+
+    @guarded(topics.ROD_STATE)
+    def on_rod_state(self, msg: RodState) -> None:
+        t_ns = _ns(msg.header)
+        x, y = np.asarray(msg.x), np.asarray(msg.y)
+        self.json[topics.ROD_STATE].log({
+            "step": int(msg.step), "t": t_ns * 1e-9, "s": list(msg.s), "x": list(msg.x), "y": list(msg.y),
+            "theta": list(msg.theta), "kinetic_energy": float(msg.kinetic_energy)}, log_time=t_ns)
+        period = float(self.get_parameter("scene_period").value)
+        if t_ns * 1e-9 + 1e-12 < self.next_scene_t and period > 0:
+            return
+        self.next_scene_t = t_ns * 1e-9 + period
+        self.scene.log(self._scene(msg, np.stack([x, y], -1), self.object.boundary), log_time=t_ns)
+
+    def _scene(self, msg: RodState, centreline: np.ndarray, boundary: Boundary | None) -> SceneUpdate:
+        stamp = Timestamp(sec=int(msg.header.stamp.sec), nsec=int(msg.header.stamp.nanosec))
+        radius = float(np.mean(msg.radius)) if len(msg.radius) else 0.002
+        lines = [_line(centreline, _ARM, thickness=radius)]
+        if boundary is not None:
+            _, pts = boundary.sample(256)
+            lines.append(_line(pts, _OBJECT, thickness=0.0015, loop=True))
+        c = self.contact
+        if c is not None and c.step == msg.step and len(c.in_contact) == len(centreline):
+            touching = centreline[np.asarray(c.in_contact, dtype=bool)]
+            if len(touching) > 1:
+                lines.append(_line(touching, _CONTACT, thickness=2.2 * radius))
+        entity = SceneEntity(timestamp=stamp, frame_id="world", id="grasp", lines=lines)
+        return SceneUpdate(entities=[entity])
+
+    @guarded(topics.CONTACT)
+    def on_contact(self, msg: ContactState) -> None:
+        self.contact = msg
+        t_ns = _ns(msg.header)
+        self.json[topics.CONTACT].log({
+            "step": int(msg.step), "t": t_ns * 1e-9, "s": list(msg.s), "rho": list(msg.rho), "alpha": list(msg.alpha),
+            "delta": list(msg.delta), "in_contact": [bool(v) for v in msg.in_contact]}, log_time=t_ns)
+
+    @guarded(topics.QUALITY)
+    def on_quality(self, msg: GraspQuality) -> None:
+        t_ns = _ns(msg.header)
+        self.json[topics.QUALITY].log({
+            "step": int(msg.step), "t": t_ns * 1e-9, "Q1": float(msg.q1), "Q2": float(msg.q2), "Q3": float(msg.q3),
+            "contact_length": float(msg.contact_length), "valid": bool(msg.valid)}, log_time=t_ns)
+
+    @guarded(topics.DIAGNOSTICS)
+    def on_status(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            if st.name == "rod_simulator":
+                self.json[STATUS].log({kv.key: kv.value for kv in st.values}, log_time=_ns(msg.header))
+
+
+def main(args: list[str] | None = None) -> int:
+    """``ros2 run contgrasp_ros foxglove_bridge``."""
+    return run_node(FoxgloveBridge, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

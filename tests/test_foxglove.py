@@ -1,0 +1,89 @@
+"""A run watched live without a ROS install: `contgrasp-launch --foxglove PORT` serves the graph
+over the Foxglove WebSocket protocol; a plain WebSocket client (as the Foxglove app is)
+subscribes and receives the rod states while the graph runs."""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import struct
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+pytest.importorskip("contgrasp_msgs.msg")
+pytest.importorskip("foxglove")
+websockets_client = pytest.importorskip("websockets.sync.client")
+
+from conftest import fresh_domain_id  # noqa: E402
+from contgrasp_ros.launch_handle import LaunchHandle  # noqa: E402
+from contgrasp_ros.launcher import default_params_file  # noqa: E402
+
+SUBPROTOCOL = "foxglove.sdk.v1"  # the Foxglove WebSocket protocol as foxglove-sdk serves it
+MESSAGE_DATA = 0x01  # binary opcode of a message
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def connect(port: int, timeout: float = 120.0) -> Any:
+    end = time.monotonic() + timeout
+    while True:
+        try:
+            return websockets_client.connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], open_timeout=5)
+        except OSError:
+            if time.monotonic() > end:
+                raise
+            time.sleep(0.2)
+
+
+def test_launcher_serves_the_run_live_to_a_foxglove_client(tmp_path: Path) -> None:
+    data = yaml.safe_load(default_params_file().read_text())
+    data["/**"]["ros__parameters"]["n_elements"] = 20
+    data["rod_simulator"]["ros__parameters"]["duration"] = 100.0  # runs until we have seen enough
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump(data))
+    port = free_port()
+    launch = LaunchHandle("--params", str(params), "--no-record", "--foxglove", str(port),
+                          "--domain-id", str(fresh_domain_id()))
+    try:
+        with connect(port) as ws:
+            assert ws.subprotocol == SUBPROTOCOL
+            channels: dict[str, dict[str, Any]] = {}
+            end = time.monotonic() + 60
+            while not {"/contgrasp/rod_state", "/contgrasp/scene"} <= set(channels) and time.monotonic() < end:
+                msg = ws.recv(timeout=60)
+                if isinstance(msg, str) and json.loads(msg).get("op") == "advertise":
+                    channels.update({c["topic"]: c for c in json.loads(msg)["channels"]})
+            rod, scene = channels["/contgrasp/rod_state"], channels["/contgrasp/scene"]
+            assert rod["encoding"] == "json" and scene["schemaName"] == "foxglove.SceneUpdate"
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": rod["id"]},
+                                                                      {"id": 2, "channelId": scene["id"]}]}))
+            states: list[tuple[int, dict[str, Any]]] = []
+            scenes = 0
+            while (len(states) < 20 or not scenes) and time.monotonic() < end + 60:
+                msg = ws.recv(timeout=60)
+                if isinstance(msg, bytes) and msg[0] == MESSAGE_DATA:
+                    sub, log_time = struct.unpack_from("<IQ", msg, 1)
+                    if sub == 1:
+                        states.append((log_time, json.loads(msg[13:])))
+                    elif sub == 2:
+                        scenes += 1
+        steps = [s["step"] for _, s in states]
+        assert steps == sorted(steps) and len(set(steps)) == len(steps) >= 20  # the loop, live
+        for log_time, s in states:
+            assert log_time == round(s["t"] * 1e9)  # logged at simulated time
+            assert len(s["x"]) == len(s["y"]) == 21
+        assert scenes >= 1
+        launch.proc.send_signal(signal.SIGINT)
+        code, out = launch.result(timeout=120)
+    finally:
+        launch.close()
+    assert code == 130 and out["foxglove"] == f"ws://127.0.0.1:{port}"
