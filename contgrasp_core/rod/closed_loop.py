@@ -19,12 +19,12 @@ node speed below ``settle_speed`` for ``settle_hold`` seconds after ``min_time``
 
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.contact import sense
 from contgrasp_core.control.gains import FeedbackGains
 from contgrasp_core.control.law import feedback_couple
@@ -116,23 +116,13 @@ def _speeds(model: RodModel, st: RodState) -> float:
     return float(np.hypot(v[:, 0], v[:, 1]).max())
 
 
-def _single_thread_blas() -> contextlib.AbstractContextManager[object]:
-    """Small dense solves are fastest on one BLAS thread (and oversubscription on a busy machine
-    costs 10x); scoped to the run when :mod:`threadpoolctl` is available."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig = ClosedLoopConfig(),
                     state: RodState | None = None) -> ClosedLoopResult:
     """Run the feedback loop (eq. (19) on the rod of eq. (17)) from ``state``
     (default: straight at rest) until settled or ``config.duration``."""
     if system.obstacle is None:
         raise InvalidParameterError("the closed loop needs an obstacle to sense (RodSystem.obstacle is None)")
-    with _single_thread_blas():
+    with single_thread_blas():
         return _run(system, system.obstacle, gains, config, state)
 
 

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.arm import ArmShape
+from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.contact import sense
 from contgrasp_core.control.rod_feedback import FeedbackExpansion, HeldExpansion
 from contgrasp_core.errors import InvalidParameterError, RunFailure
@@ -236,16 +237,18 @@ def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSess
     step it (observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
     :class:`~contgrasp_core.boundary.Boundary` and the sensor's tolerance,
     :func:`~contgrasp_core.control.feedback_at_joints`, advance): a lock-step ROS run of the same
-    scenario ends in the same state bit for bit. Returns the finished session."""
+    scenario ends in the same state bit for bit (both on one BLAS thread,
+    :func:`~contgrasp_core.blas.single_thread_blas`). Returns the finished session."""
     from contgrasp_core.control import feedback_at_joints
 
     boundary = scenario.object.boundary()
     system = RodSystem(scenario.rod, Obstacle(boundary)) if system is None else system
     session = LoopSession(system, scenario.loop)
     gains = scenario.feedback_gains
-    while True:
-        obs = session.observe()
-        if session.finished:
-            return session
-        c = sense(obs.shape, boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
-        session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha))
+    with single_thread_blas():
+        while True:
+            obs = session.observe()
+            if session.finished:
+                return session
+            c = sense(obs.shape, boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
+            session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha))
