@@ -26,7 +26,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
 
 from ._validate import float_array, instance, real
 from .arm import ArmShape, BasePose, curvature_spline
@@ -312,6 +311,8 @@ def integrate_contact(
     for ev in events:
         # solve_ivp reads a `terminal` attribute of an event function; no callable type declares it
         ev.terminal = True  # type: ignore[attr-defined]
+    from scipy.integrate import solve_ivp  # (here: the nodes never integrate; importing it costs them ~1 s)
+
     sol = solve_ivp(
         rhs,
         (ss[0], ss[-1]),

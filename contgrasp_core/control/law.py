@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from typing import Any, Callable, Union
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from contgrasp_core._validate import float_array, real
 from contgrasp_core.errors import InvalidParameterError
@@ -293,6 +292,8 @@ def closed_loop_kinematics(
         den = 1.0 + rho * k_o
         kap = float(curvature_feedback(rho, alpha, m1(si), m2(si), length_unit=lu))
         return np.array([-np.cos(alpha), -kap + k_o * np.sin(alpha) / den, np.sin(alpha) / den])
+
+    from scipy.integrate import solve_ivp  # (here: the nodes never integrate; importing it costs them ~1 s)
 
     try:
         with np.errstate(all="ignore"):
