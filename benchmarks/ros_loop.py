@@ -1,20 +1,22 @@
-"""Benchmark: the closed loop with and without ROS 2 middleware, at the same control period.
+"""Benchmark: the paper's closed-loop grasp with and without the ROS 2 middleware.
 
-For the paper scenario (packaged parameters) at a 1 kHz control rate in simulated time
-(control period = integrator step = 1 ms), over the same number of control cycles:
+The full paper scenario (`contgrasp_ros/config/default.yaml` = `contgrasp_core.scenario.PAPER`:
+N = 100, 2 ms control period, until settled) run four ways in one process, one after the other:
 
-  (a) core only: LoopSession + sensing + feedback in one Python loop (no ROS);
-  (b) the ROS graph with all nodes in one process on one executor (`contgrasp-launch --in-process`);
-  (c) the ROS graph as separate processes (`contgrasp-launch`), lock-step;
+  (a) core only: `contgrasp_core.rod.session.run_sampled` (observe, sense, law, advance; no ROS);
+  (b) the graph in one process on one executor (`contgrasp-launch --in-process`), lock-step;
+  (c) the graph as separate processes (`contgrasp-launch`), lock-step: the main job;
+  (d) the graph as separate processes in wall-clock mode (`lockstep: false`: the simulator steps
+      every control period of wall time with the latest couple).
 
-(b) with the single-threaded executor and with rclpy's experimental EventsExecutor (in separate
-processes the EventsExecutor did not serve the simulator's pause service nor stop on SIGINT in
-our trials, so node processes always use the single-threaded executor). Prints
-control cycles per wall second and the overhead ratios (b)/(a), (c)/(a). Wall times of (b) and
-(c) are the launcher's own measurement from the simulator's first state to its last (graph
-start-up and discovery excluded), so all three time the same cycles.
+For each: per-step wall milliseconds, the real-time factor (simulated / wall seconds of the
+loop), the ratio to (a), missed deadlines, and for (b)-(d) the start-up time (launcher start to
+the simulator's first step, from the launcher's `resumed` event). Loop wall times of (b)-(d)
+are the launcher's own measurement from the first state to the last. (b) and (c) must end in
+(a)'s final state bit for bit (checked). Each way runs `--repeat` times; medians are reported.
+The load average is printed at start and end (the machine is shared: compare ratios).
 
-Usage: .venv/bin/python benchmarks/ros_loop.py [--duration 0.5 --n-elements 50]
+Usage: AMENT_PREFIX_PATH=.venv .venv/bin/python benchmarks/ros_loop.py [--repeat 3]
 """
 
 from __future__ import annotations
@@ -22,62 +24,89 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import yaml
 
 from contgrasp_core.rod.session import run_sampled
-from contgrasp_core.scenario import Scenario
-from contgrasp_ros.launcher import default_params_file, load_params
+from contgrasp_core.scenario import PAPER
+from contgrasp_ros.events import read_events
+from contgrasp_ros.launcher import default_params_file
 
 
-def core_only(params: dict) -> tuple[float, int]:
+def core_only() -> dict[str, Any]:
     t0 = time.perf_counter()
-    session = run_sampled(Scenario.from_ros_parameters(params))
-    return time.perf_counter() - t0, session.k
+    session = run_sampled(PAPER)
+    wall = time.perf_counter() - t0
+    obs = session.observe()
+    return {"wall": wall, "steps": session.k, "sim": float(obs.t), "missed": 0, "startup": None, "x": obs.x}
 
 
-def graph(params_file: Path, *extra: str) -> tuple[float, int, int]:
+def graph(params_file: Path, *extra: str) -> dict[str, Any]:
     exe = Path(sys.executable).parent / "contgrasp-launch"
-    out = subprocess.run([str(exe), "--json", "--params", str(params_file), *extra], capture_output=True, text=True, timeout=3600)
+    events = Path(tempfile.mkdtemp()) / "events.jsonl"
+    t0 = time.time()
+    out = subprocess.run([str(exe), "--json", "--no-record", "--params", str(params_file), "--events", str(events), *extra],
+                         capture_output=True, text=True, timeout=3600)
+    s = json.loads(out.stdout) if out.stdout.strip() else {}
     if out.returncode != 0:
-        raise SystemExit(f"launch failed: {out.stderr[-2000:]}")
-    s = json.loads(out.stdout)
-    return float(s["loop_wall_time_s"]), int(s["steps"]), int(s["missed_deadlines"])
+        cause = s.get("error") or out.stderr.strip().splitlines()[-1:]
+        return {"error": f"exit {out.returncode}: {cause}"}
+    resumed = [e["time"] for e in read_events(events.read_text().splitlines()) if e["event"] == "resumed"]
+    x = np.stack([s["final"]["x"], s["final"]["y"]], -1)
+    return {"wall": float(s["loop_wall_time_s"]), "steps": int(s["steps"]), "sim": float(s["sim_time_s"]),
+            "missed": int(s["missed_deadlines"]), "startup": resumed[0] - t0 if resumed else None, "x": x}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--duration", type=float, default=0.5, help="simulated seconds (default 0.5 = 500 cycles)")
-    ap.add_argument("--n-elements", type=int, default=50)
+    ap.add_argument("--repeat", type=int, default=1, help="runs of each way (medians reported)")
     args = ap.parse_args()
-    data = yaml.safe_load(default_params_file().read_text())
-    data["/**"]["ros__parameters"]["n_elements"] = args.n_elements
-    sim = data["rod_simulator"]["ros__parameters"]
-    sim.update(duration=args.duration, control_period=0.001, dt=0.0, min_time=1e5)  # no early settle: fixed cycles
-    data["grasp_quality"]["ros__parameters"]["rate_hz"] = 20.0
-    tmp = Path(tempfile.mkdtemp()) / "bench.yaml"
-    tmp.write_text(yaml.safe_dump(data))
-    params = load_params(tmp)
-    print(f"python {sys.version.split()[0]}, cores {os.cpu_count()}, N = {args.n_elements}, control 1 kHz (sim), "
-          f"{args.duration:g} s simulated, load average {os.getloadavg()[0]:.2f}")
-    a, ka = core_only(params)
-    print(f"(a) core only                  : {a:7.2f} s  {ka / a:8.1f} cycles/s", flush=True)
-    runs = (("(b) in-process [single]", ("--in-process", "--executor", "single")),
-            ("(b) in-process [events]", ("--in-process", "--executor", "events")),
-            ("(c) processes  [single]", ()))
-    ratio_c = None
-    for label, extra in runs:
-        w, k, missed = graph(tmp, *extra)
-        assert k == ka, f"{label} ran {k} cycles, core {ka}"
-        print(f"{label}    : {w:7.2f} s  {k / w:8.1f} cycles/s  ratio to (a) {w / a:5.2f}  missed {missed}", flush=True)
-        if label.startswith("(c)"):
-            ratio_c = w / a
-    print(f"target (c)/(a) <= 2 at 1 kHz: (c)/(a) = {ratio_c:.2f} -> {'met' if ratio_c <= 2 else 'NOT met'}")
+    paper = default_params_file()
+    wall_clock = Path(tempfile.mkdtemp()) / "wall_clock.yaml"
+    data = yaml.safe_load(paper.read_text())
+    data["rod_simulator"]["ros__parameters"]["lockstep"] = False
+    wall_clock.write_text(yaml.safe_dump(data))
+    ways = {
+        "(a) core only": core_only,
+        "(b) in-process, lock-step": lambda: graph(paper, "--in-process"),
+        "(c) processes, lock-step": lambda: graph(paper),
+        "(d) processes, wall clock": lambda: graph(wall_clock),
+    }
+    print(f"python {sys.version.split()[0]}, cores {os.cpu_count()}, paper scenario (N = {PAPER.rod.n_elements}, "
+          f"control period {(PAPER.loop.control_period or 0.0) * 1e3:g} ms), {args.repeat} run(s) each, "
+          f"load average at start {os.getloadavg()[0]:.2f}")
+    results: dict[str, list[dict[str, Any]]] = {name: [] for name in ways}
+    for _ in range(args.repeat):
+        for name, run in ways.items():
+            results[name].append(run())
+    core_ms = statistics.median(r["wall"] / r["steps"] for r in results["(a) core only"]) * 1e3  # (never fails)
+    core_x = results["(a) core only"][0]["x"]
+    print(f"{'':28s} {'ms/step':>8s} {'RTF':>6s} {'x core':>7s} {'missed':>6s} {'start-up s':>10s}  steps")
+    for name, all_runs in results.items():
+        runs = [r for r in all_runs if "error" not in r]
+        for r in all_runs:
+            if "error" in r:
+                print(f"{name:28s} failed: {r['error']}")
+        if not runs:
+            continue
+        ms = statistics.median(r["wall"] / r["steps"] for r in runs) * 1e3
+        rtf = statistics.median(r["sim"] / r["wall"] for r in runs)
+        ups = [r["startup"] for r in runs if r["startup"] is not None]
+        startup = f"{statistics.median(ups):10.2f}" if ups else f"{'-':>10s}"
+        print(f"{name:28s} {ms:8.2f} {rtf:6.2f} {ms / core_ms:7.2f} {max(r['missed'] for r in runs):6d} {startup}  "
+              f"{runs[0]['steps']}")
+        if "lock-step" in name:
+            same = all(np.array_equal(r["x"], core_x) for r in runs)
+            print(f"{'':28s} final state equal to (a) bit for bit: {same}")
+    print(f"load average at end {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":
