@@ -309,7 +309,9 @@ def recompute_parameters(run: RunData) -> dict[str, Any]:
         return {
             "source": "run parameters",
             "sensor_contact_tolerance": _param(run.params, "boundary_sensor", "contact_tolerance", _default("boundary_sensor", "contact_tolerance")),
-            "quality_contact_tolerance": _param(run.params, "grasp_quality", "contact_tolerance", _default("grasp_quality", "contact_tolerance")),
+            # the quality node uses the contact states' own tolerance (-1); recordings made before
+            # the run had one contact set carry the quality node's own
+            "quality_contact_tolerance": _param(run.params, "grasp_quality", "contact_tolerance", -1.0),
             "reference": [_param(run.params, "grasp_quality", k, _default("grasp_quality", k)) for k in ("reference_x", "reference_y")],
         }
     return {
@@ -492,7 +494,7 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
         run.status,
         final=FinalState.of(int(rod.step[-1]), float(rod.t[-1]), rod.s[-1], rod.x[-1], rod.y[-1], rod.theta[-1]),
         final_quality=None if q is None else FinalQuality.of(q.q1[-1], q.q2[-1], q.q3[-1], q.valid[-1], q.contact_length[-1]),
-        contact=contact_stats(None) if c is None else contact_stats(c.rho[-1], c.delta[-1], c.alpha[-1], c.in_contact[-1]),
+        contact=contact_stats(None) if c is None else contact_stats(c.s[-1], c.rho[-1], c.delta[-1], c.alpha[-1], c.in_contact[-1], float(c.tol[-1])),
     )
     return {
         "path": str(run.path),

@@ -204,7 +204,9 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         print(json.dumps(summary))
     else:
         for key in ("mode", "settled", "settle_time_s", "sim_time_s", "wall_time_s", "missed_deadlines",
-                    "mean_abs_rho_ratio_minus_1_contact", "mean_abs_alpha_minus_half_pi_contact",
+                    "mean_abs_rho_ratio_minus_1_contact", "max_abs_rho_ratio_minus_1_contact",
+                    "mean_abs_alpha_minus_half_pi_contact", "max_abs_alpha_minus_half_pi_contact",
+                    "contact_nodes", "contact_length",
                     "final_quality", "bag", "restarts", "faults", "exit_codes", "error"):
             if key in summary:
                 print(f"{key}: {summary[key]}")

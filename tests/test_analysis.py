@@ -18,6 +18,7 @@ import yaml
 from conftest import fresh_domain_id
 
 from contgrasp_core.cli import main
+from contgrasp_core.scenario import PAPER
 from contgrasp_ros import cli_analyze
 from contgrasp_ros.analysis import analyze, load_run, recompute
 from contgrasp_ros.bag.reader import iter_decoded, iter_raw, open_recording
@@ -85,7 +86,8 @@ def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -
     assert r["recomputed_pairs"]["quality"] == r["messages"]["quality"] > 0
     assert r["recompute_mismatches"] == {"in_contact": 0, "valid": 0} and r["recompute_failures"] == []
     assert r["recompute_parameters"]["source"] == "run parameters"
-    assert r["recompute_parameters"]["quality_contact_tolerance"] == 0.0005
+    assert r["recompute_parameters"]["sensor_contact_tolerance"] == PAPER.sensing.contact_tolerance == 0.0005
+    assert r["recompute_parameters"]["quality_contact_tolerance"] == -1.0  # the contact states' own: one contact set
     topics = {t["name"]: t for t in r["topics"]}
     assert topics[ROD]["count"] == summary["steps"] + 1 and topics[ROD]["type"] == "contgrasp_msgs/msg/RodState"
     assert r["recorder"]["received"] == r["recorder"]["written"] == summary["bag"]["messages"]
@@ -214,13 +216,22 @@ def test_recomputation_is_not_vacuous(recording: tuple[Path, dict]) -> None:
 
 
 def test_contact_stats() -> None:
-    rho, delta, alpha = [0.02, 0.011, 0.05], [-0.01, -0.001, -0.04], [1.0, 1.5, 2.0]
-    stats = contact_stats(rho, delta, alpha, [False, True, False])
-    assert stats.mean_abs_rho_ratio_minus_1_contact == pytest.approx(0.1)
-    assert stats.mean_abs_alpha_minus_half_pi_contact == pytest.approx(np.pi / 2 - 1.5)
-    assert stats.contact_nodes == 1
-    assert contact_stats(rho, delta, alpha, [False] * 3) == ContactStats(None, None, 0)
-    assert contact_stats(None) == ContactStats(None, None, None)  # no contact state at all
+    """Every statistic names its contact set (nodes and length); the tracking error is given as
+    mean and max over it."""
+    s, rho, delta, alpha = [0.0, 0.01, 0.02, 0.03], [0.02, 0.011, 0.0105, 0.05], [-0.01, -0.001, -0.0005, -0.04], [1.0, 1.5, 1.6, 2.0]
+    stats = contact_stats(s, rho, delta, alpha, [False, True, True, False], tol=0.001)
+    assert stats.mean_abs_rho_ratio_minus_1_contact == pytest.approx((0.1 + 0.05) / 2)
+    assert stats.max_abs_rho_ratio_minus_1_contact == pytest.approx(0.1)
+    assert stats.mean_abs_alpha_minus_half_pi_contact == pytest.approx((np.pi / 2 - 1.5 + 1.6 - np.pi / 2) / 2)
+    assert stats.max_abs_alpha_minus_half_pi_contact == pytest.approx(np.pi / 2 - 1.5)
+    assert stats.contact_nodes == 2
+    # the contact length is the quality evaluator's: delta >= -tol cut at the linear crossing
+    from contgrasp_core.quality import contact_weights
+
+    assert stats.contact_length == pytest.approx(contact_weights(s, delta, 0.001).sum()) and 0.01 < stats.contact_length < 0.03
+    assert contact_stats(s, rho, [-1.0] * 4, alpha, [False] * 4) == ContactStats(None, None, None, None, 0, 0.0)
+    assert contact_stats(None) == ContactStats()  # no contact state at all
+    assert ContactStats().contact_nodes is None and ContactStats().contact_length is None
 
 
 def test_summary_builder_reads_the_simulator_status() -> None:
