@@ -24,7 +24,7 @@ from contgrasp_core.tracking import contact_stats
 
 from .common import add_object_arguments, object_from_args
 
-__all__ = ["add_parser", "run", "summarize"]
+__all__ = ["add_parser", "run", "summarize", "loop_config"]
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = None) -> argparse.ArgumentParser:
@@ -32,7 +32,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
     p = subparsers.add_parser("simulate", help="closed-loop grasp on the Cosserat rod engine (paper Sec. V-C)",
                               description=__doc__.splitlines()[0], parents=parents or [])
     add_object_arguments(p, ROD_SCALE)
-    p.add_argument("--duration", type=float, default=10.0, help="max simulated time, s (stops earlier when settled)")
+    p.add_argument("--duration", type=float, default=None,
+                   help=f"max simulated time, s (stops earlier when settled; default: the scenario's, {PAPER.loop.duration} s)")
     p.add_argument("--control-period", type=float, default=None,
                    help="sample-and-hold period of the feedback, s (default: continuous implicit feedback)")
     p.add_argument("--dt", type=float, default=0.01, help="largest integrator step, s")
@@ -77,6 +78,15 @@ def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_
     }
 
 
+def loop_config(args: argparse.Namespace, record_period: float | None = 0.01) -> ClosedLoopConfig:
+    """The run's settings: the scenario's loop (its settle criterion: every node slower than
+    ``settle_speed`` for ``settle_hold`` s, not before ``min_time``, the same as the ROS graph's)
+    with the command's duration, control period and integrator step."""
+    duration = PAPER.loop.duration if args.duration is None else args.duration
+    return replace(PAPER.loop, duration=duration, control_period=args.control_period,
+                   dt=args.dt if args.control_period is None else None, record_period=record_period)
+
+
 MAX_NODES = 10_001
 """Largest rod the command accepts (the paper's arm has 101 nodes)."""
 
@@ -112,10 +122,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     boundary, r_obj = obj.boundary(), obj.radius
     overrides = {} if args.damping is None else {"damping": args.damping}
     model = replace(PAPER.rod, n_elements=args.nodes - 1, **overrides)
-    cfg = ClosedLoopConfig(duration=args.duration, control_period=args.control_period,
-                           dt=args.dt if args.control_period is None else None,
-                           record_period=0.01)
-    res = run_closed_loop(RodSystem(model, Obstacle(boundary)), paper_gains(model, r_obj), cfg)
+    res = run_closed_loop(RodSystem(model, Obstacle(boundary)), paper_gains(model, r_obj), loop_config(args))
     out = summarize(res, args.contact_tol)
     if args.plot:
         plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" else None)
