@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.boundary import Boundary
-from contgrasp_core.errors import ContgraspError, InvalidParameterError, WriteError, output_error
+from contgrasp_core.errors import ContgraspError, InvalidParameterError, RunFailure, WriteError, output_error
 from contgrasp_core.rod.session import SettleDetector
 from contgrasp_ros import topics
 from contgrasp_ros.bag import BagInputError
@@ -55,7 +55,24 @@ __all__ = [
     "write_csv",
     "write_plots",
     "analyze",
+    "check",
+    "RecomputeMismatchError",
+    "RECOMPUTE_BOUND",
 ]
+
+RECOMPUTE_BOUND = 1e-9
+"""Largest recompute error of a genuine recording (in practice it is 0: the same functions on
+the same float64 arrays)."""
+
+
+class RecomputeMismatchError(RunFailure):
+    """The recording does not recompute: an error above :data:`RECOMPUTE_BOUND`, contact flags or
+    quality validity that differ, or steps whose recomputation failed. ``result`` is the
+    analysis (``contgrasp analyze`` prints it, then the one error line, and exits 1)."""
+
+    def __init__(self, message: str, result: dict[str, Any]) -> None:
+        super().__init__(message)
+        self.result = result
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -612,6 +629,26 @@ def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: 
             raise
         raise output_error(f"the plot {path}", exc) from exc
     return out
+
+
+def check(result: dict[str, Any]) -> None:
+    """:class:`RecomputeMismatchError` when an analysis (:func:`analyze`'s result) shows a
+    recompute error above :data:`RECOMPUTE_BOUND`, mismatching contact flags or validity, or
+    failed recomputations."""
+    problems = []
+    err = result.get("max_recompute_error")
+    if err is not None and not err <= RECOMPUTE_BOUND:
+        worst = max((k for k, v in result["recompute_errors"].items() if v is not None and not k.endswith("_relative")),
+                    key=lambda k: result["recompute_errors"][k])
+        problems.append(f"max_recompute_error {err:.3g} > {RECOMPUTE_BOUND:g} (largest: {worst})")
+    bad = {k: v for k, v in result.get("recompute_mismatches", {}).items() if v}
+    if bad:
+        problems.append("mismatches " + ", ".join(f"{k} {v}" for k, v in bad.items()))
+    if result.get("recompute_failures"):
+        problems.append(f"{len(result['recompute_failures'])} recomputations failed")
+    if problems:
+        raise RecomputeMismatchError(f"the recording does not recompute: {'; '.join(problems)} "
+                                     f"(recompute parameters from {result['recompute_parameters']['source']})", result)
 
 
 def analyze(
