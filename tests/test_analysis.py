@@ -98,7 +98,10 @@ def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -
         if key not in ("wall_time_s", "loop_wall_time_s"):
             assert r[key] == summary[key], key
     assert r["wall_time_s"] is None and summary["wall_time_s"] > summary["loop_wall_time_s"] > 0
-    assert summary["contact_nodes"] > 0 and summary["bag"]["wall_time_s"] > 0
+    assert summary["contact_nodes"] > 0 and summary["contact_length"] > 0
+    # the launcher records in simulated time: the recording spans the run's simulated time
+    assert summary["bag"]["log_time_clock"] == "sim" and summary["bag"]["wall_time_s"] is None
+    assert summary["bag"]["sim_time_s"] == pytest.approx(summary["sim_time_s"], abs=1e-6)
 
 
 def test_cli_writes_csv_and_plots(recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
