@@ -123,3 +123,26 @@ def test_simulate_settles_when_it_says() -> None:
     quiet_window_holds(res.t, res.max_speed, res.settle_time, PAPER.loop.settle_speed, PAPER.loop.settle_hold)
     out = simulate.summarize(res)
     assert out["settle_time_s"] == res.settle_time and out["contact_nodes"] >= 40
+
+
+def test_the_shipped_sample_matches_the_code(paper_run: dict[str, Any]) -> None:
+    """bags/paper_grasp.mcap is what the code makes today: the core loop run for the scenario
+    the sample carries (its contgrasp_run record) ends at the recorded step and settle time in
+    the recorded final state, bit for bit. Regenerate it as bags/README.md says when not."""
+    from contgrasp_core.rod.session import run_sampled
+    from contgrasp_ros.analysis import load_run
+
+    run = load_run(Path(__file__).resolve().parents[1] / "bags" / "paper_grasp.mcap")
+    assert run.params is not None, "the sample carries no run parameters"
+    scenario = Scenario.from_ros_parameters(run.params)
+    if scenario == PAPER:
+        session, obs = paper_run["session"], paper_run["obs"]
+    else:  # pragma: no cover - a sample of another scenario
+        session = run_sampled(scenario)
+        obs = session.observe()
+    assert int(run.status["step"]) == session.k == int(run.rod.step[-1]), "steps: regenerate the sample (bags/README.md)"
+    assert float(run.status["settle_time_s"]) == session.settle_time, "settle time: regenerate the sample (bags/README.md)"
+    assert float(run.status["sim_time_s"]) == obs.t
+    np.testing.assert_array_equal(run.rod.x[-1], obs.x[:, 0])
+    np.testing.assert_array_equal(run.rod.y[-1], obs.x[:, 1])
+    np.testing.assert_array_equal(run.rod.theta[-1], obs.theta)
