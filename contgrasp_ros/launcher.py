@@ -121,9 +121,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-record", action="store_true", help="do not record the run")
     p.add_argument("--allow-unrecorded", action="store_true",
                    help="a recording lost mid-run (the recorder died) does not fail the run (default: exit 1)")
-    p.add_argument("--bag-log-time", choices=("sim", "receive"), default="sim",
-                   help="log time of the recorded messages: simulated time (header stamp, else /clock; default, like "
-                        "ros2 bag record --use-sim-time) or the wall-clock receive time")
+    p.add_argument("--bag-log-time", choices=("sim", "receive"), default=None,
+                   help="log time of the recorded messages: simulated time (header stamp, else /clock; like ros2 bag "
+                        "record --use-sim-time; the default) or the wall-clock receive time (the default with --respawn: "
+                        "a restarted simulator starts its time over)")
     p.add_argument("--respawn", type=int, nargs="?", const=3, default=0, metavar="N",
                    help="restart a node process that dies, up to N times per node (N = 3 if omitted); "
                         "a restarted simulator starts the run again from the initial state")
@@ -205,7 +206,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         except BagError as exc:
             raise InvalidParameterError(f"--max-bag-duration / --max-bag-size: {exc}") from exc
         record = {"output": out, "layout": layout, "run_info": run_info, "exclude_regex": args.bag_exclude,
-                  "log_time": args.bag_log_time,
+                  "log_time": args.bag_log_time or ("receive" if args.respawn else "sim"),
                   "decimate_period": args.bag_decimate, "max_bag_duration": args.max_bag_duration,
                   "max_bag_size": args.max_bag_size}
     if args.respawn < 0 or (args.respawn and args.in_process):
