@@ -510,7 +510,8 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
     summary = build_summary(
         run.status,
         final=FinalState.of(int(rod.step[-1]), float(rod.t[-1]), rod.s[-1], rod.x[-1], rod.y[-1], rod.theta[-1]),
-        final_quality=None if q is None else FinalQuality.of(q.q1[-1], q.q2[-1], q.q3[-1], q.valid[-1], q.contact_length[-1]),
+        final_quality=None if q is None else FinalQuality.of(q.q1[-1], q.q2[-1], q.q3[-1], q.valid[-1], q.contact_length[-1],
+                                                                     q.step[-1]),
         contact=contact_stats(None) if c is None else contact_stats(c.s[-1], c.rho[-1], c.delta[-1], c.alpha[-1], c.in_contact[-1], float(c.tol[-1])),
     )
     return {

@@ -142,7 +142,7 @@ def _summary(mon: Monitor, loop_wall_time_s: float | None = None, wall_time_s: f
     return build_summary(
         mon.status,
         final=None if rod is None else FinalState.of(rod.step, stamp_seconds(rod.header), rod.s, rod.x, rod.y, rod.theta),
-        final_quality=None if q is None else FinalQuality.of(q.q1, q.q2, q.q3, q.valid, q.contact_length),
+        final_quality=None if q is None else FinalQuality.of(q.q1, q.q2, q.q3, q.valid, q.contact_length, q.step),
         contact=contact_stats(None) if c is None else contact_stats(c.s, c.rho, c.delta, c.alpha, c.in_contact, c.contact_tolerance),
         wall_time_s=wall_time_s,
         loop_wall_time_s=loop_wall_time_s,

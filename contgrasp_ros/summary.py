@@ -51,18 +51,21 @@ class FinalState:
 @dataclass(frozen=True)
 class FinalQuality:
     """The last grasp quality (paper Sec. IV): Q1 = lambda_min(W), Q2 = det W, Q3 = lambda_min /
-    lambda_max, whether it is valid (the arm touches the object) and the contact length (m)."""
+    lambda_max, whether it is valid (the arm touches the object), the contact length (m) and
+    the ``step`` it was evaluated at (the quality node runs at ``rate_hz`` of simulated time, so
+    this is usually an earlier step than ``final``'s and the contact statistics')."""
 
     Q1: float  # (the paper's names, and the JSON keys)
     Q2: float
     Q3: float
     valid: bool
     contact_length: float
+    step: int | None = None
 
     @classmethod
-    def of(cls, q1: float, q2: float, q3: float, valid: bool, contact_length: float) -> FinalQuality:
+    def of(cls, q1: float, q2: float, q3: float, valid: bool, contact_length: float, step: int | None = None) -> FinalQuality:
         """From message fields or numpy scalars, as plain floats and a bool."""
-        return cls(float(q1), float(q2), float(q3), bool(valid), float(contact_length))
+        return cls(float(q1), float(q2), float(q3), bool(valid), float(contact_length), None if step is None else int(step))
 
 
 @dataclass(frozen=True)

@@ -243,13 +243,13 @@ def test_summary_builder_reads_the_simulator_status() -> None:
     status = {"state": "finished", "settled": "true", "settle_time_s": "1.5", "sim_time_s": "2.0", "step": "1000",
               "missed_deadlines": "3", "max_penetration": "nan?"}
     final = FinalState.of(1000, 2.0, np.array([0.0, 0.1]), [0.0, 0.1], (0.0, 0.0), np.zeros(2))
-    s = build_summary(status, final=final, final_quality=FinalQuality.of(np.float64(1.0), 2.0, 0.5, np.bool_(True), 0.1),
+    s = build_summary(status, final=final, final_quality=FinalQuality.of(np.float64(1.0), 2.0, 0.5, np.bool_(True), 0.1, np.int64(950)),
                       contact=contact_stats(None), wall_time_s=4.0)
     d = s.to_dict()
     assert d["simulator_state"] == "finished" and d["settled"] is True and d["settle_time_s"] == 1.5
     assert d["steps"] == 1000 and d["missed_deadlines"] == 3 and d["max_penetration"] is None
     assert d["final"] == {"step": 1000, "t": 2.0, "s": [0.0, 0.1], "x": [0.0, 0.1], "y": [0.0, 0.0], "theta": [0.0, 0.0]}
-    assert d["final_quality"] == {"Q1": 1.0, "Q2": 2.0, "Q3": 0.5, "valid": True, "contact_length": 0.1}
+    assert d["final_quality"] == {"Q1": 1.0, "Q2": 2.0, "Q3": 0.5, "valid": True, "contact_length": 0.1, "step": 950}
     assert d["wall_time_s"] == 4.0 and d["loop_wall_time_s"] is None and d["contact_nodes"] is None
     assert list(d) == [f.name for f in fields(RunSummary)]
     json.dumps(d, allow_nan=False)  # plain JSON types
