@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import sense
-from contgrasp_core.errors import ContgraspError, InvalidParameterError, WriteError, output_error
+from contgrasp_core.errors import ContgraspError, InvalidParameterError, RunFailure, WriteError, output_error
 from contgrasp_core.rod.session import SettleDetector
 from contgrasp_ros import topics
 from contgrasp_ros.bag import BagInputError
@@ -57,7 +57,24 @@ __all__ = [
     "write_csv",
     "write_plots",
     "analyze",
+    "check",
+    "RecomputeMismatchError",
+    "RECOMPUTE_BOUND",
 ]
+
+RECOMPUTE_BOUND = 1e-9
+"""Largest recompute error of a genuine recording (in practice it is 0: the same functions on
+the same float64 arrays)."""
+
+
+class RecomputeMismatchError(RunFailure):
+    """The recording does not recompute: an error above :data:`RECOMPUTE_BOUND`, contact flags or
+    quality validity that differ, or steps whose recomputation failed. ``result`` is the
+    analysis (``contgrasp analyze`` prints it, then the one error line, and exits 1)."""
+
+    def __init__(self, message: str, result: dict[str, Any]) -> None:
+        super().__init__(message)
+        self.result = result
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -311,7 +328,9 @@ def recompute_parameters(run: RunData) -> dict[str, Any]:
         return {
             "source": "run parameters",
             "sensor_contact_tolerance": _param(run.params, "boundary_sensor", "contact_tolerance", _default("boundary_sensor", "contact_tolerance")),
-            "quality_contact_tolerance": _param(run.params, "grasp_quality", "contact_tolerance", _default("grasp_quality", "contact_tolerance")),
+            # the quality node uses the contact states' own tolerance (-1); recordings made before
+            # the run had one contact set carry the quality node's own
+            "quality_contact_tolerance": _param(run.params, "grasp_quality", "contact_tolerance", -1.0),
             "reference": [_param(run.params, "grasp_quality", k, _default("grasp_quality", k)) for k in ("reference_x", "reference_y")],
         }
     return {
@@ -494,8 +513,9 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
     summary = build_summary(
         run.status,
         final=FinalState.of(int(rod.step[-1]), float(rod.t[-1]), rod.s[-1], rod.x[-1], rod.y[-1], rod.theta[-1]),
-        final_quality=None if q is None else FinalQuality.of(q.q1[-1], q.q2[-1], q.q3[-1], q.valid[-1], q.contact_length[-1]),
-        contact=contact_stats(None) if c is None else contact_stats(c.rho[-1], c.delta[-1], c.alpha[-1], c.in_contact[-1]),
+        final_quality=None if q is None else FinalQuality.of(q.q1[-1], q.q2[-1], q.q3[-1], q.valid[-1], q.contact_length[-1],
+                                                                     q.step[-1]),
+        contact=contact_stats(None) if c is None else contact_stats(c.s[-1], c.rho[-1], c.delta[-1], c.alpha[-1], c.in_contact[-1], float(c.tol[-1])),
     )
     return {
         "path": str(run.path),
@@ -613,6 +633,26 @@ def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: 
             raise
         raise output_error(f"the plot {path}", exc) from exc
     return out
+
+
+def check(result: dict[str, Any]) -> None:
+    """:class:`RecomputeMismatchError` when an analysis (:func:`analyze`'s result) shows a
+    recompute error above :data:`RECOMPUTE_BOUND`, mismatching contact flags or validity, or
+    failed recomputations."""
+    problems = []
+    err = result.get("max_recompute_error")
+    if err is not None and not err <= RECOMPUTE_BOUND:
+        worst = max((k for k, v in result["recompute_errors"].items() if v is not None and not k.endswith("_relative")),
+                    key=lambda k: result["recompute_errors"][k])
+        problems.append(f"max_recompute_error {err:.3g} > {RECOMPUTE_BOUND:g} (largest: {worst})")
+    bad = {k: v for k, v in result.get("recompute_mismatches", {}).items() if v}
+    if bad:
+        problems.append("mismatches " + ", ".join(f"{k} {v}" for k, v in bad.items()))
+    if result.get("recompute_failures"):
+        problems.append(f"{len(result['recompute_failures'])} recomputations failed")
+    if problems:
+        raise RecomputeMismatchError(f"the recording does not recompute: {'; '.join(problems)} "
+                                     f"(recompute parameters from {result['recompute_parameters']['source']})", result)
 
 
 def analyze(

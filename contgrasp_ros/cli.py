@@ -23,7 +23,7 @@ def _info_text(result: dict[str, Any]) -> str:
         f"Files:             {', '.join(result['files'])}",
         f"Bag size:          {result['size_bytes'] / 1e6:.3f} MB",
         "Storage id:        mcap",
-        f"Duration:          {result['duration_s']:.6f} s",
+        f"Duration:          {result[result['log_time_clock'] + '_time_s']:.6f} s ({result['log_time_clock']} time)",
         f"Start:             {result['start_ns'] * 1e-9:.9f}",
         f"End:               {result['end_ns'] * 1e-9:.9f}",
         f"Messages:          {result['message_count']}",

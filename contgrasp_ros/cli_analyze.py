@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_ros.analysis import analyze
+from contgrasp_ros.analysis import analyze, check
 
 __all__ = ["add_parser", "run"]
 
@@ -39,7 +39,9 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser] | None = None) -
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    """Analyse ``args.bag``; the result dict (see :func:`contgrasp_ros.analysis.summarize`).
+    """Analyse ``args.bag``; the result dict (see :func:`contgrasp_ros.analysis.summarize`), or
+    :class:`~contgrasp_ros.analysis.RecomputeMismatchError` (exit 1, the result printed first)
+    when the recording does not recompute (:func:`contgrasp_ros.analysis.check`).
     The output paths are checked first, so a typo does not cost an analysis."""
     if args.plot is not None:
         from contgrasp_core.figures.draw import check_figure_path
@@ -51,4 +53,6 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 if not d.is_dir():
                     raise InvalidParameterError(f"--csv {args.csv}: {d} exists and is not a directory")
                 break
-    return analyze(args.bag, csv_dir=args.csv, plot=args.plot)
+    out = analyze(args.bag, csv_dir=args.csv, plot=args.plot)
+    check(out)  # exit 1 (after printing the result) when the recording does not recompute
+    return out

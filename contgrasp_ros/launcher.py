@@ -2,11 +2,14 @@
 
 Starts ``rod_simulator``, ``boundary_sensor``, ``grasp_controller`` and ``grasp_quality`` as
 separate processes (or, with ``--in-process``, as nodes of one executor in this process) with
-a YAML parameter file, a fresh ``ROS_DOMAIN_ID`` and loopback-only discovery; waits until the
+a YAML parameter file, the ``ROS_DOMAIN_ID`` of ``--domain-id``, else the environment's,
+else a random one (printed first on stderr), and loopback-only discovery; waits until the
 graph is connected, then resumes the (paused) simulator; runs until the simulator reports it
 finished (settled or ``--duration`` reached) and stops everything (SIGINT, then SIGTERM, then
 SIGKILL). The summary is built from what travelled over the topics. The run is recorded to MCAP
-by the ``mcap_recorder`` node (``--bag``, default ``bags/run_<time>``; ``--no-record`` skips it).
+by the ``mcap_recorder`` node (``--bag``, default ``bags/run_<time>``; ``--no-record`` skips it),
+its messages logged in simulated time (``--bag-log-time``); a recording lost mid-run fails the
+run (exit 1) unless ``--allow-unrecorded``.
 """
 
 from __future__ import annotations
@@ -78,10 +81,29 @@ def _with_object(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> Path:
     return path
 
 
+def _domain_id(given: int | None) -> int:
+    """The run's ROS_DOMAIN_ID: ``--domain-id``, else ``$ROS_DOMAIN_ID`` when set, else random in 1..101."""
+    if given is not None:
+        domain, what = given, "--domain-id"
+    elif os.environ.get("ROS_DOMAIN_ID", "").strip():
+        text, what = os.environ["ROS_DOMAIN_ID"].strip(), "ROS_DOMAIN_ID"
+        try:
+            domain = int(text)
+        except ValueError:
+            raise InvalidParameterError(f"ROS_DOMAIN_ID must be an integer in 0..232, got {text!r}") from None
+    else:
+        return random.randint(1, 101)
+    if not 0 <= domain <= 232:
+        raise InvalidParameterError(f"{what} must be in 0..232, got {domain}")
+    return domain
+
+
 def _parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog="contgrasp-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", type=Path, default=None, help="ROS 2 YAML parameter file (default: the packaged paper scenario)")
-    p.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID for the graph (default: a random free-looking id 1..101)")
+    p.add_argument("--domain-id", type=int, default=None,
+                   help="ROS_DOMAIN_ID for the graph (default: $ROS_DOMAIN_ID when set, else a random id 1..101); "
+                        "printed on stderr at start")
     add_object_arguments(p, ROD_SCALE)
     p.add_argument("--duration", type=float, default=None, help="simulated seconds to run at most (overrides the parameter file)")
     p.add_argument("--in-process", action="store_true", help="run all nodes in this process on one executor")
@@ -100,6 +122,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--foxglove", type=int, nargs="?", const=8765, default=None, metavar="PORT",
                    help="serve the run live over the Foxglove WebSocket protocol on 127.0.0.1:PORT (default 8765; "
                         "0 = any free port): open ws://127.0.0.1:PORT in the Foxglove app")
+    p.add_argument("--allow-unrecorded", action="store_true",
+                   help="a recording lost mid-run (the recorder died) does not fail the run (default: exit 1)")
+    p.add_argument("--bag-log-time", choices=("sim", "receive"), default=None,
+                   help="log time of the recorded messages: simulated time (header stamp, else /clock; like ros2 bag "
+                        "record --use-sim-time; the default) or the wall-clock receive time (the default with --respawn: "
+                        "a restarted simulator starts its time over)")
     p.add_argument("--respawn", type=int, nargs="?", const=3, default=0, metavar="N",
                    help="restart a node process that dies, up to N times per node (N = 3 if omitted); "
                         "a restarted simulator starts the run again from the initial state")
@@ -154,9 +182,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         params["rod_simulator"]["duration"] = float(args.duration)
     if args.object is not None or args.outline is not None:
         params_file = _with_object(params, object_from_args(args, ROD_SCALE))
-    domain = args.domain_id if args.domain_id is not None else random.randint(1, 101)
-    if not 0 <= domain <= 232:
-        raise InvalidParameterError(f"--domain-id must be in 0..232, got {domain}")
+    domain = _domain_id(args.domain_id)
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     if events is not None:
         events("domain_id", domain_id=domain, mode="in-process" if args.in_process else "processes")
@@ -183,14 +209,18 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         except BagError as exc:
             raise InvalidParameterError(f"--max-bag-duration / --max-bag-size: {exc}") from exc
         record = {"output": out, "layout": layout, "run_info": run_info, "exclude_regex": args.bag_exclude,
+                  "log_time": args.bag_log_time or ("receive" if args.respawn else "sim"),
                   "decimate_period": args.bag_decimate, "max_bag_duration": args.max_bag_duration,
                   "max_bag_size": args.max_bag_size}
     if args.respawn < 0 or (args.respawn and args.in_process):
         raise InvalidParameterError(f"--respawn takes N >= 0 and applies to separate node processes only, got {args.respawn}"
                                     + (" with --in-process" if args.in_process else ""))
+    # (after the checks of the command line: bad usage stays one line)
+    print(f"[launcher] ROS_DOMAIN_ID={domain} (attach from another terminal: ROS_DOMAIN_ID={domain} "
+          "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ros2 topic echo /contgrasp/quality)", file=sys.stderr, flush=True)
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
                               respawn=args.respawn, keep_history=args.plot is not None, events=events,
-                              foxglove=args.foxglove)
+                              foxglove=args.foxglove, allow_unrecorded=args.allow_unrecorded)
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
     if args.plot is not None and summary.get("history"):
@@ -208,7 +238,9 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         print(json.dumps(summary))
     else:
         for key in ("mode", "settled", "settle_time_s", "sim_time_s", "wall_time_s", "missed_deadlines",
-                    "mean_abs_rho_ratio_minus_1_contact", "mean_abs_alpha_minus_half_pi_contact",
+                    "mean_abs_rho_ratio_minus_1_contact", "max_abs_rho_ratio_minus_1_contact",
+                    "mean_abs_alpha_minus_half_pi_contact", "max_abs_alpha_minus_half_pi_contact",
+                    "contact_nodes", "contact_length",
                     "final_quality", "bag", "restarts", "faults", "exit_codes", "error"):
             if key in summary:
                 print(f"{key}: {summary[key]}")

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from contgrasp_core.tracking import ContactStats, contact_stats
+
 __all__ = ["FinalState", "FinalQuality", "ContactStats", "RunSummary", "contact_stats", "build_summary"]
 
 FloatSeq = Sequence[float] | np.ndarray
@@ -49,30 +51,21 @@ class FinalState:
 @dataclass(frozen=True)
 class FinalQuality:
     """The last grasp quality (paper Sec. IV): Q1 = lambda_min(W), Q2 = det W, Q3 = lambda_min /
-    lambda_max, whether it is valid (the arm touches the object) and the contact length (m)."""
+    lambda_max, whether it is valid (the arm touches the object), the contact length (m) and
+    the ``step`` it was evaluated at (the quality node runs at ``rate_hz`` of simulated time, so
+    this is usually an earlier step than ``final``'s and the contact statistics')."""
 
     Q1: float  # (the paper's names, and the JSON keys)
     Q2: float
     Q3: float
     valid: bool
     contact_length: float
+    step: int | None = None
 
     @classmethod
-    def of(cls, q1: float, q2: float, q3: float, valid: bool, contact_length: float) -> FinalQuality:
+    def of(cls, q1: float, q2: float, q3: float, valid: bool, contact_length: float, step: int | None = None) -> FinalQuality:
         """From message fields or numpy scalars, as plain floats and a bool."""
-        return cls(float(q1), float(q2), float(q3), bool(valid), float(contact_length))
-
-
-@dataclass(frozen=True)
-class ContactStats:
-    """Contact statistics of one contact state over its ``contact_nodes`` nodes in contact: the
-    mean of |rho / rho_d - 1| with rho_d = r = delta + rho (eq. (5): delta = r - rho) and the
-    mean of |alpha - pi/2| (eq. (4)); the means are ``None`` without contact,
-    ``contact_nodes`` is ``None`` without a contact state."""
-
-    mean_abs_rho_ratio_minus_1_contact: float | None = None
-    mean_abs_alpha_minus_half_pi_contact: float | None = None
-    contact_nodes: int | None = None
+        return cls(float(q1), float(q2), float(q3), bool(valid), float(contact_length), None if step is None else int(step))
 
 
 @dataclass(frozen=True)
@@ -82,7 +75,9 @@ class RunSummary:
     ``simulator_state``, ``settled``, ``settle_time_s`` (sim time, ``None`` if not settled),
     ``sim_time_s``, ``steps``, ``missed_deadlines`` (lock-step timeouts that applied the
     fallback couple) and ``max_penetration`` (m) are the simulator's last ``/diagnostics``
-    status; ``final``, ``final_quality`` and the contact statistics the last rod state, grasp
+    status; ``final``, ``final_quality`` and the contact statistics
+    (:class:`~contgrasp_core.tracking.ContactStats`: mean and max tracking errors over the
+    ``contact_nodes`` nodes in contact, ``contact_length`` m) the last rod state, grasp
     quality and contact state; ``wall_time_s`` (the whole launcher run) and ``loop_wall_time_s``
     (from resuming the simulator to its end) are wall-clock seconds, ``None`` from a recording.
     """
@@ -97,33 +92,17 @@ class RunSummary:
     final: FinalState | None
     final_quality: FinalQuality | None
     mean_abs_rho_ratio_minus_1_contact: float | None
+    max_abs_rho_ratio_minus_1_contact: float | None
     mean_abs_alpha_minus_half_pi_contact: float | None
+    max_abs_alpha_minus_half_pi_contact: float | None
     contact_nodes: int | None
+    contact_length: float | None
     wall_time_s: float | None = None
     loop_wall_time_s: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The summary as JSON-ready values (nested dicts for ``final`` and ``final_quality``)."""
         return asdict(self)
-
-
-def contact_stats(rho: FloatSeq | None, delta: FloatSeq | None = None, alpha: FloatSeq | None = None,
-                  in_contact: Sequence[bool] | np.ndarray | None = None) -> ContactStats:
-    """:class:`ContactStats` of one contact state given as its per-node arrays (``rho`` None: no
-    contact state)."""
-    if rho is None or delta is None or alpha is None or in_contact is None:
-        return ContactStats()
-    r = np.asarray(rho, dtype=float)
-    radius = np.asarray(delta, dtype=float) + r
-    mask = np.asarray(in_contact, dtype=bool)
-    n = int(np.count_nonzero(mask))
-    if n == 0:
-        return ContactStats(contact_nodes=0)
-    return ContactStats(
-        mean_abs_rho_ratio_minus_1_contact=float(np.mean(np.abs(r[mask] / radius[mask] - 1.0))),
-        mean_abs_alpha_minus_half_pi_contact=float(np.mean(np.abs(np.asarray(alpha, dtype=float)[mask] - np.pi / 2))),
-        contact_nodes=n,
-    )
 
 
 def _num(status: Mapping[str, str], key: str) -> float | None:
@@ -157,8 +136,11 @@ def build_summary(
         final=final,
         final_quality=final_quality,
         mean_abs_rho_ratio_minus_1_contact=contact.mean_abs_rho_ratio_minus_1_contact,
+        max_abs_rho_ratio_minus_1_contact=contact.max_abs_rho_ratio_minus_1_contact,
         mean_abs_alpha_minus_half_pi_contact=contact.mean_abs_alpha_minus_half_pi_contact,
+        max_abs_alpha_minus_half_pi_contact=contact.max_abs_alpha_minus_half_pi_contact,
         contact_nodes=contact.contact_nodes,
+        contact_length=contact.contact_length,
         wall_time_s=wall_time_s,
         loop_wall_time_s=loop_wall_time_s,
     )

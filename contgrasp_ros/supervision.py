@@ -22,7 +22,8 @@ resumed), ``SETTLING`` (one more second for the last contact and quality to arri
   quality node that stays dead is reported and the run goes on (the simulator's lock-step
   timeout applies its fallback couple);
 * the recorder is never restarted (its file exists): the run goes on unrecorded and the running
-  simulator's ``min_subscribers`` is lowered so it no longer waits for the recorder;
+  simulator's ``min_subscribers`` is lowered so it no longer waits for the recorder; the run
+  then ends with an error (exit 1) naming the lost recording, unless ``allow_unrecorded``;
 * a wall-clock ``timeout`` over the whole run ends it with an error naming the phase.
 """
 
@@ -155,12 +156,17 @@ class Supervisor:
     times out at ``start + timeout``. ``restarts`` (per node), ``faults`` (one entry per exit:
     node, exit code, action taken), ``lost`` (nodes the run goes on without), ``recording``,
     ``started`` (the simulator was first resumed), ``error`` and ``loop_wall_time_s`` (from the
-    first resume call to the end, in the observations' clock) are readable throughout."""
+    first resume call to the end, in the observations' clock) are readable throughout.
+    ``recording_lost`` names a recorder that died; unless ``allow_unrecorded`` the run's
+    ``error`` is that, when nothing else went wrong."""
 
-    def __init__(self, *, start: float, timeout: float, respawn: int = 0, recording: bool = False) -> None:
+    def __init__(self, *, start: float, timeout: float, respawn: int = 0, recording: bool = False,
+                 allow_unrecorded: bool = False) -> None:
         self.deadline = start + timeout
         self.respawn = respawn
         self.recording = recording
+        self.allow_unrecorded = allow_unrecorded
+        self.recording_lost: str | None = None
         self.phase = Phase.CONNECTING
         self.started = False
         self.restarts: dict[str, int] = {}
@@ -235,6 +241,8 @@ class Supervisor:
     # -- the rules
 
     def _finish(self, error: str | None, out: list[Action]) -> None:
+        if error is None and self.recording_lost is not None and not self.allow_unrecorded:
+            error = f"{self.recording_lost}: the run is not recorded (--allow-unrecorded accepts that)"
         self.phase, self.error = Phase.DONE, error
         out.append(Finish(error))
 
@@ -251,6 +259,7 @@ class Supervisor:
             if e.node == RECORDER:
                 if self.recording:  # a failed recorder is reported, but the run goes on without it
                     self.recording = False
+                    self.recording_lost = f"the recorder exited with code {e.code}"
                     self._fault(e, "continued unrecorded", out)
                     out += [Log("error", f"the recorder exited with code {e.code}; the run continues unrecorded"),
                             Unrecorded()]

@@ -18,6 +18,7 @@ import yaml
 from conftest import fresh_domain_id
 
 from contgrasp_core.cli import main
+from contgrasp_core.scenario import PAPER
 from contgrasp_ros import cli_analyze
 from contgrasp_ros.analysis import analyze, load_run, recompute
 from contgrasp_ros.bag.reader import iter_decoded, iter_raw, open_recording
@@ -85,7 +86,8 @@ def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -
     assert r["recomputed_pairs"]["quality"] == r["messages"]["quality"] > 0
     assert r["recompute_mismatches"] == {"in_contact": 0, "valid": 0} and r["recompute_failures"] == []
     assert r["recompute_parameters"]["source"] == "run parameters"
-    assert r["recompute_parameters"]["quality_contact_tolerance"] == 0.0005
+    assert r["recompute_parameters"]["sensor_contact_tolerance"] == PAPER.sensing.contact_tolerance == 0.0005
+    assert r["recompute_parameters"]["quality_contact_tolerance"] == -1.0  # the contact states' own: one contact set
     topics = {t["name"]: t for t in r["topics"]}
     assert topics[ROD]["count"] == summary["steps"] + 1 and topics[ROD]["type"] == "contgrasp_msgs/msg/RodState"
     assert r["recorder"]["received"] == r["recorder"]["written"] == summary["bag"]["messages"]
@@ -96,7 +98,10 @@ def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -
         if key not in ("wall_time_s", "loop_wall_time_s"):
             assert r[key] == summary[key], key
     assert r["wall_time_s"] is None and summary["wall_time_s"] > summary["loop_wall_time_s"] > 0
-    assert summary["contact_nodes"] > 0 and summary["bag"]["wall_time_s"] > 0
+    assert summary["contact_nodes"] > 0 and summary["contact_length"] > 0
+    # the launcher records in simulated time: the recording spans the run's simulated time
+    assert summary["bag"]["log_time_clock"] == "sim" and summary["bag"]["wall_time_s"] is None
+    assert summary["bag"]["sim_time_s"] == pytest.approx(summary["sim_time_s"], abs=1e-6)
 
 
 def test_cli_writes_csv_and_plots(recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -214,13 +219,22 @@ def test_recomputation_is_not_vacuous(recording: tuple[Path, dict]) -> None:
 
 
 def test_contact_stats() -> None:
-    rho, delta, alpha = [0.02, 0.011, 0.05], [-0.01, -0.001, -0.04], [1.0, 1.5, 2.0]
-    stats = contact_stats(rho, delta, alpha, [False, True, False])
-    assert stats.mean_abs_rho_ratio_minus_1_contact == pytest.approx(0.1)
-    assert stats.mean_abs_alpha_minus_half_pi_contact == pytest.approx(np.pi / 2 - 1.5)
-    assert stats.contact_nodes == 1
-    assert contact_stats(rho, delta, alpha, [False] * 3) == ContactStats(None, None, 0)
-    assert contact_stats(None) == ContactStats(None, None, None)  # no contact state at all
+    """Every statistic names its contact set (nodes and length); the tracking error is given as
+    mean and max over it."""
+    s, rho, delta, alpha = [0.0, 0.01, 0.02, 0.03], [0.02, 0.011, 0.0105, 0.05], [-0.01, -0.001, -0.0005, -0.04], [1.0, 1.5, 1.6, 2.0]
+    stats = contact_stats(s, rho, delta, alpha, [False, True, True, False], tol=0.001)
+    assert stats.mean_abs_rho_ratio_minus_1_contact == pytest.approx((0.1 + 0.05) / 2)
+    assert stats.max_abs_rho_ratio_minus_1_contact == pytest.approx(0.1)
+    assert stats.mean_abs_alpha_minus_half_pi_contact == pytest.approx((np.pi / 2 - 1.5 + 1.6 - np.pi / 2) / 2)
+    assert stats.max_abs_alpha_minus_half_pi_contact == pytest.approx(np.pi / 2 - 1.5)
+    assert stats.contact_nodes == 2
+    # the contact length is the quality evaluator's: delta >= -tol cut at the linear crossing
+    from contgrasp_core.quality import contact_weights
+
+    assert stats.contact_length == pytest.approx(contact_weights(s, delta, 0.001).sum()) and 0.01 < stats.contact_length < 0.03
+    assert contact_stats(s, rho, [-1.0] * 4, alpha, [False] * 4) == ContactStats(None, None, None, None, 0, 0.0)
+    assert contact_stats(None) == ContactStats()  # no contact state at all
+    assert ContactStats().contact_nodes is None and ContactStats().contact_length is None
 
 
 def test_summary_builder_reads_the_simulator_status() -> None:
@@ -229,13 +243,13 @@ def test_summary_builder_reads_the_simulator_status() -> None:
     status = {"state": "finished", "settled": "true", "settle_time_s": "1.5", "sim_time_s": "2.0", "step": "1000",
               "missed_deadlines": "3", "max_penetration": "nan?"}
     final = FinalState.of(1000, 2.0, np.array([0.0, 0.1]), [0.0, 0.1], (0.0, 0.0), np.zeros(2))
-    s = build_summary(status, final=final, final_quality=FinalQuality.of(np.float64(1.0), 2.0, 0.5, np.bool_(True), 0.1),
+    s = build_summary(status, final=final, final_quality=FinalQuality.of(np.float64(1.0), 2.0, 0.5, np.bool_(True), 0.1, np.int64(950)),
                       contact=contact_stats(None), wall_time_s=4.0)
     d = s.to_dict()
     assert d["simulator_state"] == "finished" and d["settled"] is True and d["settle_time_s"] == 1.5
     assert d["steps"] == 1000 and d["missed_deadlines"] == 3 and d["max_penetration"] is None
     assert d["final"] == {"step": 1000, "t": 2.0, "s": [0.0, 0.1], "x": [0.0, 0.1], "y": [0.0, 0.0], "theta": [0.0, 0.0]}
-    assert d["final_quality"] == {"Q1": 1.0, "Q2": 2.0, "Q3": 0.5, "valid": True, "contact_length": 0.1}
+    assert d["final_quality"] == {"Q1": 1.0, "Q2": 2.0, "Q3": 0.5, "valid": True, "contact_length": 0.1, "step": 950}
     assert d["wall_time_s"] == 4.0 and d["loop_wall_time_s"] is None and d["contact_nodes"] is None
     assert list(d) == [f.name for f in fields(RunSummary)]
     json.dumps(d, allow_nan=False)  # plain JSON types

@@ -561,7 +561,7 @@ def test_open_recording_and_info(files, how, cut, pos, junk) -> None:  # type: i
 
     rec = call(open_recording, _corrupt(files, how, cut, pos, junk), finite=lambda r: [])
     if rec is not None:  # a flip inside an unchecked byte (e.g. padding) may leave a readable file
-        call(info, rec, finite=lambda i: [i["duration_s"], i["message_count"]])
+        call(info, rec, finite=lambda i: [i["sim_time_s"] or i["wall_time_s"] or 0.0, i["message_count"]])
 
 
 @needs_bag

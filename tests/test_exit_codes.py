@@ -303,7 +303,9 @@ def test_launcher_run_failure_exits_1(monkeypatch: pytest.MonkeyPatch, capsys: p
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     capsys.readouterr()
     assert launcher.main(["--no-record", "--domain-id", "7"]) == 1
-    assert capsys.readouterr().err == "contgrasp-launch: error: simulation diverged: NaN/Inf in the rod state\n"
+    err = capsys.readouterr().err.splitlines()  # the launcher's log first (the domain), then one error line
+    assert [line for line in err if not line.startswith("[launcher] ")] == ["contgrasp-launch: error: simulation diverged: NaN/Inf in the rod state"]
+    assert err[0].startswith("[launcher] ROS_DOMAIN_ID=7 ")
 
 
 # ----------------------------------------------------------------------------- node mains

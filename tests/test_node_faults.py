@@ -669,7 +669,7 @@ BAD_AT_RUN_TIME = {
     "controller": [("mu1", 0.0, "out of range"), ("mu1", "fast", "type"), ("mu2", math.inf, "out of range"),
                    ("adaptive_mu2", "yes", "type"), ("object_radius", -0.1, "out of range"),
                    ("length_unit", 1e-9, "mu2 beyond"), ("n_elements", 50, "read-only"), ("radius_tip", 0.002, "read-only")],
-    "quality": [("rate_hz", -1.0, "out of range"), ("contact_tolerance", 2.0, "out of range"), ("reference_x", "a", "type")],
+    "quality": [("rate_hz", -1.0, "out of range"), ("reference_x", "a", "type")],
     "simulator": [("timeout_fallback", "explode", "must be one of"), ("timeout_fallback", 3, "type"),
                   ("couple_timeout", 0.0, "out of range"), ("duration", 5.0, "read-only"), ("object", "ellipse", "read-only"),
                   ("lockstep", False, "read-only"), ("start_paused", True, "read-only"), ("max_kinetic_energy", 0.0, "out of range"),

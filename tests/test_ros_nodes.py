@@ -140,8 +140,10 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
     assert spin_until(ex, lambda: len(got) == 2)
     spin_until(ex, lambda: len(got) > 2, timeout=0.3)
     assert [m.step for m in got] == [0, 2]
-    paper = PAPER.node_parameters(QUALITY)  # the node's defaults: the paper's tolerance and reference point
-    ref = quality_of_state(state, obj, tol=paper["contact_tolerance"], ref=(paper["reference_x"], paper["reference_y"]))
+    paper = PAPER.node_parameters(QUALITY)  # the node's default reference point; the contact set is the state's own
+    assert "contact_tolerance" not in paper
+    ref = quality_of_state(state, obj, tol=state.tol, ref=(paper["reference_x"], paper["reference_y"]))
+    assert got[0].contact_tolerance == state.tol
     np.testing.assert_allclose(np.reshape(got[0].w, (3, 3)), ref.W, rtol=1e-12, atol=1e-15)
     assert got[0].q1 == pytest.approx(ref.Q1, rel=1e-10) and got[0].valid
     bad = contact_to_msg(state, Header(), 9)

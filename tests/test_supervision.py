@@ -30,8 +30,8 @@ SIM, SENSOR, CTRL, REC = "rod_simulator", "boundary_sensor", "grasp_controller",
 class Run:
     """A supervisor and the observation the next tick feeds it (fields kept between ticks)."""
 
-    def __init__(self, timeout: float = 100.0, respawn: int = 0, recording: bool = False) -> None:
-        self.sup = Supervisor(start=0.0, timeout=timeout, respawn=respawn, recording=recording)
+    def __init__(self, timeout: float = 100.0, respawn: int = 0, recording: bool = False, allow_unrecorded: bool = False) -> None:
+        self.sup = Supervisor(start=0.0, timeout=timeout, respawn=respawn, recording=recording, allow_unrecorded=allow_unrecorded)
         self.obs = Observation(now=0.0, pause_ready=True, params_ready=True, rod_state_publishers=frozenset({"sim0"}))
         self.actions: list[Action] = []
 
@@ -152,7 +152,7 @@ def test_dead_nodes_are_restarted_up_to_respawn_times_then_the_run_goes_on_witho
 
 
 def test_recorder_death_continues_unrecorded_and_lowers_min_subscribers() -> None:
-    run = Run(respawn=3, recording=True)
+    run = Run(respawn=3, recording=True, allow_unrecorded=True)
     run.start()
     out = run.kill(REC, 20, 1)
     assert out == [Notify("exited", {"node": REC, "pid": 20, "exit_code": 1, "action": "continued unrecorded"}),
@@ -165,6 +165,28 @@ def test_recorder_death_continues_unrecorded_and_lowers_min_subscribers() -> Non
     assert run.tick(params_result=True) == []
     assert run.tick() == [] and run.finish() == [Finish(None)]
     assert run.sup.faults == [{"node": REC, "exit_code": 1, "action": "continued unrecorded"}]
+
+
+def test_a_lost_recording_fails_the_run_unless_allowed() -> None:
+    """The run goes on without the recorder, but ends with an error (exit 1) that names it;
+    ``allow_unrecorded`` (--allow-unrecorded) accepts an unrecorded run."""
+    run = Run(recording=True)
+    run.start()
+    run.kill(REC, 20, -9)
+    run.tick(params_result=True)
+    assert not run.sup.done and run.sup.recording_lost == "the recorder exited with code -9"
+    error = "the recorder exited with code -9: the run is not recorded (--allow-unrecorded accepts that)"
+    assert run.finish() == [Finish(error)] and run.sup.error == error
+    # a run that failed anyway keeps its own error
+    run = Run(recording=True)
+    run.start()
+    run.kill(REC, 20, -9)
+    assert run.kill(SIM, 10)[-1] == Finish("node 'rod_simulator' exited with code -9")
+    # allowed: a clean finish
+    run = Run(recording=True, allow_unrecorded=True)
+    run.start()
+    run.kill(REC, 20, -9)
+    assert run.finish() == [Finish(None)] and run.sup.error is None
 
 
 def test_recorder_death_while_connecting_lowers_once_the_parameter_service_is_ready() -> None:

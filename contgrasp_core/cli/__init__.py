@@ -111,6 +111,9 @@ def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> 
     except Exception as exc:  # noqa: BLE001 - the CLI turns every failure into one line
         if args.debug:
             raise
+        result = getattr(exc, "result", None)  # a failed check that has a result: print it too
+        if isinstance(result, dict):
+            print(json.dumps(_to_jsonable(result), allow_nan=False) if args.json else getattr(args, "format_text", _summary)(result))
         return report(f"contgrasp {command}", exc)
     print(text)
     return 0

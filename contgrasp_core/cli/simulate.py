@@ -8,7 +8,7 @@ Without ``parents`` the subcommand adds its own ``--json`` flag.
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
+from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
@@ -20,10 +20,11 @@ from contgrasp_core.rod import Obstacle, RodSystem
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_core.scenario import PAPER
+from contgrasp_core.tracking import contact_stats
 
 from .common import add_object_arguments, object_from_args
 
-__all__ = ["add_parser", "run", "summarize"]
+__all__ = ["add_parser", "run", "summarize", "loop_config"]
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = None) -> argparse.ArgumentParser:
@@ -31,14 +32,16 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
     p = subparsers.add_parser("simulate", help="closed-loop grasp on the Cosserat rod engine (paper Sec. V-C)",
                               description=__doc__.splitlines()[0], parents=parents or [])
     add_object_arguments(p, ROD_SCALE)
-    p.add_argument("--duration", type=float, default=10.0, help="max simulated time, s (stops earlier when settled)")
+    p.add_argument("--duration", type=float, default=None,
+                   help=f"max simulated time, s (stops earlier when settled; default: the scenario's, {PAPER.loop.duration} s)")
     p.add_argument("--control-period", type=float, default=None,
                    help="sample-and-hold period of the feedback, s (default: continuous implicit feedback)")
     p.add_argument("--dt", type=float, default=0.01, help="largest integrator step, s")
     p.add_argument("--nodes", type=int, default=101, help="rod nodes (elements + 1)")
     p.add_argument("--damping", type=float, default=None, help="damping zeta, 1/s (default: scenario value)")
-    p.add_argument("--contact-tol", type=float, default=0.5,
-                   help="contact region for the statistics: delta >= -tol * r(s) (fraction of the local radius)")
+    p.add_argument("--contact-tol", type=float, default=PAPER.sensing.contact_tolerance,
+                   help="contact tolerance, m: in contact where delta >= -tol (default: the scenario's, "
+                        f"{PAPER.sensing.contact_tolerance} m, as the ROS graph's sensor)")
     if not parents:
         p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--plot", metavar="FILE", help="write the paper's Fig. 4 (PNG/PDF/SVG)")
@@ -47,15 +50,15 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
     return p
 
 
-def summarize(res: ClosedLoopResult, contact_tol: float = 0.5) -> dict[str, Any]:
+def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_tolerance) -> dict[str, Any]:
     """The JSON result: final shape and contact state along s, settle data, penetration and the
-    contact-region statistics of rho/rho_d (rho_d = r(s)) and alpha."""
+    tracking statistics over the contact set ``delta >= -contact_tol`` (m, paper Definition 1;
+    :func:`contgrasp_core.tracking.contact_stats`, as the ROS graph's summary)."""
     m = res.model
     r = m.radius(m.s_nodes)
     rho, alpha = res.rho[-1], res.alpha[-1]
-    contact = (r - rho) >= -contact_tol * r
-    def stat(v: np.ndarray) -> float | None:
-        return float(np.mean(v[contact])) if np.any(contact) else None
+    delta = r - rho
+    stats = contact_stats(m.s_nodes, rho, delta, alpha, delta >= -contact_tol, contact_tol)
     return {
         "final": {"s": m.s_nodes.tolist(), "x": res.x[-1][:, 0].tolist(), "y": res.x[-1][:, 1].tolist(),
                   "theta": res.theta[-1].tolist(), "rho": rho.tolist(), "alpha": alpha.tolist()},
@@ -68,13 +71,20 @@ def summarize(res: ClosedLoopResult, contact_tol: float = 0.5) -> dict[str, Any]
         "max_penetration_ratio": float(res.penetration_ratio.max()),
         "final_penetration": float(res.penetration[-1]),
         "final_penetration_ratio": float(res.penetration_ratio[-1]),
-        "contact_nodes": int(np.sum(contact)),
-        "contact_tol_ratio": float(contact_tol),
-        "mean_abs_rho_ratio_minus_1_contact": stat(np.abs(rho / r - 1.0)),
-        "mean_abs_alpha_minus_half_pi_contact": stat(np.abs(alpha - 0.5 * np.pi)),
+        "contact_tolerance": float(contact_tol),
+        **asdict(stats),
         "damping_per_s": m.damping,
         "control": "continuous" if res.config.control_period is None else f"zoh {res.config.control_period} s",
     }
+
+
+def loop_config(args: argparse.Namespace, record_period: float | None = 0.01) -> ClosedLoopConfig:
+    """The run's settings: the scenario's loop (its settle criterion: every node slower than
+    ``settle_speed`` for ``settle_hold`` s, not before ``min_time``, the same as the ROS graph's)
+    with the command's duration, control period and integrator step."""
+    duration = PAPER.loop.duration if args.duration is None else args.duration
+    return replace(PAPER.loop, duration=duration, control_period=args.control_period,
+                   dt=args.dt if args.control_period is None else None, record_period=record_period)
 
 
 MAX_NODES = 10_001
@@ -112,10 +122,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     boundary, r_obj = obj.boundary(), obj.radius
     overrides = {} if args.damping is None else {"damping": args.damping}
     model = replace(PAPER.rod, n_elements=args.nodes - 1, **overrides)
-    cfg = ClosedLoopConfig(duration=args.duration, control_period=args.control_period,
-                           dt=args.dt if args.control_period is None else None,
-                           record_period=0.01)
-    res = run_closed_loop(RodSystem(model, Obstacle(boundary)), paper_gains(model, r_obj), cfg)
+    res = run_closed_loop(RodSystem(model, Obstacle(boundary)), paper_gains(model, r_obj), loop_config(args))
     out = summarize(res, args.contact_tol)
     if args.plot:
         plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" else None)

@@ -245,12 +245,16 @@ def info(rec: Recording) -> dict[str, Any]:
             t["count"] += int(st.channel_message_counts.get(cid, 0)) if st is not None else 0
     start = start or 0
     end = end if end is not None else start
+    clock = log_time_clock(rec)
+    span = (end - start) * 1e-9
     return {
         "path": str(rec.path),
         "files": [str(f) for f in rec.files],
         "storage_identifier": "mcap",
         "size_bytes": sum(f.stat().st_size for f in rec.files),
-        "duration_s": (end - start) * 1e-9,
+        "log_time_clock": clock,
+        "sim_time_s": span if clock == "sim" else None,
+        "wall_time_s": span if clock == "wall" else None,
         "start_ns": start,
         "end_ns": end,
         "message_count": count,
@@ -258,6 +262,16 @@ def info(rec: Recording) -> dict[str, Any]:
         "compression": sorted(compression),
         "topics": sorted(topics.values(), key=lambda t: t["name"]),
     }
+
+
+def log_time_clock(rec: Recording) -> str:
+    """Which clock the recording's log times are: ``sim`` (simulated time: message header stamps
+    and ``/clock``, as ``ros2 bag record --use-sim-time``) or ``wall`` (receive time, rosbag2's
+    default), from the ``contgrasp_log_time`` metadata record; ``wall`` without one."""
+    from .writer import LOG_TIME_RECORD
+
+    clock = rec.metadata_records().get(LOG_TIME_RECORD, {}).get("clock", "wall")
+    return "sim" if clock == "sim" else "wall"
 
 
 def _qos(text: str) -> list[dict[str, Any]] | str:

@@ -31,13 +31,14 @@ from .definitions import full_text
 from .errors import BagInputError, BagIOError
 from .rosbag2 import TopicRecord, bag_metadata, metadata_yaml, offered_qos_yaml
 
-__all__ = ["BagWriter", "COMPRESSIONS", "LAYOUTS", "RUN_RECORD", "RECORDER_RECORD", "check_split"]
+__all__ = ["BagWriter", "COMPRESSIONS", "LAYOUTS", "RUN_RECORD", "RECORDER_RECORD", "LOG_TIME_RECORD", "check_split"]
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 LAYOUTS = ("folder", "file")
 LIBRARY = "contgrasp mcap_recorder"
 RUN_RECORD = "contgrasp_run"  # MCAP metadata record: how the run was made (launcher parameters, argv)
 RECORDER_RECORD = "contgrasp_recorder"  # MCAP metadata record: the recorder's received/written counts
+LOG_TIME_RECORD = "contgrasp_log_time"  # MCAP metadata record: which clock the log times are ({"clock": "sim"|"wall"})
 MIN_BAG_SIZE = 64 * 1024  # smallest max_bag_size: a split needs room for at least a chunk or two
 
 
@@ -86,7 +87,10 @@ class _File:
 @dataclass
 class BagWriter:
     """Writes one recording. ``path`` is the bag folder (layout ``folder``, must not exist) or
-    the ``.mcap`` file (layout ``file``). ``custom_data`` goes into the bag metadata."""
+    the ``.mcap`` file (layout ``file``). ``custom_data`` goes into the bag metadata.
+    ``open_records`` are MCAP metadata records written when each file opens, right after its
+    header, and handed to the OS at once: a file cut short by a crash still carries them (the
+    run's parameters, the clock of the log times); :attr:`records` are written at close."""
 
     path: Path
     layout: str = "folder"
@@ -95,6 +99,7 @@ class BagWriter:
     custom_data: Mapping[str, str] = field(default_factory=dict)
     max_bag_duration: float = 0.0
     max_bag_size: int = 0
+    open_records: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.path = Path(self.path)
@@ -133,6 +138,10 @@ class BagWriter:
         self._schemas: dict[str, int] = {}
         self.files.append(_File(name))
         self._guard(lambda: self._mcap.start(profile="ros2", library=LIBRARY))
+        for name, data in self.open_records.items():
+            self._guard(lambda n=name, d=data: self._mcap.add_metadata(n, {str(k): str(v) for k, v in d.items()}))
+        if self.open_records:
+            self._guard(self._stream.flush)
         for t in self.topics.values():  # every file carries every known topic's schema and channel
             t.channel_id = self._register(t.record.name, t.record.type, t.record.offered_qos_profiles, t.record.type_description_hash,
                                           t.definition)

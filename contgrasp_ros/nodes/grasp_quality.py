@@ -1,6 +1,8 @@
 """grasp_quality: contact state -> continuum grasp quality (W, Q1..Q3) at a configurable rate.
 
-Thin wrapper of :func:`contgrasp_ros.evaluate.contact_quality` (paper Sec. IV, Prop. 4.1).
+Thin wrapper of :func:`contgrasp_ros.evaluate.contact_quality` (paper Sec. IV, Prop. 4.1) over
+the run's one contact set: the contact states' own tolerance (the sensor's, the scenario's
+``SensingSettings.contact_tolerance``); the node has no tolerance of its own.
 Malformed contact states or objects, bad stamps and states that arrive before the object are
 dropped and counted (``/diagnostics``).
 """
@@ -38,7 +40,6 @@ class GraspQualityNode(Node):
         sim_time_by_default(self)
         paper = PAPER.node_parameters("grasp_quality")
         declare(self, "rate_hz", paper["rate_hz"], "evaluations per simulated second (0 = every contact state)", lo=0.0, hi=1e6)
-        declare(self, "contact_tolerance", paper["contact_tolerance"], "contact tolerance [m]; < 0 uses the sensor's", lo=-1.0, hi=1.0)
         declare(self, "reference_x", paper["reference_x"], "wrench reference point x [m] (object frame origin)", lo=-1e6, hi=1e6)
         declare(self, "reference_y", paper["reference_y"], "wrench reference point y [m]", lo=-1e6, hi=1e6)
         self.drops = DropCounter(self)
@@ -67,15 +68,14 @@ class GraspQualityNode(Node):
         if rate > 0 and self.last_t is not None and 0.0 <= c.t - self.last_t < 1.0 / rate - 1e-12:
             return
         self.last_t = c.t
-        tol = self.get_parameter("contact_tolerance").value
         ref = (self.get_parameter("reference_x").value, self.get_parameter("reference_y").value)
         try:
-            q = contact_quality(c, boundary, tol, ref)
+            q = contact_quality(c, boundary, -1.0, ref)  # the sensor's contact set: one per run
             require_finite("the grasp quality", q.W, q.Q1, q.Q2, q.Q3, q.contact_length)
         except ContgraspError as exc:
             self.drops.drop_error(topics.CONTACT, exc)
             return
-        self.pub.publish(quality_to_msg(q, msg.header, msg.step, c.tol if tol < 0 else tol))
+        self.pub.publish(quality_to_msg(q, msg.header, msg.step, c.tol))
 
 
 def main(args: list[str] | None = None) -> int:

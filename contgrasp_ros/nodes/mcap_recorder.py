@@ -24,6 +24,16 @@ A bag folder can be split into several files (``max_bag_duration`` / ``max_bag_s
 ``ros2 bag record``'s options of the same names); this also bounds the recorder's memory, which
 otherwise grows by the MCAP chunk index (~0.9 kB per chunk) for as long as one file is open.
 
+Log times (``log_time``): ``receive`` (default, like ``ros2 bag record``) stamps each message
+with the wall clock when it arrived; ``sim`` (like ``ros2 bag record --use-sim-time``; the
+launcher's default) with simulated time: a message's own header stamp when its type starts with
+one (every message of the graph, ``/clock`` included) and it is within an hour of the
+node's clock, else the node's clock, which follows ``/clock`` (``use_sim_time`` is switched on;
+``/rosout`` always takes the clock: its stamps are wall time). A lock-step run of 2.2 s of simulated time then
+spans 2.2 s of log time however long it took. The clock is stored when the file opens (metadata
+record ``contgrasp_log_time``), and so is ``run_info`` (``contgrasp_run``): a recording cut short
+by a crash and recovered still says how its run was made.
+
 Optional decimation (to keep shipped sample recordings small): topics in ``decimate_topics``
 keep one message per ``decimate_period`` seconds of their header stamp (the quality node's
 rule: skip while ``0 <= t - t_kept < period``) plus the last message received; the skipped
@@ -46,6 +56,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import QoSSubscriptionMatchedInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from contgrasp_core.errors import InvalidParameterError
@@ -53,7 +64,16 @@ from contgrasp_ros import qos, topics
 from contgrasp_ros.bag.definitions import full_text
 from contgrasp_ros.bag.errors import BagError
 from contgrasp_ros.bag.rosbag2 import qos_profile_dict
-from contgrasp_ros.bag.writer import COMPRESSIONS, LAYOUTS, MIN_BAG_SIZE, RECORDER_RECORD, RUN_RECORD, BagWriter, check_split
+from contgrasp_ros.bag.writer import (
+    COMPRESSIONS,
+    LAYOUTS,
+    LOG_TIME_RECORD,
+    MIN_BAG_SIZE,
+    RECORDER_RECORD,
+    RUN_RECORD,
+    BagWriter,
+    check_split,
+)
 from contgrasp_ros.runtime import DropCounter, FatalNodeError, FinishPolicy, declare, guarded, run_node
 
 
@@ -70,6 +90,19 @@ def _starts_with_stamp(type_name: str) -> bool:
         if line:
             return line.split()[0] in ("std_msgs/Header", "builtin_interfaces/Time", "Header")
     return False
+
+
+LOG_TIMES = ("receive", "sim")
+OTHER_CLOCK_NS = 3600 * 1_000_000_000  # with log_time sim: a stamp this far from /clock is of another clock
+
+
+def cdr_stamp_ns(data: bytes) -> int:
+    """Nanoseconds of the leading stamp of a CDR message (exact; see :func:`cdr_stamp`)."""
+    if len(data) < 12:
+        raise ValueError("message shorter than a stamp")
+    fmt = "<iI" if data[1] == 1 else ">iI"
+    sec, nsec = struct.unpack_from(fmt, data, 4)
+    return int(sec) * 1_000_000_000 + int(nsec)
 
 
 def cdr_stamp(data: bytes) -> float:
@@ -105,7 +138,10 @@ class McapRecorder(Node):
         self.depth = declare(self, "qos_depth", 1000, "subscription queue depth", lo=1, hi=1_000_000, read_only=True)
         flush = declare(self, "flush_period", 0.5, "finish the open chunk at least this often [wall s]", lo=0.01, hi=3600.0, read_only=True)
         discovery = declare(self, "discovery_period", 0.2, "look for new topics this often [wall s]", lo=0.01, hi=3600.0, read_only=True)
-        run_info = declare(self, "run_info", "", "JSON object stored in the recording (metadata record contgrasp_run)", read_only=True)
+        run_info = declare(self, "run_info", "", "JSON object stored in the recording when it opens (metadata record "
+                           "contgrasp_run)", read_only=True)
+        self.log_time = declare(self, "log_time", "receive", "log time of a message: 'receive' (wall clock at receipt) or "
+                                "'sim' (its header stamp, else /clock: simulated time)", choices=LOG_TIMES, read_only=True)
         decimate = [t for t in declare(self, "decimate_topics", [""], "topics to decimate ([''] = none)", read_only=True) if t]
         no_seq = declare(self, "sequence_check_exclude_regex", "/parameter_events|/rosout|/diagnostics",
                          "topics with many publishers: no sequence-gap check ('' = check all)", read_only=True)
@@ -136,12 +172,16 @@ class McapRecorder(Node):
             check_split(layout, max_duration, max_size)
         except BagError as exc:
             raise InvalidParameterError(str(exc)) from exc
+        if self.log_time == "sim" and not self.get_parameter("use_sim_time").value:
+            self.set_parameters([Parameter("use_sim_time", value=True)])  # the fallback clock is /clock
+        opened = {LOG_TIME_RECORD: {"clock": "sim" if self.log_time == "sim" else "wall", "log_time": self.log_time},
+                  RUN_RECORD: {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in info.items()}}
         try:
             self.writer = BagWriter(Path(out or default_output()), layout=layout, compression=compression, chunk_size=chunk_size,
-                                    max_bag_duration=max_duration, max_bag_size=max_size)
+                                    max_bag_duration=max_duration, max_bag_size=max_size, open_records=opened)
         except BagError as exc:
             raise FatalNodeError(str(exc)) from exc
-        self.writer.records[RUN_RECORD] = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in info.items()}
+        self._stamped: dict[str, bool] = {}
         self.received: dict[str, int] = {}
         self.drops = DropCounter(self)  # (internal errors of the callbacks; nothing is dropped on purpose)
         self.exit_code = 0
@@ -192,6 +232,10 @@ class McapRecorder(Node):
                 raise FatalNodeError(str(exc)) from exc
             self.received[topic] = 0
             self.lost_in_transport[topic] = 0
+            try:  # (/rosout's stamps are the wall clock: rcutils logging)
+                self._stamped[topic] = types[0] != "rcl_interfaces/msg/Log" and _starts_with_stamp(types[0])
+            except Exception:  # noqa: BLE001 - no definition text: use the clock
+                self._stamped[topic] = False
             self._single_publisher[topic] = False  # until the matched event says one publisher is matched
             if topic in self._decimate_wanted:
                 if _starts_with_stamp(types[0]):
@@ -228,7 +272,7 @@ class McapRecorder(Node):
     def on_message(self, topic: str, data: bytes, info: dict[str, Any]) -> None:
         self.received[topic] += 1
         self._track_sequence(topic, info.get("publication_sequence_number"))
-        log_ns = time.time_ns()
+        log_ns = self.log_time_ns(topic, data)
         dec = self._decimate.get(topic)
         if dec is not None:
             try:
@@ -244,6 +288,22 @@ class McapRecorder(Node):
                 self.decimated += 1
             dec[0], dec[1] = t, None
         self._write(topic, data, info, log_ns)
+
+    def log_time_ns(self, topic: str, data: bytes) -> int:
+        """The message's log time: receive time (wall), or with ``log_time: sim`` its header
+        stamp (when its type starts with one and it is set), else the node's (sim) clock."""
+        if self.log_time != "sim":
+            return time.time_ns()
+        now = int(self.get_clock().now().nanoseconds)
+        if self._stamped.get(topic):
+            try:
+                stamp = cdr_stamp_ns(data)
+            except ValueError:
+                stamp = 0
+            # a stamp of another clock (a publisher on wall time: ~1.7e9 s) is not simulated time
+            if stamp > 0 and abs(stamp - now) < OTHER_CLOCK_NS:
+                return stamp
+        return now
 
     def _write(self, topic: str, data: bytes, info: dict[str, Any], log_ns: int) -> None:
         try:

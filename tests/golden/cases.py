@@ -49,7 +49,8 @@ def lockstep_paper_run() -> dict[str, Any]:
 
 
 def closed_loop_continuous() -> dict[str, Any]:
-    """``contgrasp simulate``'s default run: continuous implicit feedback, dt 10 ms."""
+    """Continuous implicit feedback, dt 10 ms, ``ClosedLoopConfig``'s default settle rule (what
+    ``contgrasp simulate`` ran before it took the scenario's settle criterion, issue 19)."""
     from contgrasp_core.boundary import circle
     from contgrasp_core.rod import Obstacle, RodSystem
     from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
