@@ -135,3 +135,16 @@ def test_kinematics_figure_labels_legend_curves_and_a_title_that_fits(tmp_path, 
     canvas.draw()
     box = fig._suptitle.get_window_extent(canvas.get_renderer())  # type: ignore[union-attr]
     assert box.x0 >= 0 and box.x1 <= fig.bbox.width and box.y1 <= fig.bbox.height  # not cut off
+
+
+@pytest.mark.parametrize("name", ["circle", "ellipse", "deformed"])
+def test_fig2_labels_legend_and_every_curve_inside(name: str) -> None:
+    """The curvature peak near the base (~10x the object's curvature) is shown, not clipped."""
+    from contgrasp_core.figures.grasp import plot_grasp
+    from contgrasp_core.optimal import paper_problem, solve
+
+    result = solve(paper_problem(name, nodes=200))
+    fig = plot_grasp(result, title=name)
+    _check_figure(fig)
+    kappa_axes = _axes(fig)[2]
+    assert kappa_axes.get_ylim()[1] >= float(np.max(result.kappa))
