@@ -43,7 +43,8 @@ SAMPLE_BAG = Path(__file__).resolve().parents[1] / "bags" / "paper_grasp.mcap"
 
 
 def _axes(fig: Figure) -> list[Axes]:
-    return [ax for ax in fig.get_axes() if ax.get_visible()]
+    """The plotting axes (colour bars checked separately: their label is on one axis only)."""
+    return [ax for ax in fig.get_axes() if ax.get_visible() and ax.get_label() != "<colorbar>"]
 
 
 def _check_figure(fig: Figure, *, min_curves: int = 1) -> None:
@@ -148,3 +149,17 @@ def test_fig2_labels_legend_and_every_curve_inside(name: str) -> None:
     _check_figure(fig)
     kappa_axes = _axes(fig)[2]
     assert kappa_axes.get_ylim()[1] >= float(np.max(result.kappa))
+
+
+def test_fig3_labels_legend_colour_bar_and_title() -> None:
+    from contgrasp_core.figures.quality_map import quality_map_figure
+    from contgrasp_core.objects import ObjectSpec
+    from contgrasp_core.quality_map import MapSpec, quality_map
+
+    qm = quality_map(MapSpec(ObjectSpec.parse("circle"), psi_steps=4, d_steps=2, nodes=40), executor="serial",
+                     progress=False)
+    fig = quality_map_figure(qm)
+    _check_figure(fig)
+    bars = [ax for ax in fig.get_axes() if ax.get_label() == "<colorbar>"]
+    assert len(bars) == 3 and all(UNIT.search(ax.get_ylabel()) for ax in bars)
+    assert fig.get_suptitle() == "grasp quality maps: circle:5"  # the object's text, not its repr
