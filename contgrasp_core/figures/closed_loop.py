@@ -138,19 +138,24 @@ def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 
     r = m.radius(m.s_nodes)
     idx = snapshot_indices(res, frames)
     _, pts = boundary.sample(400)
-    fig = Figure(figsize=(4, 4))
+    fig = Figure(figsize=(4.4, 4), layout="constrained")
     FigureCanvasAgg(fig)  # an animation draws frames through a canvas
     ax = fig.subplots()
+    # limits from every frame and the object (cm), so no frame is clipped
+    xs = np.concatenate([res.x[idx].reshape(-1, 2), pts]) * 100
+    pad = float(r.max()) * 100 + 0.5
+    lo, hi = xs.min(axis=0) - pad, xs.max(axis=0) + pad
 
     def draw(k: int) -> None:
         ax.clear()
         ax.fill(pts[:, 0] * 100, pts[:, 1] * 100, color="0.75")
         _draw_arm(ax, res.x[k], r, color="purple", alpha=0.7, lw=0)
-        ax.set_xlim(-2, 22)
-        ax.set_ylim(-6, 14)
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")
-        ax.set_title(f"t = {res.t[k]:.2f} s")
+        ax.set_title(f"simulated time t = {res.t[k]:.2f} s")
         ax.set_xlabel("x [cm]")
+        ax.set_ylabel("y [cm]")
 
     anim = FuncAnimation(fig, draw, frames=idx)
     try:
