@@ -114,6 +114,12 @@ def test_run_figure_labels_legend_and_every_curve_inside() -> None:
     # live and bag-drawn figures label snapshots with the same thing: the header stamp (sim time)
     assert legend is not None and "header stamp" in legend.get_title().get_text() and "simulated time" in TIME_LABEL
     assert any(t.get_text().startswith("t = ") for t in legend.get_texts())
+    # and the label is true of both messages drawn: the rod state and the contact state of one
+    # step carry the same header stamp
+    rod_t = dict(zip(run.rod.step.tolist(), run.rod.t.tolist(), strict=True))
+    assert run.contact is not None
+    pairs = [(rod_t[k], t) for k, t in zip(run.contact.step.tolist(), run.contact.t.tolist(), strict=True) if k in rod_t]
+    assert pairs and all(a == b for a, b in pairs)
 
 
 def test_kinematics_figure_labels_legend_curves_and_a_title_that_fits(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
