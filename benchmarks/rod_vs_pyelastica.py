@@ -177,12 +177,12 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
 def contgrasp_held(model: RodModel, obstacle: Obstacle, couple: np.ndarray, duration: float, dt: float):
     """The project engine under a held couple profile (open loop); returns (nodes, wall s)."""
     from contgrasp_core.rod import RodLoads, chain
-    from contgrasp_core.rod.closed_loop import _single_thread_blas
+    from contgrasp_core.blas import single_thread_blas
 
     system = RodSystem(model, obstacle)
     st = system.straight_state()
     dt_next = dt
-    with _single_thread_blas():
+    with single_thread_blas():
         t0 = time.perf_counter()
         for _ in range(int(round(duration / dt))):
             st, info = system.advance(st, dt, RodLoads(couple=couple), dt_try=dt_next)

@@ -31,13 +31,38 @@ def _info_text(result: dict[str, Any]) -> str:
         "Topic information:",
     ]
     for t in result["topics"]:
-        qos = t["offered_qos_profiles"]
-        q = qos[0] if isinstance(qos, list) and qos else {}
         lines.append(
             f"  Topic: {t['name']} | Type: {t['type']} | Count: {t['count']} | Serialization Format: {t['serialization_format']}"
-            + (f" | QoS: {q.get('reliability')}, {q.get('durability')}, {q.get('history')} {q.get('depth')}" if q else "")
+            + qos_text(t["offered_qos_profiles"])
         )
     return "\n".join(lines)
+
+
+def _profile_text(q: dict[str, Any]) -> str:
+    history = str(q.get("history", "unknown"))
+    # as rclpy's TopicEndpointInfo (``ros2 topic info --verbose``) prints it: the depth only means
+    # something for keep_last; a publisher's history is not advertised, so rosbag2 records it as
+    # "unknown" with depth 0
+    depth = f" ({q.get('depth')})" if history == "keep_last" else ""
+    return f"Reliability: {q.get('reliability', 'unknown')}, History (Depth): {history}{depth}, Durability: {q.get('durability', 'unknown')}"
+
+
+def qos_text(profiles: Any) -> str:
+    """The `` | QoS: ...`` part of a topic line of ``contgrasp bag info``: the recorded
+    ``offered_qos_profiles`` (rosbag2's YAML list, one profile per publisher) with rclpy's field
+    names; publishers with the same profile are counted once. ``ros2 bag info`` itself prints no
+    QoS; this follows ``ros2 topic info --verbose``."""
+    if isinstance(profiles, str):
+        return f" | QoS: {profiles}" if profiles else ""
+    if not isinstance(profiles, list) or not profiles:
+        return ""
+    texts: dict[str, int] = {}
+    for q in profiles:
+        text = _profile_text(q) if isinstance(q, dict) else str(q)
+        texts[text] = texts.get(text, 0) + 1
+    n = len(profiles)
+    parts = [text if len(texts) == 1 else f"{count} x {text}" for text, count in texts.items()]
+    return f" | QoS ({n} publisher{'s' if n != 1 else ''}): " + "; ".join(parts)
 
 
 def _bag_info(args: argparse.Namespace) -> dict[str, Any]:

@@ -22,7 +22,7 @@ from .. import __version__
 from ..errors import ContgraspError, exit_code, one_line
 from . import grasp, kinematics, quality, simulate
 
-__all__ = ["ArgumentParser", "build_parser", "main", "report"]
+__all__ = ["ArgumentParser", "build_parser", "main", "report", "summary_lines"]
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -30,8 +30,36 @@ class ArgumentParser(argparse.ArgumentParser):
     exit code 2 (argparse prints the whole usage, 7-9 lines for these commands). Subcommand
     parsers inherit the class, so ``PROG`` names the subcommand (``contgrasp grasp``)."""
 
+    _argv: list[str] = []
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        self._argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
+
+    def _unknown_options(self) -> list[str]:
+        """Option-like words of this parser's arguments that it does not know (a typo, usually)."""
+        out = []
+        for word in self._argv:
+            if word == "--":
+                break
+            if not word.startswith("-") or word == "-" or self._negative_number_matcher.match(word):
+                continue
+            name = word.split("=", 1)[0]
+            known = name in self._option_string_actions or (
+                self.allow_abbrev and name.startswith("--") and any(o.startswith(name) for o in self._option_string_actions))
+            if not known:
+                out.append(word)
+        return out
+
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {' '.join(message.split())}  (see '{self.prog} --help')\n")
+        message = " ".join(message.split())
+        if message.startswith("the following arguments are required"):
+            # argparse checks the required arguments first: a mistyped option would be reported
+            # as a missing positional (``contgrasp --josn`` -> "required: COMMAND")
+            unknown = self._unknown_options()
+            if unknown:
+                message = f"unrecognized arguments: {' '.join(unknown)}; {message}"
+        self.exit(2, f"{self.prog}: error: {message}  (see '{self.prog} --help')\n")
 
 
 def report(prog: str, exc: BaseException) -> int:
@@ -83,15 +111,55 @@ def _to_jsonable(obj: Any) -> Any:
     return obj
 
 
-def _summary(result: dict[str, Any]) -> str:
-    lines = []
+def _number(value: Any) -> str:
+    if isinstance(value, bool) or value is None:
+        return str(value)
+    if isinstance(value, float | np.floating):
+        return f"{float(value):.6g}"
+    return str(value)
+
+
+def _is_scalar(value: Any) -> bool:
+    return value is None or isinstance(value, bool | int | float | str | np.generic)
+
+
+def _short(value: Any) -> str | None:
+    """A short text for ``value``, or None for an array-like (those are in --json only)."""
+    if _is_scalar(value):
+        text = _number(value)
+        return text if len(text) <= 200 else text[:200] + " ..."
+    if isinstance(value, list | tuple) and len(value) <= 6 and all(_is_scalar(v) for v in value):
+        return "[" + ", ".join(_number(v) for v in value) + "]" if value else "[]"
+    return None
+
+
+def summary_lines(result: dict[str, Any], prefix: str = "") -> tuple[list[str], list[str]]:
+    """``key: value`` lines for the scalars and short values of ``result`` (nested dicts flattened
+    to ``key.sub``, floats to 6 digits), and the names of what is left out (arrays along the arm,
+    grids): those are in --json."""
+    lines: list[str] = []
+    left: list[str] = []
     for key, value in result.items():
-        if isinstance(value, list) and len(value) > 6:
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            sub_lines, sub_left = summary_lines(value, f"{name}.")
+            lines += sub_lines
+            left += sub_left
             continue
-        text = str(value)
-        if len(text) > 300:  # arrays along the arm and the like: only in --json
-            text = f"({type(value).__name__} of {len(value)} entries; see --json)" if hasattr(value, "__len__") else text[:300] + " ..."
-        lines.append(f"{key}: {text}")
+        text = _short(value)
+        if text is None:
+            left.append(name)
+        else:
+            lines.append(f"{name}: {text}")
+    return lines, left
+
+
+def _summary(result: dict[str, Any]) -> str:
+    """The text result (without --json): scalars and short values, one per line; arrays are
+    named on a last line and only printed by --json."""
+    lines, left = summary_lines(result)
+    if left:
+        lines.append(f"(in --json only: {', '.join(left)})")
     return "\n".join(lines)
 
 

@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..errors import InvalidParameterError, output_error
 from ..objects import FIG2_SCALE
 from ..quality_map import METRICS, MapSpec, load_map, quality_map, save_map
@@ -37,7 +39,44 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--out", metavar="FILE", help="save the map (FILE.npz + FILE.json) for later re-plotting")
     p.add_argument("--load", metavar="FILE", help="re-plot / report a saved map instead of computing")
     p.add_argument("--plot", metavar="FILE", help="draw the Fig. 3 panels to FILE")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, format_text=format_text)
+
+
+def format_text(out: dict[str, Any]) -> str:
+    """The text result (without --json): the map's size and validity, then per metric its
+    optimum (value, base pose (psi, d) and the base's position and heading) and the best grid
+    pose with all three Q there; the grids themselves are in --json only."""
+    n_psi, n_d = len(out["psi"]), len(out["d"])
+    lines = [
+        f"object: {out['object']}",
+        f"grid: {n_psi} polar angles x {n_d} distances in [{out['d'][0]:g}, {out['d'][-1]:g}]; "
+        f"{out['n_valid']} of {n_psi * n_d} poses valid" + (f" (invalid: {', '.join(out['invalid_reasons'])})" if out["invalid_reasons"] else ""),
+    ]
+    for metric, opt in out["optimum"].items():
+        grid = np.asarray(out[metric], dtype=float) if metric in out else None
+        if grid is not None and np.isfinite(grid).any():
+            i, j = np.unravel_index(np.nanargmax(grid), grid.shape)
+            at = ", ".join(f"{m} {float(np.asarray(out[m], dtype=float)[i, j]):.6g}" for m in METRICS)
+            best_grid = f"\n  best grid pose psi {out['psi'][i]:.4g} rad, d {out['d'][j]:.4g}: {at}"
+        else:
+            best_grid = ""
+        if not opt:
+            lines.append(f"optimum {metric}: none (no valid pose){best_grid}")
+            continue
+        base = opt.get("base", {})
+        lines.append(
+            f"optimum {metric}: {opt['value']:.6g} at psi {opt['psi']:.4g} rad, d {opt['d']:.4g} "
+            f"(base x {base.get('x', float('nan')):.4g}, y {base.get('y', float('nan')):.4g}, "
+            f"heading {base.get('theta', float('nan')):.4g} rad; {opt.get('evaluations', '?')} evaluations){best_grid}"
+        )
+    if not out["optimum"]:
+        lines.append("optimum: not computed (--no-optimise) or no valid pose")
+    lines.append(f"wall_time_s: {out['wall_time_s']:.3g} ({out['n_solves']} solves, executor {out['executor']})")
+    for key in ("saved", "plot"):
+        if out.get(key):
+            lines.append(f"{key}: {out[key]}")
+    lines.append("(in --json only: psi, d, Q1, Q2, Q3, valid, optimum arm shapes, spec)")
+    return "\n".join(lines)
 
 
 def _check_out_path(path: str) -> None:

@@ -8,15 +8,17 @@ Without ``parents`` the subcommand adds its own ``--json`` flag.
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
 
+from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.control import paper_gains
+from contgrasp_core.control import FeedbackGains, paper_gains
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
-from contgrasp_core.rod import Obstacle, RodSystem
+from contgrasp_core.rod import Obstacle, RodModel, RodSystem
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_core.scenario import PAPER
@@ -36,6 +38,10 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
                    help=f"max simulated time, s (stops earlier when settled; default: the scenario's, {PAPER.loop.duration} s)")
     p.add_argument("--control-period", type=float, default=None,
                    help="sample-and-hold period of the feedback, s (default: continuous implicit feedback)")
+    p.add_argument("--hold", choices=HOLDS, default="zero-order",
+                   help="how a sampled couple is held over --control-period: zero-order (constant; unstable for "
+                   "the paper's law at periods >= 1 ms, see docs/ros.md) or first-order in the state, as the ROS "
+                   "graph does (default zero-order)")
     p.add_argument("--dt", type=float, default=0.01, help="largest integrator step, s")
     p.add_argument("--nodes", type=int, default=101, help="rod nodes (elements + 1)")
     p.add_argument("--damping", type=float, default=None, help="damping zeta, 1/s (default: scenario value)")
@@ -50,7 +56,7 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
     return p
 
 
-def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_tolerance) -> dict[str, Any]:
+def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_tolerance, hold: str = "zoh") -> dict[str, Any]:
     """The JSON result: final shape and contact state along s, settle data, penetration and the
     tracking statistics over the contact set ``delta >= -contact_tol`` (m, paper Definition 1;
     :func:`contgrasp_core.tracking.contact_stats`, as the ROS graph's summary)."""
@@ -74,7 +80,7 @@ def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_
         "contact_tolerance": float(contact_tol),
         **asdict(stats),
         "damping_per_s": m.damping,
-        "control": "continuous" if res.config.control_period is None else f"zoh {res.config.control_period} s",
+        "control": "continuous" if res.config.control_period is None else f"{hold} {res.config.control_period} s",
     }
 
 
@@ -85,6 +91,79 @@ def loop_config(args: argparse.Namespace, record_period: float | None = 0.01) ->
     duration = PAPER.loop.duration if args.duration is None else args.duration
     return replace(PAPER.loop, duration=duration, control_period=args.control_period,
                    dt=args.dt if args.control_period is None else None, record_period=record_period)
+
+
+HOLDS = ("zero-order", "first-order")
+
+ZOH_UNSTABLE_PERIOD = 1e-3
+"""Zero-order holds of the paper's law at or above this period are known (measured) to flutter or
+crumple the paper's arm, whose tapered tip has bending modes of ~1000 rad/s (docs/rod.md,
+docs/ros.md: 1, 2 and 10 ms); 0.5 ms agrees with the continuous loop over a short horizon."""
+
+
+def zoh_warning(model: RodModel, period: float | None, hold: str) -> str | None:
+    """The one-line warning for a zero-order hold known to be unstable: the paper's law held at a
+    period of 1 ms or more on a rod whose tip is no stiffer than the paper's (per unit length and
+    inertia: the fastest bending rate scales as sqrt(EI / (rho A)) / h^2, so a thinner, softer or
+    finer-meshed tip is faster still), or None."""
+    if period is None or hold != "zero-order":
+        return None
+    paper = PAPER.rod
+    rate = _tip_rate(model) / _tip_rate(paper)  # >= 1: this rod's tip is at least as fast as the paper's
+    if period * rate < ZOH_UNSTABLE_PERIOD * (1.0 - 1e-9):
+        return None
+    return (f"warning: a zero-order hold of the feedback law at --control-period {period:g} s is unstable for this rod "
+            f"(measured for the paper's arm at >= {ZOH_UNSTABLE_PERIOD * 1e3:g} ms: the tip flutters and the run does not "
+            "settle); use --hold first-order (what the ROS graph does) or leave out --control-period")
+
+
+def _tip_rate(model: RodModel) -> float:
+    """A measure of the fastest bending rate of the rod's discretisation: sqrt(EI / (rho A)) / h^2
+    at the tip element (1/s up to a constant)."""
+    s_tip = np.array([model.s_centres[-1]])
+    ei = float(model.bending_stiffness(s_tip)[0])
+    r = float(model.radius(s_tip)[0])
+    return float(np.sqrt(ei / (model.density * np.pi * r**2)) / model.h**2)
+
+
+def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig) -> ClosedLoopResult:
+    """The sampled loop with the couple held to first order in the state between samples
+    (:class:`~contgrasp_core.control.HeldExpansion`, stepped by :class:`~contgrasp_core.rod.session.LoopSession`
+    exactly as the ROS graph steps it), recorded like :func:`run_closed_loop`."""
+    import time
+
+    from contgrasp_core.contact import sense
+    from contgrasp_core.control import feedback_at_joints
+    from contgrasp_core.rod import chain
+    from contgrasp_core.rod.session import LoopSession
+
+    m, obstacle = system.model, system.obstacle
+    assert obstacle is not None and config.control_period is not None
+    rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / config.control_period)))
+    rec: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
+    wall0 = time.perf_counter()
+    with single_thread_blas():
+        session = LoopSession(system, config)
+        while True:
+            obs = session.observe()
+            sn = sense(obs.shape, obstacle, obs.radius)
+            expansion = feedback_at_joints(m, gains, sn.rho, sn.alpha)
+            if session.k % rec_every == 0 or session.finished:
+                pen_c = m.r_centres - obstacle.project(chain.centres(m, session.state.theta)).signed_distance
+                ratio = max(float((sn.delta / obs.radius).max()), float((pen_c / m.r_centres).max()), 0.0)
+                for key, val in (("t", obs.t), ("x", obs.x), ("theta", obs.theta), ("rho", sn.rho), ("alpha", sn.alpha),
+                                 ("couple", expansion.u), ("pen", obs.penetration), ("ratio", ratio),
+                                 ("speed", obs.max_speed)):
+                    rec[key].append(val)
+            if session.finished:
+                break
+            session.advance(expansion)
+    arr = {k: np.asarray(v) for k, v in rec.items()}
+    return ClosedLoopResult(
+        t=arr["t"], x=arr["x"], theta=arr["theta"], rho=arr["rho"], alpha=arr["alpha"], couple=arr["couple"],
+        penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=session.settled,
+        settle_time=session.settle_time, wall_time=time.perf_counter() - wall0, newton_iterations=session.iterations,
+        final_state=session.state, model=m, gains=gains, config=config)
 
 
 MAX_NODES = 10_001
@@ -122,8 +201,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     boundary, r_obj = obj.boundary(), obj.radius
     overrides = {} if args.damping is None else {"damping": args.damping}
     model = replace(PAPER.rod, n_elements=args.nodes - 1, **overrides)
-    res = run_closed_loop(RodSystem(model, Obstacle(boundary)), paper_gains(model, r_obj), loop_config(args))
-    out = summarize(res, args.contact_tol)
+    if args.hold != "zero-order" and args.control_period is None:
+        raise InvalidParameterError(f"--hold {args.hold} holds a sampled couple: give --control-period too")
+    cfg = loop_config(args)
+    warning = zoh_warning(model, args.control_period, args.hold)
+    if warning:
+        print(f"contgrasp simulate: {warning}", file=sys.stderr)
+    system, gains = RodSystem(model, Obstacle(boundary)), paper_gains(model, r_obj)
+    if args.hold == "first-order":
+        res = run_first_order(system, gains, cfg)
+    else:
+        res = run_closed_loop(system, gains, cfg)
+    out = summarize(res, args.contact_tol, "zoh" if args.hold == "zero-order" else "first-order hold")
     if args.plot:
         plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" else None)
     if args.animate:

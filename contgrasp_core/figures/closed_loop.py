@@ -1,5 +1,9 @@
 """Fig. 4 of the paper: the closed-loop grasp on the rod engine (snapshots, rho/rho_d and alpha
-along the arm against the static solution) and its animation."""
+along the arm against the static solution) and its animation.
+
+The static solution (eq. (20) integrated through eq. (8) from the base's contact state) is the
+equilibrium of the feedback law *without* the object: it ignores contact, so it may dip below
+rho = rho_d, into the object, where the real rod is held at the surface (docs/rod.md)."""
 
 from __future__ import annotations
 
@@ -18,7 +22,7 @@ from ..errors import output_error
 from ..rod.closed_loop import ClosedLoopResult
 from .draw import save
 
-__all__ = ["snapshot_indices", "plot_fig4", "animate"]
+__all__ = ["snapshot_indices", "fig4_figure", "plot_fig4", "animate", "data_limits", "ratio_axis", "STATIC_LABEL"]
 
 
 def _draw_arm(ax: Axes, x: np.ndarray, r: np.ndarray, **kw: Any) -> None:
@@ -40,47 +44,92 @@ def snapshot_indices(res: ClosedLoopResult, count: int = 6) -> np.ndarray:
     return np.unique(idx)
 
 
-def plot_fig4(res: ClosedLoopResult, boundary: Boundary, path: str, obstacle_radius: float | None = None) -> None:
-    """Paper Fig. 4: six snapshots of the arm (with its radius) around the object; rho/rho_d and
-    alpha along s at several times, the static solution of eq. (20) dashed."""
+STATIC_LABEL = "static solution, eq. (20)\n(equilibrium of the law without the object)"
+"""Legend entry of the static solution: it ignores contact, so it may cut into the object (docs/rod.md)."""
+
+
+def data_limits(values: list[np.ndarray], *, log: bool = False, pad: float = 0.05,
+                include: tuple[float, ...] = ()) -> tuple[float, float]:
+    """Axis limits that show every value of every curve (and the ``include`` levels), padded by
+    ``pad`` of the span (of the log span when ``log``)."""
+    v = np.concatenate([np.ravel(np.asarray(a, dtype=float)) for a in values] + [np.asarray(include, dtype=float)])
+    v = v[np.isfinite(v) & (v > 0.0)] if log else v[np.isfinite(v)]
+    lo, hi = float(v.min()), float(v.max())
+    if log:
+        span = max(np.log10(hi / lo), 0.1)
+        return lo / 10.0 ** (pad * span), hi * 10.0 ** (pad * span)
+    span = max(hi - lo, 1e-12)
+    return lo - pad * span, hi + pad * span
+
+
+def ratio_axis(ax: Axes, ratios: list[np.ndarray]) -> None:
+    """rho/rho_d on a log scale (it spans ~0.6 to ~100 during a grasp) with limits from the data
+    and the target 1 included; linear when some value is not positive (a centreline inside the
+    object), which a log axis could not show."""
+    positive = all(np.all(np.asarray(v)[np.isfinite(v)] > 0.0) for v in ratios)
+    if positive:
+        ax.set_yscale("log")
+    ax.set_ylim(*data_limits(ratios, log=positive, include=(1.0,)))
+    ax.set_ylabel(r"$\rho / \rho_d$ [-]" + ("  (log scale; " if positive else "  (") + r"$\rho_d = r(s)$)")
+
+
+def fig4_figure(res: ClosedLoopResult, boundary: Boundary, obstacle_radius: float | None = None) -> Figure:
+    """Paper Fig. 4 as a :class:`~matplotlib.figure.Figure`: six snapshots of the arm (with its
+    radius) around the object, shaded by simulated time (legend); rho/rho_d (log scale, limits
+    from the data, so every curve shows) and alpha along s at the same times, with the targets
+    rho = rho_d and alpha = pi/2 and, for a circle, the static solution of eq. (20) dashed."""
     m = res.model
     r = m.radius(m.s_nodes)
-    fig = Figure(figsize=(7.0, 7.5))
-    ax0 = fig.add_subplot(2, 1, 1)
+    fig = Figure(figsize=(8.0, 9.0), layout="constrained")
+    grid = fig.add_gridspec(2, 1, height_ratios=(1.0, 1.1))
+    top, bottom = fig.add_subfigure(grid[0]), fig.add_subfigure(grid[1])
+    ax0 = top.add_subplot(1, 1, 1)
     idx = snapshot_indices(res, 6)
     _, pts = boundary.sample(400)
-    ax0.fill(pts[:, 0] * 100, pts[:, 1] * 100, color="0.75", zorder=1)
-    for j, k in enumerate(idx):
-        _draw_arm(ax0, res.x[k], r, color="purple", alpha=0.15 + 0.12 * j, lw=0, zorder=2)
-        ax0.annotate(f"{res.t[k]:.2f} s", res.x[k][-1] * 100, fontsize=7, color="purple")
-    ax0.plot(0, 0, "ks", ms=5)
+    ax0.fill(pts[:, 0] * 100, pts[:, 1] * 100, color="0.75", zorder=1, label="object")
+    shades = [0.15 + 0.7 * j / max(len(idx) - 1, 1) for j in range(len(idx))]
+    for shade, k in zip(shades, idx, strict=True):
+        _draw_arm(ax0, res.x[k], r, color="purple", alpha=shade, lw=0, zorder=2, label=f"t = {res.t[k]:.2f} s")
+    ax0.plot(0, 0, "ks", ms=5, label="base (clamped)")
     ax0.set_aspect("equal")
     ax0.set_xlabel("x [cm]")
     ax0.set_ylabel("y [cm]")
-    ax0.set_title("closed-loop grasp (eq. (19)), six time instances")
-    ax1 = fig.add_subplot(2, 2, 3)
-    ax2 = fig.add_subplot(2, 2, 4)
+    ax0.legend(title="arm at simulated time", fontsize=7, title_fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    ax0.set_title("closed-loop grasp (feedback law eq. (19)), six time instances")
+    ax1, ax2 = bottom.subplots(1, 2)
     s_n = m.s_nodes / m.length
     cmap = colormaps["Blues"]
-    for j, k in enumerate(idx[1:]):
+    ratios, alphas = [], []
+    for j, k in enumerate(idx):
         c = cmap(0.35 + 0.65 * (j + 1) / len(idx))
-        ax1.plot(s_n, res.rho[k] / r, color=c, lw=1.2, label=f"{res.t[k]:.2f} s")
-        ax2.plot(s_n, res.alpha[k], color=c, lw=1.2)
+        ratios.append(res.rho[k] / r)
+        alphas.append(res.alpha[k])
+        ax1.plot(s_n, ratios[-1], color=c, lw=1.2, label=f"t = {res.t[k]:.2f} s")
+        ax2.plot(s_n, alphas[-1], color=c, lw=1.2, label=f"t = {res.t[k]:.2f} s")
     if obstacle_radius is not None:
         s, rho_s, alpha_s = static_solution(res, obstacle_radius)
-        ax1.plot(s / m.length, rho_s / r, "k--", lw=1.2, label="static theory")
-        ax2.plot(s / m.length, alpha_s, "k--", lw=1.2)
-    ax1.axhline(1.0, color="0.6", lw=0.6)
-    ax2.axhline(0.5 * np.pi, color="0.6", lw=0.6)
-    ax1.set_ylim(0, 3)
-    ax2.set_ylim(0, np.pi)
-    ax1.set_xlabel("s / L")
-    ax2.set_xlabel("s / L")
-    ax1.set_ylabel(r"$\rho / \rho_d$")
+        ratios.append(rho_s / r)
+        alphas.append(alpha_s)
+        ax1.plot(s / m.length, rho_s / r, "k--", lw=1.2, label=STATIC_LABEL)
+        ax2.plot(s / m.length, alpha_s, "k--", lw=1.2, label=STATIC_LABEL)
+    ax1.axhline(1.0, color="tab:red", lw=0.8, ls=":", label=r"target $\rho = \rho_d$")
+    ax2.axhline(0.5 * np.pi, color="tab:red", lw=0.8, ls=":", label=r"target $\alpha = \pi/2$")
+    ratio_axis(ax1, ratios)
+    ax2.set_ylim(*data_limits(alphas, include=(0.0, np.pi)))
+    for ax in (ax1, ax2):
+        ax.set_xlabel("s / L [-]  (along the arm)")
+        ax.grid(alpha=0.3)
     ax2.set_ylabel(r"$\alpha$ [rad]")
-    ax1.legend(fontsize=6)
-    fig.tight_layout()
-    save(fig, path, dpi=150)
+    handles, labels = ax1.get_legend_handles_labels()
+    h2, l2 = ax2.get_legend_handles_labels()
+    handles, labels = handles + h2[-1:], labels + l2[-1:]  # and the target alpha = pi/2
+    bottom.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=7)
+    return fig
+
+
+def plot_fig4(res: ClosedLoopResult, boundary: Boundary, path: str, obstacle_radius: float | None = None) -> None:
+    """Write :func:`fig4_figure` to ``path`` (format from the suffix)."""
+    save(fig4_figure(res, boundary, obstacle_radius), path, dpi=150)
 
 
 def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 60) -> None:
@@ -89,19 +138,24 @@ def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 
     r = m.radius(m.s_nodes)
     idx = snapshot_indices(res, frames)
     _, pts = boundary.sample(400)
-    fig = Figure(figsize=(4, 4))
+    fig = Figure(figsize=(4.4, 4), layout="constrained")
     FigureCanvasAgg(fig)  # an animation draws frames through a canvas
     ax = fig.subplots()
+    # limits from every frame and the object (cm), so no frame is clipped
+    xs = np.concatenate([res.x[idx].reshape(-1, 2), pts]) * 100
+    pad = float(r.max()) * 100 + 0.5
+    lo, hi = xs.min(axis=0) - pad, xs.max(axis=0) + pad
 
     def draw(k: int) -> None:
         ax.clear()
         ax.fill(pts[:, 0] * 100, pts[:, 1] * 100, color="0.75")
         _draw_arm(ax, res.x[k], r, color="purple", alpha=0.7, lw=0)
-        ax.set_xlim(-2, 22)
-        ax.set_ylim(-6, 14)
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")
-        ax.set_title(f"t = {res.t[k]:.2f} s")
+        ax.set_title(f"simulated time t = {res.t[k]:.2f} s")
         ax.set_xlabel("x [cm]")
+        ax.set_ylabel("y [cm]")
 
     anim = FuncAnimation(fig, draw, frames=idx)
     try:

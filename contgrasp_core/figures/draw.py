@@ -6,6 +6,8 @@ so importing or using this package never selects or switches a backend: a notebo
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
@@ -76,33 +78,41 @@ def kinematics_figure(
     geo: ContactState,
     *,
     title: str = "",
+    unit: str = "-",
 ) -> Figure:
-    """Arm around the object with its shadow points; rho and alpha against s/L (ODE vs geometry)."""
-    fig = Figure(figsize=(10, 4.6))
-    ax = fig.add_subplot(1, 2, 1)
+    """Arm around the object with its shadow points; rho and alpha against s/L (ODE vs geometry).
+    ``unit`` names the length unit of the axes (``-``: the paper's dimensionless Fig. 2 units);
+    the title is wrapped to the figure's width (constrained layout keeps it inside)."""
+    fig = Figure(figsize=(10, 5.0), layout="constrained")
+    grid = fig.add_gridspec(1, 2, width_ratios=(1.1, 1.0))
+    left, right = fig.add_subfigure(grid[0]), fig.add_subfigure(grid[1])
+    ax = left.add_subplot(1, 1, 1)
     draw_boundary(ax, boundary)
-    draw_arm(ax, shape, radius)
+    ax.fill([], [], color="0.85", label="object")
+    draw_arm(ax, shape, radius, label="arm (with its radius)")
     step = max(1, len(shape.s) // 40)
     for i in range(0, len(shape.s), step):
         ax.plot([shape.r[i, 0], geo.foot[i, 0]], [shape.r[i, 1], geo.foot[i, 1]], color="tab:orange", lw=0.5, zorder=4)
     ax.plot(geo.foot[::step, 0], geo.foot[::step, 1], "o", color="tab:orange", ms=2.5, zorder=5, label="shadow points")
     ax.set_aspect("equal")
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_title(title or "arm and shadow curve")
+    ax.set_xlabel(f"x [{unit}]")
+    ax.set_ylabel(f"y [{unit}]")
+    ax.legend(loc="best", fontsize=8)
+    fig.suptitle(textwrap.fill(title or "arm and shadow curve", 90, break_on_hyphens=False),
+                 fontsize=10)
     sl = shape.s / shape.s[-1]
-    ax1 = fig.add_subplot(2, 2, 2)
-    ax1.plot(sl, ode.rho, "C0", label="rho (ODE)")
-    ax1.plot(sl, geo.rho, "k:", label="rho (geometry)")
-    ax1.set_ylabel("rho")
+    ax1, ax2 = right.subplots(2, 1, sharex=True)
+    ax1.plot(sl, ode.rho, "C0", label="rho (ODE, eq. (8))")
+    ax1.plot(sl, geo.rho, "k:", label="rho (geometry, eq. (4))")
+    ax1.set_ylabel(f"rho [{unit}]")
+    ax1.set_xlabel("s / L [-]")
     ax1.legend(fontsize=8)
-    ax2 = fig.add_subplot(2, 2, 4, sharex=ax1)
-    ax2.plot(sl, ode.alpha, "C1", label="alpha (ODE)")
-    ax2.plot(sl, geo.alpha, "k:", label="alpha (geometry)")
-    ax2.axhline(np.pi / 2, color="0.5", ls="--", lw=0.8)
+    ax2.plot(sl, ode.alpha, "C1", label="alpha (ODE, eq. (8))")
+    ax2.plot(sl, geo.alpha, "k:", label="alpha (geometry, eq. (4))")
+    ax2.axhline(np.pi / 2, color="0.5", ls="--", lw=0.8, label="pi / 2")
     ax2.set_ylabel("alpha [rad]")
-    ax2.set_xlabel("s / L")
+    ax2.set_xlabel("s / L [-]")
     ax2.legend(fontsize=8)
-    fig.tight_layout()
     return fig
 
 

@@ -45,16 +45,19 @@ def quality_map_figure(qm: QualityMap, *, title: str | None = None) -> Figure:
         draw_boundary(ax, qm.spec.boundary(), color="0.75")
         opt = qm.optimum.get(metric)
         if opt:
-            ax.plot(opt["base"]["x"], opt["base"]["y"], "o", color="purple", ms=7, zorder=6)
+            ax.plot(opt["base"]["x"], opt["base"]["y"], "o", color="purple", ms=7, zorder=6, label=f"base maximising {metric}")
             if opt.get("x") is not None:
-                ax.plot(opt["x"], opt["y"], "--", color="purple", lw=2, zorder=6)
+                ax.plot(opt["x"], opt["y"], "--", color="purple", lw=2, zorder=6, label="its optimal arm")
         inv = ~qm.valid
         if inv.any():
             ax.plot(qm.base[..., 0][inv], qm.base[..., 1][inv], "x", color="tab:red", ms=4, label="invalid pose")
+        if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="lower right", fontsize=7)
         ax.set_aspect("equal")
+        ax.set_xlabel("base x [-]")
+        ax.set_ylabel("base y [-]")
         ax.set_title(f"{metric} / max {metric}" + (f"  (max {vmax:.3g})" if finite.any() else ""))
-        fig.colorbar(pc, ax=ax, shrink=0.7)
-    fig.suptitle(title or f"grasp quality maps: {qm.spec.object}")
+        fig.colorbar(pc, ax=ax, shrink=0.7, label=f"{metric} / max {metric} [-]")
+    fig.suptitle(title or f"grasp quality maps: {qm.spec.object.text()}")
     fig.tight_layout()
     return fig

@@ -3,7 +3,8 @@
 Top: six snapshots of the arm (with its radius) around the object. Bottom: rho/rho_d and
 alpha along s at those times, with the static theoretical solution of eq. (20)
 (closed-loop kinematics from the base's contact state, :func:`contgrasp_core.control.closed_loop_kinematics`)
-dashed.
+dashed: the equilibrium of the law without the object (it ignores contact, so it may cut into
+the object). Every time is the header stamp of the messages drawn (simulated time).
 """
 
 from __future__ import annotations
@@ -17,14 +18,24 @@ from matplotlib.figure import Figure
 from contgrasp_core.arm import ArmShape
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.control.law import adaptive_mu2, closed_loop_kinematics
+from contgrasp_core.figures.closed_loop import STATIC_LABEL, data_limits, ratio_axis
 from contgrasp_core.figures.draw import draw_arm, draw_boundary, save
 from contgrasp_core.scenario import Scenario
 
-__all__ = ["run_figure", "quality_history_figure"]
+__all__ = ["TIME_LABEL", "build_run_figure", "run_figure", "quality_history_figure"]
 
 
-def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path: str) -> None:
-    """Draw the figure of ``summary['history']`` (the launcher's monitor samples) to ``path``."""
+TIME_LABEL = "simulated time t [s] (message header stamp)"
+"""What a run figure's times are: the header stamp of the messages drawn (a rod state and the
+contact state of the same step carry the same stamp), i.e. simulated time, both in the live figure
+(``contgrasp-launch --plot``) and in the one drawn from a bag (``contgrasp analyze --plot``)."""
+
+
+def build_run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]]) -> Figure:
+    """The figure of ``summary['history']`` (snapshots of rod state + contact state of one step,
+    each labelled by its header stamp): the arm around the object at six times (legend), and
+    rho/rho_d (log scale, limits from the data) and alpha along s at those times, with the
+    targets and, for a circle, the static solution of eq. (20)."""
     hist = summary["history"]
     ctl = params["grasp_controller"]
     boundary = Scenario.from_ros_parameters(params).object.boundary()
@@ -33,8 +44,10 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
     times = np.array([h["t"] for h in hist])
     wanted = [0.0, 0.05, 0.1, 0.15, 0.25, times[-1]]
     picks = np.unique([int(np.argmin(np.abs(times - w))) for w in wanted])
-    fig = Figure(figsize=(11, 8))
-    ax = fig.add_subplot(2, 1, 1)
+    fig = Figure(figsize=(11, 9), layout="constrained")
+    grid = fig.add_gridspec(2, 1, height_ratios=(1.0, 0.9))
+    top, bottom = fig.add_subfigure(grid[0]), fig.add_subfigure(grid[1])
+    ax = top.add_subplot(1, 1, 1)
     draw_boundary(ax, boundary)
     colours = colormaps["Purples"](np.linspace(0.35, 1.0, len(picks)))
     for colour, i in zip(colours, picks, strict=True):
@@ -42,14 +55,20 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
         shape = ArmShape(np.asarray(h["s"]), np.stack([h["x"], h["y"]], -1), np.asarray(h["theta"]))
         draw_arm(ax, shape, np.asarray(h["radius"]), color=colour, alpha=0.45, label=f"t = {h['t']:.2f} s")
     ax.set_aspect("equal")
-    ax.legend(loc="upper left", fontsize=8)
-    ax.set_title("closed-loop grasp through the ROS graph")
-    ax_r, ax_a = fig.add_subplot(2, 2, 3), fig.add_subplot(2, 2, 4)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, title=TIME_LABEL.replace(" (", "\n("),
+              title_fontsize=8)
+    ax.set_title("closed-loop grasp through the ROS graph (feedback law eq. (19))")
+    ax_r, ax_a = bottom.subplots(1, 2)
+    ratios, alphas = [], []
     for colour, i in zip(colours, picks, strict=True):
         h = hist[i]
         s, radius = np.asarray(h["s"]), np.asarray(h["radius"])
-        ax_r.plot(s / s[-1], np.asarray(h["rho"]) / radius, color=colour, lw=1.2)
-        ax_a.plot(s / s[-1], h["alpha"], color=colour, lw=1.2)
+        ratios.append(np.asarray(h["rho"]) / radius)
+        alphas.append(np.asarray(h["alpha"]))
+        ax_r.plot(s / s[-1], ratios[-1], color=colour, lw=1.2, label=f"t = {h['t']:.2f} s")
+        ax_a.plot(s / s[-1], alphas[-1], color=colour, lw=1.2, label=f"t = {h['t']:.2f} s")
     h = hist[-1]
     s, radius = np.asarray(h["s"]), np.asarray(h["radius"])
     if boundary.kind == "circle" and ctl.get("adaptive_mu2", True):
@@ -60,19 +79,31 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
                 h["rho"][0], h["alpha"][0], s, ctl["mu1"], lambda sv: np.interp(sv, s, mu2),
                 1.0 / boundary.params["R"], length_unit=lu,
             )
-            ax_r.plot(s / s[-1], static.rho / radius, "k--", lw=1.0, label="static solution")
-            ax_a.plot(s / s[-1], static.alpha, "k--", lw=1.0)
-            ax_r.legend(fontsize=8)
         except ContgraspError:
             pass  # no admissible static solution from this base state: nothing to draw
-    ax_r.set_ylim(0.0, 3.0)
-    ax_r.set_xlabel("s / L")
-    ax_r.set_ylabel("rho / rho_d")
-    ax_a.set_xlabel("s / L")
-    ax_a.set_ylabel("alpha [rad]")
-    ax_a.axhline(np.pi / 2, color="0.6", lw=0.8, ls=":")
-    fig.tight_layout()
-    save(fig, path)
+        else:
+            ratios.append(static.rho / radius)
+            alphas.append(static.alpha)
+            ax_r.plot(s / s[-1], ratios[-1], "k--", lw=1.0, label=STATIC_LABEL)
+            ax_a.plot(s / s[-1], alphas[-1], "k--", lw=1.0, label=STATIC_LABEL)
+    ax_r.axhline(1.0, color="tab:red", lw=0.8, ls=":", label=r"target $\rho = \rho_d$")
+    ax_a.axhline(np.pi / 2, color="tab:red", lw=0.8, ls=":", label=r"target $\alpha = \pi/2$")
+    ratio_axis(ax_r, ratios)
+    ax_a.set_ylim(*data_limits(alphas, include=(0.0, np.pi)))
+    for a in (ax_r, ax_a):
+        a.set_xlabel("s / L [-]  (along the arm)")
+        a.grid(alpha=0.3)
+    ax_a.set_ylabel(r"$\alpha$ [rad]")
+    handles, labels = ax_r.get_legend_handles_labels()
+    h2, l2 = ax_a.get_legend_handles_labels()
+    bottom.legend(handles + h2[-1:], labels + l2[-1:], loc="outside lower center", ncols=4, fontsize=8)
+    return fig
+
+
+def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path: str) -> None:
+    """Draw :func:`build_run_figure` of ``summary['history']`` (the launcher's monitor samples, or
+    the same picked from a bag) to ``path``."""
+    save(build_run_figure(summary, params), path)
 
 
 def quality_history_figure(t: np.ndarray, q: tuple[np.ndarray, np.ndarray, np.ndarray], path: str, *,
@@ -93,6 +124,6 @@ def quality_history_figure(t: np.ndarray, q: tuple[np.ndarray, np.ndarray, np.nd
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     axes[0].set_title("continuum grasp quality (Sec. IV) over the run")
-    axes[-1].set_xlabel("sim time t [s]")
+    axes[-1].set_xlabel(TIME_LABEL)
     fig.tight_layout()
     save(fig, path)
