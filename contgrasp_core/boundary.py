@@ -246,7 +246,9 @@ class Boundary:
 
         The ``candidates`` nearest of 4096 curve samples seed Newton iterations on
         ``(c(t) - q) . c'(t) = 0`` (steps limited to two sample spacings); the best refined
-        candidate wins, so non-convex boundaries get the global closest point.
+        candidate wins, so non-convex boundaries get the global closest point. A circle is
+        projected in closed form (same result to rounding, ~50x faster; ``candidates`` is
+        irrelevant there).
         """
         q = float_array("points", points)
         if q.ndim != 2 or q.shape[1] != 2 or not np.all(np.isfinite(q)):
@@ -257,6 +259,8 @@ class Boundary:
         if len(q) == 0:
             e = np.zeros(0)
             return Projection(np.zeros((0, 2)), e, e, e, np.zeros(0, dtype=int), e, e)
+        if self.kind == "circle":
+            return self._project_circle(q)
         _, idx = self._tree.query(q, k=k)
         idx = np.asarray(idx).reshape(len(q), k)
         h = TWO_PI / _N_TABLE
@@ -284,6 +288,29 @@ class Boundary:
             phi=self._phi(t_best, s_o),
             kappa_o=self._kappa(t_best),
         )
+
+    def _project_circle(self, q: NDArray[np.float64]) -> Projection:
+        """:meth:`project` for a circle in closed form: the foot is along the ray from the centre
+        (the parameter ``t`` Newton converges to is the query's polar angle; a query at the centre
+        gets ``t = 0``), ``s_o = R t``, ``phi = t + pi/2``, ``kappa_o = 1/R``. Same quantities,
+        computed the same way from ``t``, as the general path (agrees with it to rounding; tested)."""
+        R = float(self.params["R"])
+        c0 = np.asarray(self.params["center"], dtype=float)
+        rel_c = q - c0
+        t = np.mod(np.arctan2(rel_c[:, 1], rel_c[:, 0]), TWO_PI)
+        t[t >= TWO_PI] = 0.0  # mod of a tiny negative rounds to 2 pi: the seam is t = 0
+        cs, sn = np.cos(t), np.sin(t)
+        foot = np.empty_like(q)
+        foot[:, 0] = R * cs + c0[0]
+        foot[:, 1] = R * sn + c0[1]
+        rel = q - foot
+        d = np.hypot(rel[:, 0], rel[:, 1])
+        cross = -R * sn * rel[:, 1] - R * cs * rel[:, 0]  # c'(t) x (q - foot) > 0: inside
+        side = -np.sign(cross).astype(int)
+        s_o = np.mod(R * t, self.length)
+        s_o[s_o >= self.length] = 0.0
+        return Projection(foot=foot, s_o=s_o, distance=d, signed_distance=side * d, side=side,
+                          phi=t + 0.5 * np.pi, kappa_o=np.full(len(q), 1.0 / R))
 
     def _refine(self, q: NDArray[np.float64], t: NDArray[np.float64], h: float) -> NDArray[np.float64]:
         """Newton's method for the stationary point of |c(t) - q|^2 / 2 near the sample ``t``.
