@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from contgrasp_core.control.gains import FeedbackGains
 from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_gradient
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.rod import chain
+from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
@@ -106,6 +106,12 @@ def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarra
     tangent at the foot). The node angle is the mean of the adjacent elements:
     ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2``.
     """
+    if _kernels.ENABLED:  # the same entries in one compiled loop (contgrasp_core.rod._kernels)
+        f64 = np.float64
+        return _kernels.joint_couple_jacobian(
+            model.h, np.ascontiguousarray(g_rho, dtype=f64), np.ascontiguousarray(g_alpha, dtype=f64),
+            np.ascontiguousarray(sensing.normal_out, dtype=f64), np.ascontiguousarray(sensing.foot_turn, dtype=f64),
+            np.ascontiguousarray(b, dtype=f64))
     n_out = sensing.normal_out
     tangent = np.stack([-n_out[:, 1], n_out[:, 0]], axis=1)
     direction = g_rho[:, None] * n_out + (g_alpha * sensing.foot_turn)[:, None] * tangent

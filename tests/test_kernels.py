@@ -1,0 +1,100 @@
+"""The compiled kernels (contgrasp_core.rod._kernels) against the numpy code they replace: equal to
+rounding, term by term and over a closed-loop run; the circle's closed-form projection against
+the general closest-point search."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from contgrasp_core.boundary import circle, ellipse
+from contgrasp_core.control import feedback_at_joints
+from contgrasp_core.control.rod_feedback import joint_couple_jacobian, sense_joints
+from contgrasp_core.rod import Obstacle, RodSystem, _kernels
+from contgrasp_core.rod.session import LoopSession, sense_observation
+from contgrasp_core.scenario import PAPER
+from test_rod_physics import _contact_case
+
+
+def _both(fn):  # type: ignore[no-untyped-def]
+    before = _kernels.ENABLED
+    try:
+        _kernels.ENABLED = False
+        ref = fn()
+        _kernels.ENABLED = True
+        got = fn()
+    finally:
+        _kernels.ENABLED = before
+    return ref, got
+
+
+@pytest.mark.parametrize("method", ["euler", "midpoint"])
+@pytest.mark.parametrize("feedback", ["none", "state", "held", "deformed"])
+def test_newton_system_kernel_equals_numpy_to_rounding(method: str, feedback: str) -> None:
+    """Residual, Newton matrix and penetration of the kernel and of RodSystem._evaluate, with
+    contact (damping and friction), drag, node forces, held couple and every feedback."""
+    system, state, loads = _contact_case(method, feedback)
+    dt = 2e-3
+    frame = system.contact_frame(state, dt)
+    rng = np.random.default_rng(5)
+    w1 = state.omega + 5.0 * rng.standard_normal(len(state.omega))
+    (r0, j0, e0), (r1, j1, e1) = _both(lambda: system.newton_system(state, w1, dt, loads, frame))
+    assert np.abs(r1 - r0).max() <= 1e-13 * np.abs(r0).max()
+    assert np.abs(j1 - j0).max() <= 1e-13 * np.abs(j0).max()
+    assert e1.penetration == pytest.approx(e0.penetration, rel=1e-13)
+    # and without contact or feedback (the kernel's empty-array branches)
+    (r0, j0, _), (r1, j1, _) = _both(lambda: system.newton_system(state, w1, dt))
+    assert np.abs(r1 - r0).max() <= 1e-13 * np.abs(r0).max()
+    assert np.abs(j1 - j0).max() <= 1e-13 * np.abs(j0).max()
+
+
+def test_joint_couple_jacobian_kernel() -> None:
+    model = PAPER.rod
+    obstacle = Obstacle(PAPER.object.boundary())
+    theta = np.linspace(0.0, 2.5, model.n_elements)
+    js = sense_joints(model, obstacle, theta)
+    rng = np.random.default_rng(2)
+    g_rho, g_alpha = rng.standard_normal((2, model.n_elements))
+    b = np.stack([-np.sin(theta), np.cos(theta)], axis=1)
+    ref, got = _both(lambda: joint_couple_jacobian(model, g_rho, g_alpha, js, b))
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-15 * np.abs(ref).max())
+
+
+def test_obstacle_circle_kernel() -> None:
+    obstacle = Obstacle(circle(0.025, (0.08, 0.08)))
+    q = 0.08 + 0.05 * np.random.default_rng(4).standard_normal((500, 2))
+    q[0] = (0.08, 0.08)  # the centre: normal (1, 0) by convention
+    ref, got = _both(lambda: obstacle.project(q))
+    for name in ("foot", "s_o", "phi", "kappa_o", "signed_distance", "normal_out"):
+        np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=1e-15, err_msg=name)
+
+
+def test_circle_closed_form_projection_equals_the_general_search() -> None:
+    """Boundary.project of a circle (closed form) against the same circle as an ellipse with
+    equal axes (the general candidates + Newton search)."""
+    R, c = 0.025, (0.08, 0.08)
+    q = np.asarray(c) + 0.06 * np.random.default_rng(6).standard_normal((1000, 2))
+    fast, slow = circle(R, c).project(q), ellipse(R, R, c).project(q)
+    np.testing.assert_array_equal(fast.side, slow.side)
+    for name, tol in (("foot", 1e-16), ("distance", 1e-16), ("signed_distance", 1e-16), ("s_o", 1e-15),
+                      ("phi", 1e-14), ("kappa_o", 1e-12)):
+        np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=0, atol=tol * 40, err_msg=name)
+
+
+def test_lockstep_loop_same_with_and_without_kernels() -> None:
+    """A stretch of the paper's lock-step loop (through first contact) gives the same states
+    with the kernels as with the numpy code, to rounding amplified over the steps."""
+    boundary = PAPER.object.boundary()
+    gains = PAPER.feedback_gains
+
+    def run() -> np.ndarray:
+        session = LoopSession(RodSystem(PAPER.rod, Obstacle(boundary)), PAPER.loop)
+        for _ in range(120):
+            obs = session.observe()
+            c = sense_observation(obs, boundary, PAPER.sensing.contact_tolerance)
+            session.advance(feedback_at_joints(PAPER.rod, gains, c.rho, c.alpha))
+        return np.concatenate([session.state.theta, [session.iterations]])
+
+    ref, got = _both(run)
+    assert got[-1] == ref[-1]  # same Newton iterations
+    np.testing.assert_allclose(got[:-1], ref[:-1], rtol=0, atol=1e-11)
