@@ -62,6 +62,8 @@ def summarize(res: ClosedLoopResult, contact_tol: float = 0.5) -> dict[str, Any]
         "settled": bool(res.settled),
         "settle_time_s": res.settle_time,
         "sim_time_s": float(res.t[-1]),
+        "steps": int(res.steps),
+        "integrator_steps": int(res.integrator_steps),
         "wall_time_s": float(res.wall_time),
         "newton_iterations": int(res.newton_iterations),
         "max_penetration": float(res.penetration.max()),
