@@ -382,3 +382,28 @@ def joint_couple_jacobian(h: float, g_rho: np.ndarray, g_alpha: np.ndarray, norm
             du[k, k] += coef
             du[k, k - 1] += coef
     return du
+
+
+def warm() -> float:
+    """Compile (or load from numba's on-disk cache) every kernel by running a tiny closed-loop
+    simulation through the code paths that use them (the lock-step loop with the held expansion
+    and the continuous loop, both around a circle, with contact); returns the seconds it took.
+    ``contgrasp.sh setup`` runs it, so the first real run does not pay the compilation (~10-17 s
+    on 2 cores; loading the cache afterwards takes well under a second)."""
+    import time
+    from dataclasses import replace
+
+    from contgrasp_core.control import paper_gains
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
+    from contgrasp_core.rod.integrator import RodSystem
+    from contgrasp_core.rod.obstacle import Obstacle
+    from contgrasp_core.rod.session import run_sampled
+    from contgrasp_core.scenario import PAPER
+
+    t0 = time.perf_counter()
+    rod = replace(PAPER.rod, n_elements=12)
+    run_sampled(replace(PAPER, rod=rod, loop=replace(PAPER.loop, duration=0.01)))
+    system = RodSystem(rod, Obstacle(PAPER.object.boundary()))
+    run_closed_loop(system, paper_gains(rod, 0.025), ClosedLoopConfig(duration=0.02, dt=0.01))
+    return time.perf_counter() - t0
+
