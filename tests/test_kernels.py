@@ -98,3 +98,14 @@ def test_lockstep_loop_same_with_and_without_kernels() -> None:
     ref, got = _both(run)
     assert got[-1] == ref[-1]  # same Newton iterations
     np.testing.assert_allclose(got[:-1], ref[:-1], rtol=0, atol=1e-11)
+
+
+def test_kinetic_energy_and_contact_frame_kernels() -> None:
+    system, state, _ = _contact_case("euler", "none")
+    ref, got = _both(lambda: system.kinetic_energy(state))
+    assert got == pytest.approx(ref, rel=1e-13)
+    f0, f1 = _both(lambda: system.contact_frame(state, 2e-3))
+    assert f0 is not None and f1 is not None
+    np.testing.assert_array_equal(f1.rows, f0.rows)
+    for name in ("foot", "normal", "tangent"):
+        np.testing.assert_allclose(getattr(f1, name), getattr(f0, name), rtol=0, atol=1e-15, err_msg=name)

@@ -25,7 +25,8 @@ import os
 import numpy as np
 from numba import njit
 
-__all__ = ["ENABLED", "frames_nodes", "newton_system", "circle_projection", "joint_couple_jacobian"]
+__all__ = ["ENABLED", "frames_nodes", "kinetic_energy", "newton_system", "circle_projection", "joint_couple_jacobian",
+           "warm"]
 
 ENABLED: bool = os.environ.get("CONTGRASP_KERNELS", "1").strip().lower() not in ("0", "false", "no", "off")
 """Use the kernels (True) or the numpy reference code (False). Read at every call, so it can be
@@ -58,6 +59,28 @@ def frames_nodes(theta: np.ndarray, h: float, base: np.ndarray) -> tuple[np.ndar
 
 
 @njit(cache=True)
+def kinetic_energy(theta: np.ndarray, omega: np.ndarray, h: float, weight: np.ndarray,
+                   rot_inertia: np.ndarray) -> float:
+    """``1/2 omega^T M omega`` with ``M = h^2 W * cos(theta_j - theta_k) + diag(J)`` (as
+    :func:`contgrasp_core.rod.chain.mass_matrix`), without forming ``M``."""
+    n = theta.shape[0]
+    cs = np.empty(n)
+    sn = np.empty(n)
+    for k in range(n):
+        cs[k] = math.cos(theta[k])
+        sn[k] = math.sin(theta[k])
+    hh = h * h
+    total = 0.0
+    for j in range(n):
+        row = 0.0
+        for k in range(n):
+            row += hh * weight[j, k] * (cs[j] * cs[k] + sn[j] * sn[k]) * omega[k]
+        row += rot_inertia[j] * omega[j]
+        total += omega[j] * row
+    return 0.5 * total
+
+
+@njit(cache=True)
 def _tails(d: np.ndarray) -> np.ndarray:
     """Exclusive suffix sums ``sum_{i>m} D_i`` of per-centre tensors (4, N)."""
     n = d.shape[1]
@@ -68,7 +91,7 @@ def _tails(d: np.ndarray) -> np.ndarray:
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath={"reassoc", "contract"})
 def newton_system(theta: np.ndarray, omega: np.ndarray, delta: np.ndarray, dw: np.ndarray, dt: float, cw: float,
                   cq: float, h: float, base: np.ndarray, weight: np.ndarray, rot_inertia: np.ndarray,
                   mass_e: np.ndarray, zeta: float, drag_n: float, drag_t: float, r_c: np.ndarray,

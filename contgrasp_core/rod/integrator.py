@@ -170,6 +170,11 @@ class RodSystem:
 
     def kinetic_energy(self, state: RodState) -> float:
         """``1/2 omega^T M omega`` (J)."""
+        if _kernels.ENABLED:
+            m = self.model
+            return float(_kernels.kinetic_energy(np.ascontiguousarray(state.theta, dtype=float),
+                                                 np.ascontiguousarray(state.omega, dtype=float), m.h,
+                                                 m.weight_matrix, m.rot_inertia))
         return float(0.5 * state.omega @ chain.mass_matrix(self.model, state.theta) @ state.omega)
 
     def elastic_energy(self, state: RodState, loads: RodLoads | None = None) -> float:
@@ -381,7 +386,11 @@ class RodSystem:
         if self.obstacle is None:
             return None
         m, th0, w0 = self.model, state.theta, state.omega
-        c0 = chain.centres(m, th0 + 0.5 * dt * w0)
+        if _kernels.ENABLED:
+            x = _kernels.frames_nodes(th0 + 0.5 * dt * w0, m.h, np.asarray(m.base_position, dtype=float))[2]
+            c0 = 0.5 * (x[:-1] + x[1:])
+        else:
+            c0 = chain.centres(m, th0 + 0.5 * dt * w0)
         return contact_frame(m, self.obstacle, c0, self.options.contact_margin + 2.0 * dt * np.abs(w0).max() * m.length)
 
     def _new_angles(self, state: RodState, w1: np.ndarray, dt: float) -> np.ndarray:

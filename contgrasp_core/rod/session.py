@@ -161,7 +161,7 @@ class LoopSession:
         speed = float(np.hypot(v[:, 0], v[:, 1]).max())
         radius = m.radius(m.s_nodes)
         gap_nodes = self.obstacle.project(x).signed_distance - radius
-        gap_c = self.obstacle.project(chain.centres(m, st.theta)).signed_distance - m.r_centres
+        gap_c = self.obstacle.project(0.5 * (x[:-1] + x[1:])).signed_distance - m.r_centres  # (chain.centres)
         pen = max(float(-gap_nodes.min()), float(-gap_c.min()), 0.0)
         self.max_penetration = max(self.max_penetration, pen)
         obs = Observation(
