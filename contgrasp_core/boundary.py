@@ -247,8 +247,8 @@ class Boundary:
         The ``candidates`` nearest of 4096 curve samples seed Newton iterations on
         ``(c(t) - q) . c'(t) = 0`` (steps limited to two sample spacings); the best refined
         candidate wins, so non-convex boundaries get the global closest point. A circle is
-        projected in closed form (same result to rounding, ~50x faster; ``candidates`` is
-        irrelevant there).
+        projected in closed form and an ellipse by an exact one-dimensional root bracketing
+        (same results to rounding, ~50x / ~10x faster; ``candidates`` is irrelevant there).
         """
         q = float_array("points", points)
         if q.ndim != 2 or q.shape[1] != 2 or not np.all(np.isfinite(q)):
@@ -261,6 +261,12 @@ class Boundary:
             return Projection(np.zeros((0, 2)), e, e, e, np.zeros(0, dtype=int), e, e)
         if self.kind == "circle":
             return self._project_circle(q)
+        if self.kind == "ellipse":
+            return self._project_ellipse(q)
+        return self._project_search(q, k)
+
+    def _project_search(self, q: NDArray[np.float64], k: int) -> Projection:
+        """The general closest-point search of :meth:`project` (``k`` candidates per query)."""
         _, idx = self._tree.query(q, k=k)
         idx = np.asarray(idx).reshape(len(q), k)
         h = TWO_PI / _N_TABLE
@@ -311,6 +317,32 @@ class Boundary:
         s_o[s_o >= self.length] = 0.0
         return Projection(foot=foot, s_o=s_o, distance=d, signed_distance=side * d, side=side,
                           phi=t + 0.5 * np.pi, kappa_o=np.full(len(q), 1.0 / R))
+
+    def _project_ellipse(self, q: NDArray[np.float64]) -> Projection:
+        """:meth:`project` for an ellipse: the closest point's parameter ``t`` by Eberly's
+        root bracketing in the ellipse's frame (:func:`contgrasp_core._geometry.ellipse_parameters`,
+        global and exact to rounding for every query, no candidates needed), then foot, arclength,
+        tangent angle, curvature and side from ``t`` exactly as the general path does."""
+        from ._geometry import ellipse_parameters
+
+        a_, b_ = float(self.params["a"]), float(self.params["b"])
+        ang = float(self.params["angle"])
+        rel_c = q - np.asarray(self.params["center"], dtype=float)
+        ca, sa = np.cos(ang), np.sin(ang)
+        local = np.empty_like(q)
+        local[:, 0] = ca * rel_c[:, 0] + sa * rel_c[:, 1]
+        local[:, 1] = -sa * rel_c[:, 0] + ca * rel_c[:, 1]
+        t_best = ellipse_parameters(local, a_, b_)
+        foot = self._c(t_best, 0)
+        rel = q - foot
+        d = np.hypot(rel[:, 0], rel[:, 1])
+        d1 = self._c(t_best, 1)
+        cross = d1[:, 0] * rel[:, 1] - d1[:, 1] * rel[:, 0]  # > 0: query on the left = inside
+        side = -np.sign(cross).astype(int)
+        s_o = np.mod(self._s_of_t(t_best), self.length)
+        s_o[s_o >= self.length] = 0.0
+        return Projection(foot=foot, s_o=s_o, distance=d, signed_distance=side * d, side=side,
+                          phi=self._phi(t_best, s_o), kappa_o=self._kappa(t_best))
 
     def _refine(self, q: NDArray[np.float64], t: NDArray[np.float64], h: float) -> NDArray[np.float64]:
         """Newton's method for the stationary point of |c(t) - q|^2 / 2 near the sample ``t``.

@@ -69,16 +69,54 @@ def test_obstacle_circle_kernel() -> None:
         np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=1e-15, err_msg=name)
 
 
+def _same_projection(fast, slow, length: float, scale: float) -> None:  # type: ignore[no-untyped-def]
+    """Equal to the general search's own accuracy (its Newton stops at a parameter step of 1e-13)."""
+    np.testing.assert_array_equal(fast.side, slow.side)
+    for name, tol in (("foot", 1e-12), ("distance", 1e-14), ("signed_distance", 1e-14)):
+        np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=0, atol=tol * scale, err_msg=name)
+    ds = np.mod(fast.s_o - slow.s_o + 0.5 * length, length) - 0.5 * length  # (s_o = 0 and L_o are one point)
+    assert np.abs(ds).max() <= 1e-12 * length
+    np.testing.assert_allclose(fast.phi, slow.phi, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fast.kappa_o, slow.kappa_o, rtol=1e-10, atol=0)
+
+
 def test_circle_closed_form_projection_equals_the_general_search() -> None:
-    """Boundary.project of a circle (closed form) against the same circle as an ellipse with
-    equal axes (the general candidates + Newton search)."""
+    """Boundary.project of a circle (closed form) against the general candidates + Newton
+    search on the same boundary (and on the circle built as an equal-axes ellipse)."""
     R, c = 0.025, (0.08, 0.08)
     q = np.asarray(c) + 0.06 * np.random.default_rng(6).standard_normal((1000, 2))
-    fast, slow = circle(R, c).project(q), ellipse(R, R, c).project(q)
-    np.testing.assert_array_equal(fast.side, slow.side)
-    for name, tol in (("foot", 1e-16), ("distance", 1e-16), ("signed_distance", 1e-16), ("s_o", 1e-15),
-                      ("phi", 1e-14), ("kappa_o", 1e-12)):
-        np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=0, atol=tol * 40, err_msg=name)
+    b = circle(R, c)
+    _same_projection(b.project(q), b._project_search(q, 4), b.length, R)
+    _same_projection(b.project(q), ellipse(R, R, c).project(q), b.length, R)
+
+
+@pytest.mark.parametrize("a,b,center,angle", [(8.0, 4.0, (0.0, 0.0), 0.0), (0.03, 0.02, (0.08, 0.08), 0.7),
+                                              (4.0, 8.0, (1.0, -2.0), -2.0), (5.0, 5.0, (0.0, 0.0), 0.3)])
+def test_ellipse_projection_equals_the_general_search(a: float, b: float, center: tuple[float, float],
+                                                      angle: float) -> None:
+    """The ellipse's root-bracketing projection against the general search: queries outside,
+    inside and near the centre (the global closest point everywhere)."""
+    e = ellipse(a, b, center, angle)
+    rng = np.random.default_rng(0)
+    big, small = max(a, b), min(a, b)
+    q = np.vstack([np.asarray(center) + rng.uniform(-3 * big, 3 * big, size=(1500, 2)),
+                   np.asarray(center) + rng.uniform(-0.3 * small, 0.3 * small, size=(300, 2))])
+    _same_projection(e.project(q), e._project_search(q, 4), e.length, big)
+
+
+def test_ellipse_projection_on_the_axes_and_at_the_centre() -> None:
+    """Closed forms: on the major axis inside the evolute the foot is the nearest vertex's
+    neighbourhood point of Eberly's formula; at the centre the foot is a minor-axis end."""
+    a, b = 8.0, 4.0
+    e = ellipse(a, b)
+    pr = e.project(np.array([[0.0, 0.0], [20.0, 0.0], [0.0, -9.0], [1.0, 0.0]]))
+    np.testing.assert_allclose(np.abs(pr.foot[0]), [0.0, b], atol=1e-12)
+    np.testing.assert_allclose(pr.foot[1], [a, 0.0], atol=1e-12)
+    np.testing.assert_allclose(pr.foot[2], [0.0, -b], atol=1e-12)
+    x0 = a * 1.0 / (a * a - b * b) * a  # Eberly: x0 = a^2 y0 / (a^2 - b^2) inside the evolute
+    np.testing.assert_allclose(pr.foot[3], [x0, b * np.sqrt(1 - (x0 / a) ** 2)], atol=1e-12)
+    np.testing.assert_allclose(pr.distance, [b, 12.0, 5.0, np.hypot(x0 - 1.0, b * np.sqrt(1 - (x0 / a) ** 2))],
+                               atol=1e-12)
 
 
 def test_lockstep_loop_same_with_and_without_kernels() -> None:

@@ -423,7 +423,10 @@ def warm() -> float:
     from contgrasp_core.rod.session import run_sampled
     from contgrasp_core.scenario import PAPER
 
+    from contgrasp_core.boundary import ellipse
+
     t0 = time.perf_counter()
+    ellipse(2.0, 1.0).project(np.array([[0.5, 0.25]]))  # contgrasp_core._geometry
     rod = replace(PAPER.rod, n_elements=12)
     run_sampled(replace(PAPER, rod=rod, loop=replace(PAPER.loop, duration=0.01)))
     system = RodSystem(rod, Obstacle(PAPER.object.boundary()))
