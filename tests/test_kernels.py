@@ -147,3 +147,23 @@ def test_kinetic_energy_and_contact_frame_kernels() -> None:
     np.testing.assert_array_equal(f1.rows, f0.rows)
     for name in ("foot", "normal", "tangent"):
         np.testing.assert_allclose(getattr(f1, name), getattr(f0, name), rtol=0, atol=1e-15, err_msg=name)
+
+
+def test_read_only_inputs_use_the_compiled_signature() -> None:
+    """Arrays that arrive read-only (e.g. views of message buffers) are copied to the one array
+    type the kernels are compiled (and cached) for, instead of compiling a second version."""
+    system, state, loads = _contact_case("euler", "held")
+    frame = system.contact_frame(state, 2e-3)
+    system.newton_system(state, state.omega, 2e-3, loads, frame)
+    before = {k: len(getattr(_kernels, k).signatures) for k in ("newton_system", "joint_couple_jacobian", "frames_nodes")}
+    theta, omega = state.theta.copy(), state.omega.copy()
+    theta.setflags(write=False)
+    omega.setflags(write=False)
+    couple = np.asarray(loads.couple, dtype=float).copy()
+    couple.setflags(write=False)
+    ro_state = type(state)(t=state.t, theta=theta, omega=omega)
+    ro_loads = type(loads)(couple=couple, node_forces=loads.node_forces, feedback=loads.feedback)
+    system.newton_system(ro_state, omega, 2e-3, ro_loads, system.contact_frame(ro_state, 2e-3))
+    system.kinetic_energy(ro_state)
+    after = {k: len(getattr(_kernels, k).signatures) for k in before}
+    assert after == before

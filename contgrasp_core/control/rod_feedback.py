@@ -107,11 +107,9 @@ def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarra
     ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2``.
     """
     if _kernels.ENABLED:  # the same entries in one compiled loop (contgrasp_core.rod._kernels)
-        f64 = np.float64
-        return _kernels.joint_couple_jacobian(
-            model.h, np.ascontiguousarray(g_rho, dtype=f64), np.ascontiguousarray(g_alpha, dtype=f64),
-            np.ascontiguousarray(sensing.normal_out, dtype=f64), np.ascontiguousarray(sensing.foot_turn, dtype=f64),
-            np.ascontiguousarray(b, dtype=f64))
+        f64 = _kernels.f64
+        return _kernels.joint_couple_jacobian(model.h, f64(g_rho), f64(g_alpha), f64(sensing.normal_out),
+                                              f64(sensing.foot_turn), f64(b))
     n_out = sensing.normal_out
     tangent = np.stack([-n_out[:, 1], n_out[:, 0]], axis=1)
     direction = g_rho[:, None] * n_out + (g_alpha * sensing.foot_turn)[:, None] * tangent

@@ -25,12 +25,19 @@ import os
 import numpy as np
 from numba import njit
 
-__all__ = ["ENABLED", "frames_nodes", "kinetic_energy", "newton_system", "circle_projection", "joint_couple_jacobian",
+__all__ = ["ENABLED", "f64", "frames_nodes", "kinetic_energy", "newton_system", "circle_projection", "joint_couple_jacobian",
            "warm"]
 
 ENABLED: bool = os.environ.get("CONTGRASP_KERNELS", "1").strip().lower() not in ("0", "false", "no", "off")
 """Use the kernels (True) or the numpy reference code (False). Read at every call, so it can be
 switched at run time (the benchmarks compare both in one process)."""
+
+
+def f64(x: object) -> np.ndarray:
+    """``x`` as a C-contiguous, writeable float64 array (a copy only when it is not one already):
+    the kernels are compiled for exactly that array type, so a read-only or strided argument
+    (e.g. a view of a message buffer) does not trigger a second compilation."""
+    return np.require(x, dtype=np.float64, requirements=("C", "W"))
 
 
 @njit(cache=True)

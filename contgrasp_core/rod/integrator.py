@@ -172,8 +172,7 @@ class RodSystem:
         """``1/2 omega^T M omega`` (J)."""
         if _kernels.ENABLED:
             m = self.model
-            return float(_kernels.kinetic_energy(np.ascontiguousarray(state.theta, dtype=float),
-                                                 np.ascontiguousarray(state.omega, dtype=float), m.h,
+            return float(_kernels.kinetic_energy(_kernels.f64(state.theta), _kernels.f64(state.omega), m.h,
                                                  m.weight_matrix, m.rot_inertia))
         return float(0.5 * state.omega @ chain.mass_matrix(self.model, state.theta) @ state.omega)
 
@@ -289,23 +288,24 @@ class RodSystem:
                                 frame: ContactFrame | None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
         """:meth:`newton_system` by :func:`._kernels.newton_system` (same terms as :meth:`_evaluate`)."""
         m = self.model
-        theta = np.ascontiguousarray(theta, dtype=float)
-        base = np.asarray(m.base_position, dtype=float)
+        f64 = _kernels.f64
+        theta = f64(theta)
+        base = f64(m.base_position)
         a, b, x = _kernels.frames_nodes(theta, m.h, base)
         u_fb, du = _EMPTY, _EMPTY22
         if loads.feedback is not None:
             u_fb, du_ = loads.feedback.couple_and_jacobian(theta, jacobian=True, nodes=x, normals=b)
             assert du_ is not None  # asked for with jacobian=True
-            u_fb, du = np.ascontiguousarray(u_fb, dtype=float), np.ascontiguousarray(du_, dtype=float)
-        couple = _EMPTY if loads.couple is None else np.ascontiguousarray(loads.couple, dtype=float)
-        nf = _EMPTY2 if loads.node_forces is None else np.ascontiguousarray(loads.node_forces, dtype=float)
+            u_fb, du = f64(u_fb), f64(du_)
+        couple = _EMPTY if loads.couple is None else f64(loads.couple)
+        nf = _EMPTY2 if loads.node_forces is None else f64(loads.node_forces)
         if frame is None:
             rows, foot, normal, tangent = _EMPTY_ROWS, _EMPTY2, _EMPTY2, _EMPTY2
         else:
-            rows = np.asarray(frame.rows, dtype=np.int64)
-            foot, normal, tangent = (np.ascontiguousarray(v, dtype=float) for v in (frame.foot, frame.normal, frame.tangent))
+            rows = np.require(frame.rows, dtype=np.int64, requirements=("C", "W"))
+            foot, normal, tangent = f64(frame.foot), f64(frame.normal), f64(frame.tangent)
         res, jac, pen = _kernels.newton_system(
-            theta, np.ascontiguousarray(omega, dtype=float), delta, delta, float(dt), float(cw), float(cq), m.h, base,
+            theta, f64(omega), f64(delta), f64(delta), float(dt), float(cw), float(cq), m.h, base,
             m.weight_matrix, m.rot_inertia, m.mass, float(m.damping), float(m.drag_normal), float(m.drag_tangential),
             m.r_centres, m.stiffness_matrix, m.joint_ei, m.joint_len, float(m.base_angle), couple, nf, rows, foot,
             normal, tangent, float(m.contact_stiffness), float(m.contact_damping), float(m.friction),
@@ -387,7 +387,7 @@ class RodSystem:
             return None
         m, th0, w0 = self.model, state.theta, state.omega
         if _kernels.ENABLED:
-            x = _kernels.frames_nodes(th0 + 0.5 * dt * w0, m.h, np.asarray(m.base_position, dtype=float))[2]
+            x = _kernels.frames_nodes(_kernels.f64(th0 + 0.5 * dt * w0), m.h, _kernels.f64(m.base_position))[2]
             c0 = 0.5 * (x[:-1] + x[1:])
         else:
             c0 = chain.centres(m, th0 + 0.5 * dt * w0)
