@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ENABLED", "f64", "warm"]  # and, loaded on first use, the kernels of _kernels_jit
+__all__ = ["ENABLED", "f64", "load", "warm"]  # and, loaded on first use, the kernels of _kernels_jit
 
 ENABLED: bool = os.environ.get("CONTGRASP_KERNELS", "1").strip().lower() not in ("0", "false", "no", "off")
 """Use the kernels (True) or the numpy reference code (False). Read at every call, so it can be
@@ -42,6 +42,14 @@ def f64(x: object) -> np.ndarray:
 
 
 _JIT_NAMES = ("frames_nodes", "kinetic_energy", "newton_system", "circle_projection", "joint_couple_jacobian")
+
+
+def load() -> None:
+    """Import the compiled kernels now (numba and its on-disk cache; idempotent, cheap once
+    loaded). :class:`~contgrasp_core.rod.integrator.RodSystem` calls it when it is created, so a
+    simulation pays this in its set-up rather than in its first time step."""
+    if ENABLED and "newton_system" not in globals():
+        __getattr__("newton_system")
 
 
 def __getattr__(name: str) -> Any:

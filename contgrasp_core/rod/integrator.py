@@ -162,6 +162,9 @@ class RodSystem:
     obstacle: Obstacle | None = None
     options: StepOptions = field(default_factory=StepOptions)
 
+    def __post_init__(self) -> None:
+        _kernels.load()  # numba and the compiled kernels, at set-up rather than in the first step
+
     # ---------------------------------------------------------------- states and energies
     def straight_state(self, t: float = 0.0) -> RodState:
         """The straight rod at rest along the base angle."""
