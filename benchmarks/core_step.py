@@ -10,8 +10,8 @@ only ratios within a run mean much; the load average is printed at start and end
 
 * ``before``: the code as it was before the compiled kernels: the numpy residual/matrix
   (``CONTGRASP_KERNELS=0`` path, kept selectable), the numpy circle obstacle and the general
-  closest-point search for the sensing (an equal-axes ellipse: the path ``Boundary.project``
-  took for circles before its closed form). Solves on one BLAS thread for both (the old code
+  closest-point search for the sensing (the circle as a ``fourier_polar`` curve without
+  harmonics: the path ``Boundary.project`` took for circles before its closed form). Solves on one BLAS thread for both (the old code
   ran them on OpenBLAS's default threads: ``--old-threads`` measures that too);
 * ``after``: the kernels and the circle's closed-form projection.
 
@@ -36,7 +36,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from contgrasp_core.boundary import Boundary, ellipse
+from contgrasp_core.boundary import Boundary, fourier_polar
 from contgrasp_core.control import feedback_at_joints
 from contgrasp_core.rod import Obstacle, RodSystem, _kernels, integrator
 from contgrasp_core.rod.session import LoopSession, sense_observation
@@ -83,8 +83,8 @@ def run(scenario: Scenario, after: bool, steps: int | None = None, *, breakdown:
     obj = scenario.object.boundary()
     # before: the general closest-point search for the sensing (how circles were projected)
     sensing: Boundary = obj
-    if not after and obj.kind == "circle":
-        sensing = ellipse(obj.params["R"], obj.params["R"], obj.params["center"])
+    if not after and obj.kind == "circle":  # the same circle as a polar curve without harmonics
+        sensing = fourier_polar(obj.params["R"], center=obj.params["center"])
     system = RodSystem(scenario.rod, Obstacle(obj))
     gains = scenario.feedback_gains
     phases = dict.fromkeys(("observe", "sense", "law", "advance"), 0.0)
