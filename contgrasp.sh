@@ -7,8 +7,9 @@
 #   bash contgrasp.sh setup  # only set up
 #
 # Set-up creates .venv/ inside the checkout with Python 3.11, installs the project with its
-# dependencies (numpy, scipy, matplotlib, pinned ros-jazzy-* wheels) and test extras, and
-# re-installs only when pyproject.toml changed. Everything talks over loopback only.
+# dependencies (numpy, scipy, numba, matplotlib, pinned ros-jazzy-* wheels) and test extras,
+# re-installs only when pyproject.toml changed, and warms numba's cache of the compiled kernels.
+# Everything talks over loopback only.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -71,6 +72,10 @@ setup() {
     fi
     "$py" msgs_schema/build_into_venv.py
     "$py" -m contgrasp_ros.install_resources >/dev/null  # editable installs skip data files
+    # Compile the rod engine's numba kernels once (a tiny simulation; numba caches the machine code
+    # in contgrasp_core/rod/__pycache__), so the first real run does not pay ~10-17 s of compilation;
+    # when the cache is current this only loads it (under a second).
+    "$py" -c "from contgrasp_core.rod._kernels import warm; warm()"
     mkdir -p "$ROS_LOG_DIR"
 }
 

@@ -17,8 +17,11 @@ the element scale at zeta = 1 (see docs/rod.md), so PyElastica's ``LaplaceDissip
 unchanged. PyElastica runs at the largest stable step of ``--pe-dts``; the project engine runs
 continuous implicit feedback with adaptive steps up to ``--dt``.
 
-Reports wall seconds per simulated second for both (same process, one BLAS thread), their ratio
-and the max distance between the two final centrelines at equal arclength. ``--also-unfiltered``
+Reports wall seconds per simulated second for both (same process, one BLAS thread; medians of
+``--repeats`` full runs of each engine, and contgrasp also with its compiled kernels switched off,
+``CONTGRASP_KERNELS=0`` path), their ratio and the max distance between the two final
+centrelines at equal arclength; the load average is printed at start and end (the machine may be
+shared: only ratios within one run mean much). ``--also-unfiltered``
 also tries the closed loop without the filter and with external torques. Part 2 compares both
 engines open loop (``--open-duration``, default 8 s, no filter) under a held couple
 ``u = -EI(s) kappa`` (default kappa = 30 /m: the arm curls onto the object), applied in
@@ -26,6 +29,7 @@ PyElastica both as external torques on neighbouring elements and as rest curvatu
 optional extra ``bench`` (pyelastica).
 
     python benchmarks/rod_vs_pyelastica.py --duration 3 --also-unfiltered --json
+    python benchmarks/rod_vs_pyelastica.py --duration 3 --skip-open-loop --repeats 3
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ import numpy as np  # noqa: E402
 from contgrasp_core.boundary import circle  # noqa: E402
 from contgrasp_core.errors import InvalidParameterError  # noqa: E402
 from contgrasp_core.control.law import feedback_couple  # noqa: E402
-from contgrasp_core.rod import Obstacle, RodModel, RodSystem  # noqa: E402
+from contgrasp_core.rod import Obstacle, RodModel, RodSystem, _kernels  # noqa: E402
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop  # noqa: E402
 from contgrasp_core.control import paper_gains  # noqa: E402
 from contgrasp_core.scenario import PAPER  # noqa: E402
@@ -177,17 +181,15 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
 def contgrasp_held(model: RodModel, obstacle: Obstacle, couple: np.ndarray, duration: float, dt: float):
     """The project engine under a held couple profile (open loop); returns (nodes, wall s)."""
     from contgrasp_core.rod import RodLoads, chain
-    from contgrasp_core.blas import single_thread_blas
 
     system = RodSystem(model, obstacle)
     st = system.straight_state()
     dt_next = dt
-    with single_thread_blas():
-        t0 = time.perf_counter()
-        for _ in range(int(round(duration / dt))):
-            st, info = system.advance(st, dt, RodLoads(couple=couple), dt_try=dt_next)
-            dt_next = info["dt_next"]
-        wall = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for _ in range(int(round(duration / dt))):
+        st, info = system.advance(st, dt, RodLoads(couple=couple), dt_try=dt_next)
+        dt_next = info["dt_next"]
+    wall = time.perf_counter() - t0
     return chain.nodes(model, st.theta), wall
 
 
@@ -226,7 +228,10 @@ def main() -> None:
                     help="simulated seconds of the open-loop check (default 8; the held curl settles slowly)")
     ap.add_argument("--skip-open-loop", action="store_true")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--repeats", type=int, default=3, help="full closed-loop runs per engine (medians; default 3)")
     args = ap.parse_args()
+    print(f"load average at start {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores",
+          flush=True)
 
     model = PAPER.rod
     obstacle = Obstacle(circle(0.025, (0.08, 0.08)))
@@ -239,7 +244,22 @@ def main() -> None:
                           ClosedLoopConfig(duration=args.duration, dt=args.dt, settle_speed=1e-12))
     slow = np.nonzero(res.max_speed >= 2e-4)[0]
     quiet_from = 0.0 if len(slow) == 0 else (float(res.t[slow[-1] + 1]) if slow[-1] + 1 < len(res.t) else None)
-    cg_wall = res.wall_time / res.t[-1]
+    cfg = ClosedLoopConfig(duration=args.duration, dt=args.dt, settle_speed=1e-12)
+    cg_walls, cg_walls_numpy = [res.wall_time / res.t[-1]], []
+    for r in range(args.repeats):
+        if r > 0:
+            cg_walls.append(run_closed_loop(RodSystem(model, obstacle), paper_gains(model, 0.025), cfg).wall_time / res.t[-1])
+        _kernels.ENABLED = False
+        try:
+            cg_walls_numpy.append(run_closed_loop(RodSystem(model, obstacle), paper_gains(model, 0.025), cfg).wall_time
+                                  / res.t[-1])
+        finally:
+            _kernels.ENABLED = True
+    cg_wall = float(np.median(cg_walls))
+    out.update({"closed_loop_contgrasp_wall_per_sim_s_runs": cg_walls,
+                "closed_loop_contgrasp_numpy_path_wall_per_sim_s": float(np.median(cg_walls_numpy)),
+                "closed_loop_contgrasp_numpy_path_wall_per_sim_s_runs": cg_walls_numpy,
+                "closed_loop_contgrasp_kernels_speedup": float(np.median(cg_walls_numpy)) / cg_wall})
     out.update({"closed_loop_contgrasp_wall_per_sim_s": cg_wall,
                 "closed_loop_contgrasp_final_max_speed": float(res.max_speed[-1]),
                 "closed_loop_contgrasp_speed_below_2e-4_from_s": quiet_from})
@@ -258,13 +278,20 @@ def main() -> None:
                 filter_order=args.filter_order, **stiff)
     out["closed_loop_pyelastica_stable_dt"] = dt
     if dt is not None:
-        pe_x, pe_wall, ok, speed = pyelastica_run(model, obstacle, dt, args.duration, filter_order=args.filter_order,
-                                                  **stiff)
+        pe_walls = []
+        for _ in range(max(args.repeats, 1)):
+            pe_x, pe_wall, ok, speed = pyelastica_run(model, obstacle, dt, args.duration,
+                                                      filter_order=args.filter_order, **stiff)
+            pe_walls.append(pe_wall / args.duration)
+            print(f"pyelastica full run: {pe_walls[-1]:.2f} wall s per simulated s", flush=True)
+        pe_med = float(np.median(pe_walls))
         dmax, s_at = _diff(model, pe_x, res.x[-1])
         out.update({"closed_loop_pyelastica_stable_full_run": ok,
                     "closed_loop_pyelastica_final_max_speed": speed,
-                    "closed_loop_pyelastica_wall_per_sim_s": pe_wall / args.duration,
-                    "closed_loop_speedup": (pe_wall / args.duration) / cg_wall,
+                    "closed_loop_pyelastica_wall_per_sim_s": pe_med,
+                    "closed_loop_pyelastica_wall_per_sim_s_runs": pe_walls,
+                    "closed_loop_speedup": pe_med / cg_wall,
+                    "closed_loop_speedup_numpy_path": pe_med / float(np.median(cg_walls_numpy)),
                     "closed_loop_centreline_max_diff_m": dmax, "closed_loop_centreline_max_diff_at_s_m": s_at,
                     "closed_loop_tip_contgrasp_m": res.x[-1][-1].tolist(), "closed_loop_tip_pyelastica_m": pe_x[-1].tolist()})
     # --- 3. open loop: both engines under a held couple profile (no filter)
@@ -289,7 +316,9 @@ def main() -> None:
                         f"open_loop_{via}_speedup": pe_wall / cg_wall_open,
                         f"open_loop_{via}_centreline_max_diff_m": dmax,
                         f"open_loop_{via}_centreline_max_diff_at_s_m": s_at})
+    out["load_average_end"] = os.getloadavg()[0]
     print(json.dumps(out, indent=2) if args.json else "\n".join(f"{k}: {v}" for k, v in out.items()))
+    print(f"load average at end {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 
 if __name__ == "__main__":

@@ -1,9 +1,11 @@
 """One BLAS thread for the rod engine's small dense solves.
 
 The implicit step solves a dense (N x N) Newton system a few times per step, N ~ 100: a
-multi-threaded BLAS gains nothing at that size, and on a busy machine (other processes, the
-graph's own nodes) its threads wait for cores: measured 15-17x slower per step with OpenBLAS's
-default threads under load 6 on 2 cores. Runs and node processes therefore use one thread.
+multi-threaded BLAS gains nothing at that size, and on a busy machine its threads wait for
+cores: measured on 2 shared cores, N = 100 150 us vs 60 us per solve, N = 200 190 ms vs 0.29 ms,
+and a whole lock-step step 15-17x slower at load 6. :meth:`RodSystem.advance
+<contgrasp_core.rod.integrator.RodSystem.advance>` therefore solves on one thread, whoever calls
+it (the core loops, the ROS simulator, a notebook).
 """
 
 from __future__ import annotations
@@ -13,12 +15,16 @@ from typing import Any
 
 __all__ = ["single_thread_blas"]
 
+_CONTROLLER: list[Any] = []  # threadpoolctl's controller, made once (finding the libraries costs ms)
+
 
 def single_thread_blas() -> contextlib.AbstractContextManager[Any]:
-    """A context (also usable for a whole process: keep the returned object) limiting BLAS to one
-    thread, via :mod:`threadpoolctl` (a dependency; a no-op without it)."""
+    """A context limiting BLAS to one thread (:mod:`threadpoolctl`, a dependency; a no-op without it)."""
     try:
-        from threadpoolctl import threadpool_limits
+        if not _CONTROLLER:
+            from threadpoolctl import ThreadpoolController
+
+            _CONTROLLER.append(ThreadpoolController())
     except ImportError:  # pragma: no cover - threadpoolctl is a dependency
         return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    return _CONTROLLER[0].limit(limits=1, user_api="blas")

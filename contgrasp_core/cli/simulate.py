@@ -14,7 +14,6 @@ from typing import Any
 
 import numpy as np
 
-from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.control import FeedbackGains, paper_gains
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
@@ -71,6 +70,8 @@ def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_
         "settled": bool(res.settled),
         "settle_time_s": res.settle_time,
         "sim_time_s": float(res.t[-1]),
+        "steps": int(res.steps),
+        "integrator_steps": int(res.integrator_steps),
         "wall_time_s": float(res.wall_time),
         "newton_iterations": int(res.newton_iterations),
         "max_penetration": float(res.penetration.max()),
@@ -142,22 +143,21 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / config.control_period)))
     rec: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
     wall0 = time.perf_counter()
-    with single_thread_blas():
-        session = LoopSession(system, config)
-        while True:
-            obs = session.observe()
-            sn = sense(obs.shape, obstacle, obs.radius)
-            expansion = feedback_at_joints(m, gains, sn.rho, sn.alpha)
-            if session.k % rec_every == 0 or session.finished:
-                pen_c = m.r_centres - obstacle.project(chain.centres(m, session.state.theta)).signed_distance
-                ratio = max(float((sn.delta / obs.radius).max()), float((pen_c / m.r_centres).max()), 0.0)
-                for key, val in (("t", obs.t), ("x", obs.x), ("theta", obs.theta), ("rho", sn.rho), ("alpha", sn.alpha),
-                                 ("couple", expansion.u), ("pen", obs.penetration), ("ratio", ratio),
-                                 ("speed", obs.max_speed)):
-                    rec[key].append(val)
-            if session.finished:
-                break
-            session.advance(expansion)
+    session = LoopSession(system, config)
+    while True:
+        obs = session.observe()
+        sn = sense(obs.shape, obstacle, obs.radius)
+        expansion = feedback_at_joints(m, gains, sn.rho, sn.alpha)
+        if session.k % rec_every == 0 or session.finished:
+            pen_c = m.r_centres - obstacle.project(chain.centres(m, session.state.theta)).signed_distance
+            ratio = max(float((sn.delta / obs.radius).max()), float((pen_c / m.r_centres).max()), 0.0)
+            for key, val in (("t", obs.t), ("x", obs.x), ("theta", obs.theta), ("rho", sn.rho), ("alpha", sn.alpha),
+                             ("couple", expansion.u), ("pen", obs.penetration), ("ratio", ratio),
+                             ("speed", obs.max_speed)):
+                rec[key].append(val)
+        if session.finished:
+            break
+        session.advance(expansion)
     arr = {k: np.asarray(v) for k, v in rec.items()}
     return ClosedLoopResult(
         t=arr["t"], x=arr["x"], theta=arr["theta"], rho=arr["rho"], alpha=arr["alpha"], couple=arr["couple"],

@@ -36,7 +36,7 @@ from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.control.gains import FeedbackGains
 from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_gradient
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.rod import chain
+from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
@@ -95,6 +95,9 @@ def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarra
     n_out = sensing.normal_out[:-1]
     safe = 1.0 + sensing.rho[:-1] * sensing.kappa_o[:-1] > _SAFE_ONE_PLUS
     turn = np.where(safe, sensing.foot_turn[:-1], 0.0)
+    if _kernels.ENABLED:  # the same entries in one compiled loop (contgrasp_core.rod._kernels)
+        f64 = _kernels.f64
+        return _kernels.joint_couple_jacobian(model.h, f64(g_rho), f64(g_alpha), f64(n_out), f64(turn), f64(b))
     tangent = np.stack([-n_out[:, 1], n_out[:, 0]], axis=1)
     direction = g_rho[:, None] * n_out + (g_alpha * turn)[:, None] * tangent
     du = model.h * np.tril(direction @ b.T, -1)

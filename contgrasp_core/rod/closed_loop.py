@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.contact import sense
 from contgrasp_core.control.gains import FeedbackGains
 from contgrasp_core.control.law import feedback_couple
@@ -89,7 +88,8 @@ class ClosedLoopResult:
     ``couple`` (K, N), ``penetration`` (K,) max surface penetration (m) and
     ``penetration_ratio`` (K,) max penetration / local radius, ``max_speed`` (K,) (m/s);
     ``settled``, ``settle_time`` (s or None), ``wall_time`` (s), ``newton_iterations``,
-    the ``final_state`` and the run's ``model``, ``gains`` and ``config``."""
+    the ``final_state`` and the run's ``model``, ``gains`` and ``config``; ``steps`` the control
+    periods advanced and ``integrator_steps`` the accepted implicit steps (substeps included)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -108,6 +108,8 @@ class ClosedLoopResult:
     model: RodModel
     gains: FeedbackGains
     config: ClosedLoopConfig = field(repr=False)
+    steps: int = 0
+    integrator_steps: int = 0
 
 
 def _speeds(model: RodModel, st: RodState) -> float:
@@ -122,8 +124,7 @@ def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     (default: straight at rest) until settled or ``config.duration``."""
     if system.obstacle is None:
         raise InvalidParameterError("the closed loop needs an obstacle to sense (RodSystem.obstacle is None)")
-    with single_thread_blas():
-        return _run(system, system.obstacle, gains, config, state)
+    return _run(system, system.obstacle, gains, config, state)
 
 
 def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: ClosedLoopConfig,
@@ -140,6 +141,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     r_nodes = m.radius(m.s_nodes)
     rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
     iters = 0
+    steps = substeps = 0
     dt_next = dt
     quiet_since: float | None = None
     settled = False
@@ -172,10 +174,12 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         st, info = system.advance(st, period, loads, dt_try=dt_next)
         dt_next = min(info["dt_next"], dt)
         iters += info["iterations"]
+        steps += 1
+        substeps += info["substeps"]
     wall = time.perf_counter() - wall0
     arr = {k: np.asarray(v) for k, v in rec.items()}
     return ClosedLoopResult(
         t=arr["t"], x=arr["x"], theta=arr["theta"], rho=arr["rho"], alpha=arr["alpha"], couple=arr["couple"],
         penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=settled,
         settle_time=(quiet_since if settled else None), wall_time=wall, newton_iterations=iters,
-        final_state=st, model=m, gains=gains, config=config)
+        final_state=st, model=m, gains=gains, config=config, steps=steps, integrator_steps=substeps)

@@ -31,6 +31,12 @@ than ``max_angle_step`` (accuracy guard for violent transients) is retried with 
 scaled to 0.9 ``max_angle_step``. After an accepted step the step doubles if Newton took at
 most ``max_iter / 2`` iterations (never beyond 0.9 ``max_angle_step`` of rotation). The first
 Newton iterate is extrapolated from the previous step's rate change.
+
+Compiled kernels: by default the residual, the Newton matrix and the solve run in numba kernels
+(:mod:`contgrasp_core.rod._kernels`, the same terms fused into two O(N^2) passes; equal to the
+numpy path :meth:`RodSystem._evaluate` to rounding). ``CONTGRASP_KERNELS=0`` in the environment,
+or ``contgrasp_core.rod._kernels.ENABLED = False``, selects the numpy path (kept as the readable reference and
+for the comparison tests and benchmarks).
 """
 
 from __future__ import annotations
@@ -40,13 +46,19 @@ from typing import Protocol
 
 import numpy as np
 
+from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.errors import InvalidParameterError, RunFailure
-from contgrasp_core.rod import chain
+from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.loads import ContactFrame, contact_forces, contact_frame, contact_tensors, drag_forces
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
 
 __all__ = ["RodState", "RodLoads", "StepOptions", "RodSystem", "StepFailedError"]
+
+_EMPTY = np.zeros(0)
+_EMPTY2 = np.zeros((0, 2))
+_EMPTY22 = np.zeros((0, 0))
+_EMPTY_ROWS = np.zeros(0, dtype=np.int64)
 
 
 class StepFailedError(RunFailure):
@@ -108,13 +120,19 @@ class StepOptions:
 
 
 @dataclass(frozen=True)
-class _Eval:
+class _StepEval:
+    """What a Newton iteration reports besides the residual and matrix."""
+
+    penetration: float
+
+
+@dataclass(frozen=True)
+class _Eval(_StepEval):
     q: np.ndarray
     mass: np.ndarray
     jac_w: np.ndarray
     jac_q: np.ndarray
     jac_m: np.ndarray
-    penetration: float
 
 
 @dataclass(frozen=True)
@@ -125,6 +143,9 @@ class RodSystem:
     obstacle: Obstacle | None = None
     options: StepOptions = field(default_factory=StepOptions)
 
+    def __post_init__(self) -> None:
+        _kernels.load()  # numba and the compiled kernels, at set-up rather than in the first step
+
     # ---------------------------------------------------------------- states and energies
     def straight_state(self, t: float = 0.0) -> RodState:
         """The straight rod at rest along the base angle."""
@@ -133,6 +154,10 @@ class RodSystem:
 
     def kinetic_energy(self, state: RodState) -> float:
         """``1/2 omega^T M omega`` (J)."""
+        if _kernels.ENABLED:
+            m = self.model
+            return float(_kernels.kinetic_energy(_kernels.f64(state.theta), _kernels.f64(state.omega), m.h,
+                                                 m.weight_matrix, m.rot_inertia))
         return float(0.5 * state.omega @ chain.mass_matrix(self.model, state.theta) @ state.omega)
 
     def elastic_energy(self, state: RodState, loads: RodLoads | None = None) -> float:
@@ -242,6 +267,40 @@ class RodSystem:
             q -= m.damping * (mass @ omega)
         return _Eval(q=q, mass=mass, jac_w=jac_w, jac_q=jac_q, jac_m=jac_m, penetration=pen)
 
+    def _newton_system_compiled(self, theta: np.ndarray, omega: np.ndarray, delta: np.ndarray, dt: float,
+                                cw: float, cq: float, loads: RodLoads,
+                                frame: ContactFrame | None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
+        """:meth:`newton_system` by :func:`._kernels.newton_system` (same terms as :meth:`_evaluate`)."""
+        m = self.model
+        f64 = _kernels.f64
+        theta = f64(theta)
+        base = f64(m.base_position)
+        a, b, x = _kernels.frames_nodes(theta, m.h, base)
+        u_fb, du = _EMPTY, _EMPTY22
+        if loads.feedback is not None:
+            u_fb, du_ = loads.feedback.couple_and_jacobian(theta, jacobian=True, nodes=x, normals=b)
+            assert du_ is not None  # asked for with jacobian=True
+            u_fb, du = f64(u_fb), f64(du_)
+        couple = _EMPTY if loads.couple is None else f64(loads.couple)
+        nf = _EMPTY2 if loads.node_forces is None else f64(loads.node_forces)
+        if frame is None:
+            rows, foot, normal, tangent = _EMPTY_ROWS, _EMPTY2, _EMPTY2, _EMPTY2
+        else:
+            rows = np.require(frame.rows, dtype=np.int64, requirements=("C", "W"))
+            foot, normal, tangent = f64(frame.foot), f64(frame.normal), f64(frame.tangent)
+        res, jac, pen = _kernels.newton_system(
+            theta, f64(omega), f64(delta), f64(delta), float(dt), float(cw), float(cq), m.h, base,
+            m.weight_matrix, m.rot_inertia, m.mass, float(m.damping), float(m.drag_normal), float(m.drag_tangential),
+            m.r_centres, m.stiffness_matrix, m.joint_ei, m.joint_len, float(m.base_angle), couple, nf, rows, foot,
+            normal, tangent, float(m.contact_stiffness), float(m.contact_damping), float(m.friction),
+            float(m.friction_velocity), u_fb, du, a, b, x)
+        return res, jac, _StepEval(penetration=float(pen))
+
+    @staticmethod
+    def _solve(jac: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        """The Newton increment ``jac^-1 rhs`` (LAPACK, as before the kernels)."""
+        return np.linalg.solve(jac, rhs)
+
     # ---------------------------------------------------------------- stepping
     def step(self, state: RodState, dt: float, loads: RodLoads = RodLoads()) -> tuple[RodState, dict]:
         """Advance by ``dt`` (s) with ``loads`` held constant: one implicit step, or adaptive
@@ -258,6 +317,11 @@ class RodSystem:
         (default: the whole duration). ``info["dt_next"]`` is the step to try next time."""
         if not (np.isfinite(duration) and duration > 0):
             raise InvalidParameterError(f"dt/duration must be finite and > 0, got {duration!r}")
+        with single_thread_blas():  # (contgrasp_core.blas: small solves, one thread)
+            return self._advance(state, duration, loads, dt_try)
+
+    def _advance(self, state: RodState, duration: float, loads: RodLoads,
+                 dt_try: float | None) -> tuple[RodState, dict]:
         info = {"iterations": 0, "substeps": 0, "penetration": 0.0}
         dt = duration if dt_try is None else min(float(dt_try), duration)
         dt_min = duration / 2.0**self.options.max_halvings
@@ -283,7 +347,7 @@ class RodSystem:
         return state, info
 
     def newton_system(self, state: RodState, w1: np.ndarray, dt: float, loads: RodLoads = RodLoads(),
-                      frame: ContactFrame | None = None) -> tuple[np.ndarray, np.ndarray, _Eval]:
+                      frame: ContactFrame | None = None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
         """Residual and Newton matrix of the implicit step from ``state`` over ``dt`` at the
         iterate ``w1`` (the new rates): backward Euler ``R = M(theta_1)(w1 - w0) - dt q(theta_1,
         w1)`` with ``theta_1 = theta_0 + dt w1``, or the implicit midpoint rule with both evaluated
@@ -294,6 +358,8 @@ class RodSystem:
             th_, cw, cq = th0 + 0.5 * dt * w_, 0.5, 0.25 * dt
         else:
             w_, th_, cw, cq = w1, th0 + dt * w1, 1.0, dt
+        if _kernels.ENABLED:
+            return self._newton_system_compiled(th_, w_, w1 - w0, dt, cw, cq, loads, frame)
         ev = self._evaluate(th_, w_, loads, frame, w1 - w0)
         res = ev.mass @ (w1 - w0) - dt * ev.q
         return res, ev.mass + dt * cw * ev.jac_w + cq * (dt * ev.jac_q + ev.jac_m), ev
@@ -304,7 +370,11 @@ class RodSystem:
         if self.obstacle is None:
             return None
         m, th0, w0 = self.model, state.theta, state.omega
-        c0 = chain.centres(m, th0 + 0.5 * dt * w0)
+        if _kernels.ENABLED:
+            x = _kernels.frames_nodes(_kernels.f64(th0 + 0.5 * dt * w0), m.h, _kernels.f64(m.base_position))[2]
+            c0 = 0.5 * (x[:-1] + x[1:])
+        else:
+            c0 = chain.centres(m, th0 + 0.5 * dt * w0)
         return contact_frame(m, self.obstacle, c0, self.options.contact_margin + 2.0 * dt * np.abs(w0).max() * m.length)
 
     def _new_angles(self, state: RodState, w1: np.ndarray, dt: float) -> np.ndarray:
@@ -321,7 +391,7 @@ class RodSystem:
         element by more than ``max_angle_step``. Counted in ``info["linearised_steps"]``."""
         frame = self.contact_frame(state, dt)
         res, jac, ev = self.newton_system(state, state.omega, dt, loads, frame)
-        w1 = state.omega + np.linalg.solve(jac, -res)
+        w1 = state.omega + self._solve(jac, -res)
         th1 = self._new_angles(state, w1, dt)
         info["iterations"] += 1
         if not (np.all(np.isfinite(w1)) and np.abs(th1 - state.theta).max() <= self.options.max_angle_step):
@@ -342,7 +412,7 @@ class RodSystem:
         prev = np.inf
         for it in range(1, opt.max_iter + 1):
             res, jac, ev = self.newton_system(state, w1, dt, loads, frame)
-            dw = np.linalg.solve(jac, -res)
+            dw = self._solve(jac, -res)
             size = dt * np.abs(dw).max()
             if not np.isfinite(size) or (it >= 3 and size > 2.0 * prev):  # diverging: give up early
                 info["iterations"] += it

@@ -4,7 +4,8 @@
 per call; the rod engine queries the boundary every time step. :class:`Obstacle` wraps any
 :class:`~contgrasp_core.boundary.Boundary` with
 
-* an exact analytic projection for circles (``kind == "circle"``), and
+* an exact analytic projection for circles (``kind == "circle"``; a compiled loop,
+  :func:`contgrasp_core.rod._kernels.circle_projection`, unless the kernels are disabled), and
 * for every other boundary, a table of ``samples`` arclength-equispaced boundary points with
   tangent angle and curvature, a KD-tree for the nearest sample and one Newton step on the
   osculating circle of that sample (error ``O(ds^3 kappa^2)``, about 1e-10 of the object size
@@ -22,6 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from contgrasp_core.boundary import Boundary
+from contgrasp_core.rod import _kernels
 from contgrasp_core.errors import InvalidParameterError
 
 __all__ = ["Obstacle", "ObstacleProjection"]
@@ -65,6 +67,11 @@ class Obstacle:
     def project(self, points: np.ndarray) -> ObstacleProjection:
         """Closest boundary point of each of ``points`` (n, 2) (vectorised)."""
         q = np.asarray(points, dtype=float)
+        if self._circle is not None and _kernels.ENABLED:
+            R, c = self._circle
+            foot, ang, sd, n_out = _kernels.circle_projection(_kernels.f64(q), R, float(c[0]), float(c[1]))
+            return ObstacleProjection(foot=foot, s_o=np.mod(ang, 2 * np.pi) * R, phi=ang + 0.5 * np.pi,
+                                      kappa_o=np.full(len(q), 1.0 / R), signed_distance=sd, normal_out=n_out)
         if self._circle is not None:
             R, c = self._circle
             d = q - c

@@ -28,7 +28,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.arm import ArmShape
-from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.contact import sense
 from contgrasp_core.control.rod_feedback import FeedbackExpansion, HeldExpansion
 from contgrasp_core.errors import InvalidParameterError, RunFailure
@@ -166,7 +165,7 @@ class LoopSession:
         speed = float(np.hypot(v[:, 0], v[:, 1]).max())
         radius = m.radius(m.s_nodes)
         gap_nodes = self.obstacle.project(x).signed_distance - radius
-        gap_c = self.obstacle.project(chain.centres(m, st.theta)).signed_distance - m.r_centres
+        gap_c = self.obstacle.project(0.5 * (x[:-1] + x[1:])).signed_distance - m.r_centres  # (chain.centres)
         pen = max(float(-gap_nodes.min()), float(-gap_c.min()), 0.0)
         self.max_penetration = max(self.max_penetration, pen)
         obs = Observation(
@@ -237,18 +236,16 @@ def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSess
     step it (observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
     :class:`~contgrasp_core.boundary.Boundary` and the sensor's tolerance,
     :func:`~contgrasp_core.control.feedback_at_joints`, advance): a lock-step ROS run of the same
-    scenario ends in the same state bit for bit (both on one BLAS thread,
-    :func:`~contgrasp_core.blas.single_thread_blas`). Returns the finished session."""
+    scenario ends in the same state bit for bit. Returns the finished session."""
     from contgrasp_core.control import feedback_at_joints
 
     boundary = scenario.object.boundary()
     system = RodSystem(scenario.rod, Obstacle(boundary)) if system is None else system
     session = LoopSession(system, scenario.loop)
     gains = scenario.feedback_gains
-    with single_thread_blas():
-        while True:
-            obs = session.observe()
-            if session.finished:
-                return session
-            c = sense(obs.shape, boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
-            session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha))
+    while True:
+        obs = session.observe()
+        if session.finished:
+            return session
+        c = sense(obs.shape, boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
+        session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha))

@@ -1,0 +1,90 @@
+"""Compiled kernels (numba ``@njit(cache=True)``) of the rod engine's hot paths.
+
+The implicit step evaluates, per Newton iteration, the generalised force and the exact Newton
+matrix (:meth:`contgrasp_core.rod.integrator.RodSystem._evaluate`, O(N^2) numpy expressions with
+some forty temporary arrays) and solves the dense system. :func:`newton_system` computes the
+same residual and matrix in two fused O(N^2) passes without temporaries (every term of the
+numpy path, in the same algebraic form: the Gram forms of :func:`contgrasp_core.rod.chain.gram_form`
+through their tail sums, bending, inertia, damping, drag, penalty contact and the feedback couple's
+Jacobian). The solve stays LAPACK's (``numpy.linalg.solve``, bit for bit the solve of the numpy
+path, run on one BLAS thread): a numba LU was 2.5x slower at N = 100 and 8x at N = 400.
+
+Results agree with the numpy path to rounding (sums are accumulated in a different order;
+tests/test_kernels.py). The numpy path stays selectable: ``CONTGRASP_KERNELS=0`` in the
+environment (or :data:`ENABLED` set to False at run time) uses it;
+``NUMBA_DISABLE_JIT=1`` runs these functions as plain Python (for debugging; slow).
+Compiled code is cached on disk (numba's ``cache=True``: ``__pycache__`` next to
+``_kernels_jit.py``, or ``NUMBA_CACHE_DIR``), so only the first use on a machine pays the
+compilation. The compiled functions live in :mod:`._kernels_jit`, imported on first use
+(module ``__getattr__``): importing the package does not import numba (~0.5 s).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ENABLED", "f64", "load", "warm"]  # and, loaded on first use, the kernels of _kernels_jit
+
+ENABLED: bool = os.environ.get("CONTGRASP_KERNELS", "1").strip().lower() not in ("0", "false", "no", "off")
+"""Use the kernels (True) or the numpy reference code (False). Read at every call, so it can be
+switched at run time (the benchmarks compare both in one process)."""
+
+
+def f64(x: object) -> np.ndarray:
+    """``x`` as a C-contiguous, writeable float64 array (a copy only when it is not one already):
+    the kernels are compiled for exactly that array type, so a read-only or strided argument
+    (e.g. a view of a message buffer) does not trigger a second compilation."""
+    return np.require(x, dtype=np.float64, requirements=("C", "W"))
+
+
+_JIT_NAMES = ("frames_nodes", "kinetic_energy", "newton_system", "circle_projection", "joint_couple_jacobian")
+
+
+def load() -> None:
+    """Import the compiled kernels now (numba and its on-disk cache; idempotent, cheap once
+    loaded). :class:`~contgrasp_core.rod.integrator.RodSystem` calls it when it is created, so a
+    simulation pays this in its set-up rather than in its first time step."""
+    if ENABLED and "newton_system" not in globals():
+        __getattr__("newton_system")
+
+
+def __getattr__(name: str) -> Any:
+    """The compiled kernels, loaded (numba imported, cache read) on first access."""
+    if name in _JIT_NAMES:
+        mod = importlib.import_module("contgrasp_core.rod._kernels_jit")
+        for n in _JIT_NAMES:
+            globals()[n] = getattr(mod, n)
+        return globals()[name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def warm() -> float:
+    """Compile (or load from numba's on-disk cache) every kernel by running a tiny closed-loop
+    simulation through the code paths that use them (the lock-step loop with the held expansion
+    and the continuous loop, both around a circle, with contact); returns the seconds it took.
+    ``contgrasp.sh setup`` runs it, so the first real run does not pay the compilation (~10-17 s
+    on 2 cores; loading the cache afterwards takes well under a second)."""
+    import time
+    from dataclasses import replace
+
+    from contgrasp_core.control import paper_gains
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
+    from contgrasp_core.rod.integrator import RodSystem
+    from contgrasp_core.rod.obstacle import Obstacle
+    from contgrasp_core.rod.session import run_sampled
+    from contgrasp_core.scenario import PAPER
+
+    from contgrasp_core.boundary import ellipse
+
+    t0 = time.perf_counter()
+    ellipse(2.0, 1.0).project(np.array([[0.5, 0.25]]))  # contgrasp_core._geometry
+    rod = replace(PAPER.rod, n_elements=12)
+    run_sampled(replace(PAPER, rod=rod, loop=replace(PAPER.loop, duration=0.01)))
+    system = RodSystem(rod, Obstacle(PAPER.object.boundary()))
+    run_closed_loop(system, paper_gains(rod, 0.025), ClosedLoopConfig(duration=0.02, dt=0.01))
+    return time.perf_counter() - t0
+

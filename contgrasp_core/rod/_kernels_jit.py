@@ -1,0 +1,385 @@
+"""The numba-compiled kernels behind :mod:`contgrasp_core.rod._kernels` (imported on first use,
+so a process that never steps a rod does not import numba). Documentation: that module."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["frames_nodes", "kinetic_energy", "newton_system", "circle_projection", "joint_couple_jacobian"]
+
+
+@njit(cache=True)
+def frames_nodes(theta: np.ndarray, h: float, base: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tangents ``a`` (N, 2), normals ``b`` (N, 2) and nodes ``x`` (N+1, 2) (as :mod:`.chain`)."""
+    n = theta.shape[0]
+    a = np.empty((n, 2))
+    b = np.empty((n, 2))
+    x = np.empty((n + 1, 2))
+    x[0, 0] = base[0]
+    x[0, 1] = base[1]
+    s0 = 0.0
+    s1 = 0.0
+    for j in range(n):
+        c = math.cos(theta[j])
+        s = math.sin(theta[j])
+        a[j, 0] = c
+        a[j, 1] = s
+        b[j, 0] = -s
+        b[j, 1] = c
+        s0 += h * c
+        s1 += h * s
+        x[j + 1, 0] = s0 + base[0]
+        x[j + 1, 1] = s1 + base[1]
+    return a, b, x
+
+
+@njit(cache=True)
+def kinetic_energy(theta: np.ndarray, omega: np.ndarray, h: float, weight: np.ndarray,
+                   rot_inertia: np.ndarray) -> float:
+    """``1/2 omega^T M omega`` with ``M = h^2 W * cos(theta_j - theta_k) + diag(J)`` (as
+    :func:`contgrasp_core.rod.chain.mass_matrix`), without forming ``M``."""
+    n = theta.shape[0]
+    cs = np.empty(n)
+    sn = np.empty(n)
+    for k in range(n):
+        cs[k] = math.cos(theta[k])
+        sn[k] = math.sin(theta[k])
+    hh = h * h
+    total = 0.0
+    for j in range(n):
+        row = 0.0
+        for k in range(n):
+            row += hh * weight[j, k] * (cs[j] * cs[k] + sn[j] * sn[k]) * omega[k]
+        row += rot_inertia[j] * omega[j]
+        total += omega[j] * row
+    return 0.5 * total
+
+
+@njit(cache=True)
+def _tails(d: np.ndarray) -> np.ndarray:
+    """Exclusive suffix sums ``sum_{i>m} D_i`` of per-centre tensors (4, N)."""
+    n = d.shape[1]
+    t = np.zeros((4, n))
+    for m in range(n - 2, -1, -1):
+        for p in range(4):
+            t[p, m] = t[p, m + 1] + d[p, m + 1]
+    return t
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def newton_system(theta: np.ndarray, omega: np.ndarray, delta: np.ndarray, dw: np.ndarray, dt: float, cw: float,
+                  cq: float, h: float, base: np.ndarray, weight: np.ndarray, rot_inertia: np.ndarray,
+                  mass_e: np.ndarray, zeta: float, drag_n: float, drag_t: float, r_c: np.ndarray,
+                  stiffness: np.ndarray, joint_ei: np.ndarray, joint_len: np.ndarray, base_angle: float,
+                  couple: np.ndarray, node_forces: np.ndarray, rows: np.ndarray, foot: np.ndarray,
+                  normal: np.ndarray, tangent: np.ndarray, k_c: float, d_c: float, mu: float, v_eps: float,
+                  u_fb: np.ndarray, du: np.ndarray, a: np.ndarray, b: np.ndarray,
+                  x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Residual ``mass @ dw - dt q`` and Newton matrix ``mass + dt cw jac_w + cq (dt jac_q + jac_m)``
+    at angles ``theta`` and rates ``omega`` (``delta`` the step's rate increment, ``dw`` the
+    increment the residual multiplies; both ``w1 - w0``), as
+    :meth:`~contgrasp_core.rod.integrator.RodSystem.newton_system`. Empty ``couple`` /
+    ``node_forces`` / ``rows`` / ``u_fb`` mean absent; ``a``, ``b``, ``x`` from :func:`frames_nodes`.
+    Returns (residual, matrix, penetration)."""
+    n = theta.shape[0]
+    hh = h * h
+    # ---- per-element kinematics: centres, velocities, centripetal forces
+    v = np.empty((n, 2))
+    f = np.empty((n, 2))
+    c = np.empty((n, 2))
+    p0 = 0.0
+    p1 = 0.0
+    q0 = 0.0
+    q1 = 0.0
+    for i in range(n):
+        bw0 = h * b[i, 0] * omega[i]
+        bw1 = h * b[i, 1] * omega[i]
+        w2 = omega[i] ** 2
+        aw0 = -h * a[i, 0] * w2
+        aw1 = -h * a[i, 1] * w2
+        v[i, 0] = 0.5 * bw0 + p0
+        v[i, 1] = 0.5 * bw1 + p1
+        f[i, 0] = -mass_e[i] * (0.5 * aw0 + q0)
+        f[i, 1] = -mass_e[i] * (0.5 * aw1 + q1)
+        p0 += bw0
+        p1 += bw1
+        q0 += aw0
+        q1 += aw1
+        c[i, 0] = 0.5 * (x[i, 0] + x[i + 1, 0])
+        c[i, 1] = 0.5 * (x[i, 1] + x[i + 1, 1])
+    damp = np.zeros((4, n))  # per-centre -df/dv (xx, xy, yx, yy)
+    stiff = np.zeros((4, n))  # per-centre -df/dc of contact
+    e = np.zeros((n, 2))
+    has_drag = drag_n > 0 or drag_t > 0
+    if has_drag:
+        for i in range(n):
+            vn = v[i, 0] * b[i, 0] + v[i, 1] * b[i, 1]
+            vt = v[i, 0] * a[i, 0] + v[i, 1] * a[i, 1]
+            dl = 2.0 * r_c[i] * h
+            fn = -drag_n * dl * abs(vn) * vn
+            ft = -drag_t * dl * abs(vt) * vt
+            fd0 = fn * b[i, 0] + ft * a[i, 0]
+            fd1 = fn * b[i, 1] + ft * a[i, 1]
+            f[i, 0] += fd0
+            f[i, 1] += fd1
+            gn = 2.0 * drag_n * dl * abs(vn)
+            gt = 2.0 * drag_t * dl * abs(vt)
+            damp[0, i] += gn * b[i, 0] * b[i, 0] + gt * a[i, 0] * a[i, 0]
+            damp[1, i] += gn * b[i, 0] * b[i, 1] + gt * a[i, 0] * a[i, 1]
+            damp[2, i] += gn * b[i, 1] * b[i, 0] + gt * a[i, 1] * a[i, 0]
+            damp[3, i] += gn * b[i, 1] * b[i, 1] + gt * a[i, 1] * a[i, 1]
+            fnb = fd0 * b[i, 0] + fd1 * b[i, 1]
+            fta = fd0 * a[i, 0] + fd1 * a[i, 1]
+            cb = gn * vt + fta
+            ca = gt * vn + fnb
+            e[i, 0] = cb * b[i, 0] - ca * a[i, 0]
+            e[i, 1] = cb * b[i, 1] - ca * a[i, 1]
+    pen_max = 0.0
+    nr = rows.shape[0]
+    for r in range(nr):
+        i = rows[r]
+        n0 = normal[r, 0]
+        n1 = normal[r, 1]
+        t0 = tangent[r, 0]
+        t1 = tangent[r, 1]
+        pen = r_c[i] - ((c[i, 0] - foot[r, 0]) * n0 + (c[i, 1] - foot[r, 1]) * n1)
+        pen_max = max(pen_max, pen)
+        pen_rate = -(v[i, 0] * n0 + v[i, 1] * n1)
+        fn = h * (k_c * pen + d_c * pen_rate)
+        active = pen > 0 and fn > 0
+        if not active:
+            fn = 0.0
+        ratio = 0.0
+        frd = 0.0
+        f[i, 0] += fn * n0
+        f[i, 1] += fn * n1
+        if mu > 0:
+            vt = v[i, 0] * t0 + v[i, 1] * t1
+            xx = vt / v_eps
+            ratio = mu * math.tanh(xx)
+            f[i, 0] -= ratio * fn * t0
+            f[i, 1] -= ratio * fn * t1
+            frd = mu * fn / v_eps / math.cosh(xx) ** 2
+        if not active:
+            ratio = 0.0
+        kk = h * k_c if active else 0.0
+        dd = h * d_c if active else 0.0
+        u0 = n0 - ratio * t0
+        u1 = n1 - ratio * t1
+        stiff[0, i] = hh * (kk * u0 * n0)
+        stiff[1, i] = hh * (kk * u0 * n1)
+        stiff[2, i] = hh * (kk * u1 * n0)
+        stiff[3, i] = hh * (kk * u1 * n1)
+        damp[0, i] += dd * u0 * n0 + frd * t0 * t0
+        damp[1, i] += dd * u0 * n1 + frd * t0 * t1
+        damp[2, i] += dd * u1 * n0 + frd * t1 * t0
+        damp[3, i] += dd * u1 * n1 + frd * t1 * t1
+    pen_max = max(pen_max, 0.0)
+    for p in range(4):
+        for i in range(n):
+            damp[p, i] *= hh
+    # ---- Gram forms through their tail sums (chain.gram_form): per row/column 2-vectors
+    ts = _tails(stiff)
+    td = _tails(damp)
+    us = np.empty((n, 2))  # (S_j + D_j/2)^T b_j, stiffness, lower triangle rows
+    zs = np.empty((n, 2))  # (S_k + D_k/2) b_k, upper triangle columns
+    ud = np.empty((n, 2))  # damping, (b, .) lower rows
+    zdb = np.empty((n, 2))  # damping upper columns with right = b
+    zda = np.empty((n, 2))  # damping upper columns with right = a
+    gs = np.empty(n)  # diagonals: b^T (S + D/4) b (stiffness), b^T (S + D/4) b and b^T (S + D/4) a (damping)
+    gdb = np.empty(n)
+    gda = np.empty(n)
+    for j in range(n):
+        sxx = ts[0, j] + 0.5 * stiff[0, j]
+        sxy = ts[1, j] + 0.5 * stiff[1, j]
+        syx = ts[2, j] + 0.5 * stiff[2, j]
+        syy = ts[3, j] + 0.5 * stiff[3, j]
+        us[j, 0] = sxx * b[j, 0] + syx * b[j, 1]
+        us[j, 1] = sxy * b[j, 0] + syy * b[j, 1]
+        zs[j, 0] = sxx * b[j, 0] + sxy * b[j, 1]
+        zs[j, 1] = syx * b[j, 0] + syy * b[j, 1]
+        dxx = td[0, j] + 0.5 * damp[0, j]
+        dxy = td[1, j] + 0.5 * damp[1, j]
+        dyx = td[2, j] + 0.5 * damp[2, j]
+        dyy = td[3, j] + 0.5 * damp[3, j]
+        ud[j, 0] = dxx * b[j, 0] + dyx * b[j, 1]
+        ud[j, 1] = dxy * b[j, 0] + dyy * b[j, 1]
+        zdb[j, 0] = dxx * b[j, 0] + dxy * b[j, 1]
+        zdb[j, 1] = dyx * b[j, 0] + dyy * b[j, 1]
+        zda[j, 0] = dxx * a[j, 0] + dxy * a[j, 1]
+        zda[j, 1] = dyx * a[j, 0] + dyy * a[j, 1]
+        sxx = ts[0, j] + 0.25 * stiff[0, j]
+        sxy = ts[1, j] + 0.25 * stiff[1, j]
+        syx = ts[2, j] + 0.25 * stiff[2, j]
+        syy = ts[3, j] + 0.25 * stiff[3, j]
+        gs[j] = b[j, 0] * (sxx * b[j, 0] + sxy * b[j, 1]) + b[j, 1] * (syx * b[j, 0] + syy * b[j, 1])
+        dxx = td[0, j] + 0.25 * damp[0, j]
+        dxy = td[1, j] + 0.25 * damp[1, j]
+        dyx = td[2, j] + 0.25 * damp[2, j]
+        dyy = td[3, j] + 0.25 * damp[3, j]
+        gdb[j] = b[j, 0] * (dxx * b[j, 0] + dxy * b[j, 1]) + b[j, 1] * (dyx * b[j, 0] + dyy * b[j, 1])
+        gda[j] = b[j, 0] * (dxx * a[j, 0] + dxy * a[j, 1]) + b[j, 1] * (dyx * a[j, 0] + dyy * a[j, 1])
+    # ---- generalised force q
+    tail0 = 0.0
+    tail1 = 0.0
+    nf0 = 0.0
+    nf1 = 0.0
+    has_nf = node_forces.shape[0] > 0
+    q = np.empty(n)
+    tdiag = np.empty(n)  # h a_j . tail_j (the diagonal of jac_q from the force directions' rotation)
+    for j in range(n - 1, -1, -1):
+        t0 = tail0 + 0.5 * f[j, 0]
+        t1 = tail1 + 0.5 * f[j, 1]
+        if has_nf:
+            nf0 += node_forces[j + 1, 0]
+            nf1 += node_forces[j + 1, 1]
+            t0 += nf0
+            t1 += nf1
+        q[j] = h * (b[j, 0] * t0 + b[j, 1] * t1)
+        tdiag[j] = h * (a[j, 0] * t0 + a[j, 1] * t1)
+        tail0 += f[j, 0]
+        tail1 += f[j, 1]
+    mom = np.empty(n)
+    prev = base_angle
+    for k in range(n):
+        mom[k] = joint_ei[k] * ((theta[k] - prev) / joint_len[k])
+        prev = theta[k]
+    if couple.shape[0] > 0:
+        for k in range(n):
+            mom[k] += couple[k]
+    has_fb = u_fb.shape[0] > 0
+    if has_fb:
+        for k in range(n):
+            mom[k] += u_fb[k]
+    for k in range(n):
+        q[k] -= mom[k]
+    for k in range(n - 1):
+        q[k] += mom[k + 1]
+    # ---- the matrix, row by row: the O(N^2) terms common to both triangles in one branch-free
+    # loop (with the row sums the diagonal and the residual need), then the triangle-specific
+    # rank-2 terms (Gram forms through their tail vectors, drag), the band and the diagonal
+    jac = np.empty((n, n))
+    res = np.empty(n)
+    cs = np.empty(n)
+    sn = np.empty(n)
+    om2 = np.empty(n)
+    up_q = np.empty((n, 2))  # upper triangle, column k: jq += b_j . up_q[k], jw += b_j . zdb[k]
+    for k in range(n):
+        cs[k] = a[k, 0]
+        sn[k] = a[k, 1]
+        om2[k] = omega[k] ** 2
+        up_q[k, 0] = zs[k, 0] - zda[k, 0] * omega[k]
+        up_q[k, 1] = zs[k, 1] - zda[k, 1] * omega[k]
+        if has_drag:
+            up_q[k, 0] -= h * e[k, 0]
+            up_q[k, 1] -= h * e[k, 1]
+    cwdt = dt * cw
+    cqdt = cq * dt
+    for j in range(n):
+        cj = cs[j]
+        sj = sn[j]
+        wsd = 0.0
+        wso = 0.0
+        mo = 0.0
+        md = 0.0
+        row = jac[j]
+        wrow = weight[j]
+        for k in range(n):
+            hw = hh * wrow[k]
+            trans = hw * (cj * cs[k] + sj * sn[k])
+            ws = hw * (sj * cs[k] - cj * sn[k])
+            wsd += ws * delta[k]
+            wso += ws * omega[k]
+            mo += trans * omega[k]
+            md += trans * dw[k]
+            jw = 2.0 * ws * omega[k] + zeta * trans
+            jq = -trans * om2[k] + zeta * (ws * omega[k])
+            row[k] = trans + cwdt * jw + cq * (dt * jq + ws * delta[k])
+        mo += rot_inertia[j] * omega[j]
+        md += rot_inertia[j] * dw[j]
+        qj = q[j]
+        if zeta > 0:
+            qj -= zeta * mo
+        res[j] = md - dt * qj
+        b0 = b[j, 0]
+        b1 = b[j, 1]
+        for k in range(j + 1, n):  # upper triangle
+            row[k] += cwdt * (b0 * zdb[k, 0] + b1 * zdb[k, 1]) + cqdt * (b0 * up_q[k, 0] + b1 * up_q[k, 1])
+        u0 = us[j, 0]
+        u1 = us[j, 1]
+        d0 = ud[j, 0]
+        d1 = ud[j, 1]
+        for k in range(j):  # lower triangle
+            row[k] += (cwdt * (d0 * b[k, 0] + d1 * b[k, 1])
+                       + cqdt * (u0 * b[k, 0] + u1 * b[k, 1] - (d0 * a[k, 0] + d1 * a[k, 1]) * omega[k]))
+        # diagonal: rotary inertia, the row sums, drag, Gram diagonals, force-direction rotation
+        jq = -zeta * wso + gs[j] - gda[j] * omega[j] + tdiag[j]
+        if has_drag:
+            jq -= h * 0.5 * (b0 * e[j, 0] + b1 * e[j, 1])
+        row[j] += rot_inertia[j] * (1.0 + cwdt * zeta) + cwdt * gdb[j] + cq * (dt * jq - wsd)
+        # bending (tridiagonal)
+        for k in range(max(j - 1, 0), min(j + 2, n)):
+            row[k] += cqdt * stiffness[j, k]
+        if has_fb:  # du (lower triangle and diagonal) minus the next joint's row
+            for k in range(j + 1):
+                row[k] += cqdt * du[j, k]
+            if j < n - 1:
+                for k in range(j + 2):
+                    row[k] -= cqdt * du[j + 1, k]
+    return res, jac, pen_max
+
+
+@njit(cache=True)
+def circle_projection(q: np.ndarray, radius: float, cx: float,
+                      cy: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Closest points on the circle ``|p - c| = radius`` (as ``Obstacle.project``): foot (n, 2),
+    polar angle of the query (n,), signed distance (n,), outward normal (n, 2); a query at the
+    centre gets the normal (1, 0)."""
+    n = q.shape[0]
+    foot = np.empty((n, 2))
+    ang = np.empty(n)
+    sd = np.empty(n)
+    nrm = np.empty((n, 2))
+    for i in range(n):
+        d0 = q[i, 0] - cx
+        d1 = q[i, 1] - cy
+        dist = math.hypot(d0, d1)
+        ang[i] = math.atan2(d1, d0)
+        if dist > 0:
+            n0 = d0 / dist
+            n1 = d1 / dist
+        else:
+            n0 = 1.0
+            n1 = 0.0
+        nrm[i, 0] = n0
+        nrm[i, 1] = n1
+        foot[i, 0] = cx + radius * n0
+        foot[i, 1] = cy + radius * n1
+        sd[i] = dist - radius
+    return foot, ang, sd, nrm
+
+
+@njit(cache=True)
+def joint_couple_jacobian(h: float, g_rho: np.ndarray, g_alpha: np.ndarray, normal_out: np.ndarray,
+                          foot_turn: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``du/dtheta`` (N, N) of :func:`contgrasp_core.control.rod_feedback.joint_couple_jacobian`:
+    ``h (g_rho n_k + g_alpha foot_turn_k t_k) . b_l`` for ``l < k`` and ``-g_alpha_k / 2`` at
+    ``(k, k)`` and ``(k, k-1)``, ``k >= 1``."""
+    n = g_rho.shape[0]
+    du = np.zeros((n, b.shape[0]))
+    for k in range(n):
+        n0 = normal_out[k, 0]
+        n1 = normal_out[k, 1]
+        ga = g_alpha[k] * foot_turn[k]
+        d0 = g_rho[k] * n0 + ga * (-n1)
+        d1 = g_rho[k] * n1 + ga * n0
+        for j in range(k):
+            du[k, j] = h * (d0 * b[j, 0] + d1 * b[j, 1])
+        if k >= 1:
+            coef = -0.5 * g_alpha[k]
+            du[k, k] += coef
+            du[k, k - 1] += coef
+    return du
