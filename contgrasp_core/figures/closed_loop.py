@@ -22,7 +22,7 @@ from ..errors import output_error
 from ..rod.closed_loop import ClosedLoopResult
 from .draw import save
 
-__all__ = ["snapshot_indices", "fig4_figure", "plot_fig4", "animate", "data_limits", "ratio_axis", "STATIC_LABEL"]
+__all__ = ["snapshot_indices", "finish_profile_panels", "fig4_figure", "plot_fig4", "animate", "data_limits", "ratio_axis", "STATIC_LABEL"]
 
 
 def _draw_arm(ax: Axes, x: np.ndarray, r: np.ndarray, **kw: Any) -> None:
@@ -73,6 +73,24 @@ def ratio_axis(ax: Axes, ratios: list[np.ndarray]) -> None:
     ax.set_ylabel(r"$\rho / \rho_d$ [-]" + ("  (log scale; " if positive else "  (") + r"$\rho_d = r(s)$)")
 
 
+def finish_profile_panels(ax_r: Axes, ax_a: Axes, ratios: list[np.ndarray], alphas: list[np.ndarray], legend_on: Any,
+                          *, ncols: int, fontsize: float) -> None:
+    """The rho/rho_d and alpha panels along the arm (Fig. 4 and the run figure): the targets
+    rho = rho_d and alpha = pi/2 of the law, limits that show every curve, labels, and one legend
+    (the curves' labels and the alpha target) at the bottom of ``legend_on`` (a figure)."""
+    ax_r.axhline(1.0, color="tab:red", lw=0.8, ls=":", label=r"target $\rho = \rho_d$")
+    ax_a.axhline(0.5 * np.pi, color="tab:red", lw=0.8, ls=":", label=r"target $\alpha = \pi/2$")
+    ratio_axis(ax_r, ratios)
+    ax_a.set_ylim(*data_limits(alphas, include=(0.0, np.pi)))
+    for ax in (ax_r, ax_a):
+        ax.set_xlabel("s / L [-]  (along the arm)")
+        ax.grid(alpha=0.3)
+    ax_a.set_ylabel(r"$\alpha$ [rad]")
+    handles, labels = ax_r.get_legend_handles_labels()
+    h2, l2 = ax_a.get_legend_handles_labels()
+    legend_on.legend(handles + h2[-1:], labels + l2[-1:], loc="outside lower center", ncols=ncols, fontsize=fontsize)
+
+
 def fig4_figure(res: ClosedLoopResult, boundary: Boundary, obstacle_radius: float | None = None) -> Figure:
     """Paper Fig. 4 as a :class:`~matplotlib.figure.Figure`: six snapshots of the arm (with its
     radius) around the object, shaded by simulated time (legend); rho/rho_d (log scale, limits
@@ -112,18 +130,7 @@ def fig4_figure(res: ClosedLoopResult, boundary: Boundary, obstacle_radius: floa
         alphas.append(alpha_s)
         ax1.plot(s / m.length, rho_s / r, "k--", lw=1.2, label=STATIC_LABEL)
         ax2.plot(s / m.length, alpha_s, "k--", lw=1.2, label=STATIC_LABEL)
-    ax1.axhline(1.0, color="tab:red", lw=0.8, ls=":", label=r"target $\rho = \rho_d$")
-    ax2.axhline(0.5 * np.pi, color="tab:red", lw=0.8, ls=":", label=r"target $\alpha = \pi/2$")
-    ratio_axis(ax1, ratios)
-    ax2.set_ylim(*data_limits(alphas, include=(0.0, np.pi)))
-    for ax in (ax1, ax2):
-        ax.set_xlabel("s / L [-]  (along the arm)")
-        ax.grid(alpha=0.3)
-    ax2.set_ylabel(r"$\alpha$ [rad]")
-    handles, labels = ax1.get_legend_handles_labels()
-    h2, l2 = ax2.get_legend_handles_labels()
-    handles, labels = handles + h2[-1:], labels + l2[-1:]  # and the target alpha = pi/2
-    bottom.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=7)
+    finish_profile_panels(ax1, ax2, ratios, alphas, bottom, ncols=3, fontsize=7)
     return fig
 
 

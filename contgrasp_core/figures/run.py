@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 from contgrasp_core.arm import ArmShape
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.control.law import adaptive_mu2, closed_loop_kinematics
-from contgrasp_core.figures.closed_loop import STATIC_LABEL, data_limits, ratio_axis
+from contgrasp_core.figures.closed_loop import STATIC_LABEL, finish_profile_panels
 from contgrasp_core.figures.draw import draw_arm, draw_boundary, save
 from contgrasp_core.scenario import Scenario
 
@@ -86,17 +86,7 @@ def build_run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]])
             alphas.append(static.alpha)
             ax_r.plot(s / s[-1], ratios[-1], "k--", lw=1.0, label=STATIC_LABEL)
             ax_a.plot(s / s[-1], alphas[-1], "k--", lw=1.0, label=STATIC_LABEL)
-    ax_r.axhline(1.0, color="tab:red", lw=0.8, ls=":", label=r"target $\rho = \rho_d$")
-    ax_a.axhline(np.pi / 2, color="tab:red", lw=0.8, ls=":", label=r"target $\alpha = \pi/2$")
-    ratio_axis(ax_r, ratios)
-    ax_a.set_ylim(*data_limits(alphas, include=(0.0, np.pi)))
-    for a in (ax_r, ax_a):
-        a.set_xlabel("s / L [-]  (along the arm)")
-        a.grid(alpha=0.3)
-    ax_a.set_ylabel(r"$\alpha$ [rad]")
-    handles, labels = ax_r.get_legend_handles_labels()
-    h2, l2 = ax_a.get_legend_handles_labels()
-    bottom.legend(handles + h2[-1:], labels + l2[-1:], loc="outside lower center", ncols=4, fontsize=8)
+    finish_profile_panels(ax_r, ax_a, ratios, alphas, bottom, ncols=4, fontsize=8)
     return fig
 
 
