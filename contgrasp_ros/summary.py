@@ -79,7 +79,9 @@ class RunSummary:
     (:class:`~contgrasp_core.tracking.ContactStats`: mean and max tracking errors over the
     ``contact_nodes`` nodes in contact, ``contact_length`` m) the last rod state, grasp
     quality and contact state; ``wall_time_s`` (the whole launcher run) and ``loop_wall_time_s``
-    (from resuming the simulator to its end) are wall-clock seconds, ``None`` from a recording.
+    (from resuming the simulator to its end) are wall-clock seconds, ``None`` from a recording;
+    from them ``real_time_factor`` (simulated seconds per wall second of the loop) and
+    ``step_wall_ms`` (wall milliseconds per control step).
     """
 
     simulator_state: str
@@ -99,6 +101,8 @@ class RunSummary:
     contact_length: float | None
     wall_time_s: float | None = None
     loop_wall_time_s: float | None = None
+    real_time_factor: float | None = None
+    step_wall_ms: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The summary as JSON-ready values (nested dicts for ``final`` and ``final_quality``)."""
@@ -125,12 +129,14 @@ def build_summary(
     (``state``, ``settled``, ``settle_time_s``, ``sim_time_s``, ``step``, ``missed_deadlines``,
     ``max_penetration``; missing or unparsable ones give ``None``/0), the last rod state and
     quality, and the contact statistics of the last contact state (:func:`contact_stats`)."""
+    sim_time, steps = _num(status, "sim_time_s"), int(_num(status, "step") or 0)
+    loop = loop_wall_time_s if loop_wall_time_s is not None and loop_wall_time_s > 0 else None
     return RunSummary(
         simulator_state=status.get("state", "unknown"),
         settled=status.get("settled") == "true",
         settle_time_s=_num(status, "settle_time_s"),
-        sim_time_s=_num(status, "sim_time_s"),
-        steps=int(_num(status, "step") or 0),
+        sim_time_s=sim_time,
+        steps=steps,
         missed_deadlines=int(_num(status, "missed_deadlines") or 0),
         max_penetration=_num(status, "max_penetration"),
         final=final,
@@ -143,4 +149,6 @@ def build_summary(
         contact_length=contact.contact_length,
         wall_time_s=wall_time_s,
         loop_wall_time_s=loop_wall_time_s,
+        real_time_factor=None if loop is None or sim_time is None else sim_time / loop,
+        step_wall_ms=None if loop is None or steps == 0 else 1e3 * loop / steps,
     )

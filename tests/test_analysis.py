@@ -95,9 +95,12 @@ def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -
     # one builder: every RunSummary key agrees between the launcher and the recording (the
     # wall-clock times only the launcher measures)
     for key in RunSummary.__dataclass_fields__:
-        if key not in ("wall_time_s", "loop_wall_time_s"):
+        if key not in ("wall_time_s", "loop_wall_time_s", "real_time_factor", "step_wall_ms"):
             assert r[key] == summary[key], key
     assert r["wall_time_s"] is None and summary["wall_time_s"] > summary["loop_wall_time_s"] > 0
+    assert r["real_time_factor"] is None and summary["real_time_factor"] == pytest.approx(
+        summary["sim_time_s"] / summary["loop_wall_time_s"], rel=1e-12)
+    assert summary["step_wall_ms"] == pytest.approx(1e3 * summary["loop_wall_time_s"] / summary["steps"], rel=1e-12)
     assert summary["contact_nodes"] > 0 and summary["contact_length"] > 0
     # the launcher records in simulated time: the recording spans the run's simulated time
     assert summary["bag"]["log_time_clock"] == "sim" and summary["bag"]["wall_time_s"] is None
