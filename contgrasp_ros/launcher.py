@@ -237,7 +237,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
     if args.json:
         print(json.dumps(summary))
     else:
-        for key in ("mode", "settled", "settle_time_s", "sim_time_s", "wall_time_s", "missed_deadlines",
+        for key in ("mode", "settled", "settle_time_s", "sim_time_s", "steps", "wall_time_s", "loop_wall_time_s",
+                    "real_time_factor", "step_wall_ms", "missed_deadlines",
                     "mean_abs_rho_ratio_minus_1_contact", "max_abs_rho_ratio_minus_1_contact",
                     "mean_abs_alpha_minus_half_pi_contact", "max_abs_alpha_minus_half_pi_contact",
                     "contact_nodes", "contact_length",
