@@ -17,7 +17,7 @@ from contgrasp_core.errors import ContgraspError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, GraspQuality
 from contgrasp_ros import qos, topics
-from contgrasp_ros.convert import contact_arrays, quality_to_msg, require_finite
+from contgrasp_ros.convert import ContactArrays, contact_arrays, quality_to_msg, require_finite
 from contgrasp_ros.evaluate import contact_quality
 from contgrasp_ros.runtime import (
     Diagnostics,
@@ -46,7 +46,10 @@ class GraspQualityNode(Node):
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops)
         self.finish = FinishPolicy(self, watch_simulator=True)
-        self.object = ObjectTracker(self, self.drops, self.stamps)
+        # the latched object and the first contact states race (as in the sensor): the newest
+        # state that arrived first is kept and evaluated as soon as the object is there
+        self.waiting: tuple[ContactState, ContactArrays] | None = None
+        self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._evaluate_waiting)
         self.last_t: float | None = None
         self.pub = self.create_publisher(GraspQuality, topics.QUALITY, qos.STREAM)
         self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM)
@@ -60,10 +63,21 @@ class GraspQualityNode(Node):
         except ContgraspError as exc:
             self.drops.drop_error(topics.CONTACT, exc)
             return
-        boundary = self.object.boundary
-        if boundary is None:
-            self.drops.drop(topics.CONTACT, "no object yet", "no object boundary received yet")
+        if self.object.boundary is None:
+            if self.waiting is not None:
+                self.drops.drop(topics.CONTACT, "no object yet", "a newer contact state arrived before the object")
+            self.waiting = (msg, c)
             return
+        self._evaluate(msg, c)
+
+    def _evaluate_waiting(self) -> None:
+        waiting, self.waiting = self.waiting, None
+        if waiting is not None:
+            self._evaluate(*waiting)
+
+    def _evaluate(self, msg: ContactState, c: ContactArrays) -> None:
+        boundary = self.object.boundary
+        assert boundary is not None  # (evaluated only once the object is known)
         rate = self.get_parameter("rate_hz").value
         if rate > 0 and self.last_t is not None and 0.0 <= c.t - self.last_t < 1.0 / rate - 1e-12:
             return
