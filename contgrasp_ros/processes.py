@@ -20,7 +20,7 @@ from typing import IO
 
 from contgrasp_ros.events import EventSink
 
-__all__ = ["Child", "ProcessGroup", "clean_shared_memory"]
+__all__ = ["Child", "ProcessGroup", "clean_shared_memory", "remove_orphans"]
 
 _COLOURS = ("\033[36m", "\033[35m", "\033[33m", "\033[32m", "\033[34m", "\033[31m")
 _RESET = "\033[0m"
@@ -147,4 +147,43 @@ def clean_shared_memory() -> int:
             module.Clean().run()
     except Exception:  # noqa: BLE001 - a failed clean-up must never fail a run
         return 0
-    return sum(int(n) for n in re.findall(r"(\d+) zombie (?:ports|segments) cleaned", out.getvalue()))
+    removed = sum(int(n) for n in re.findall(r"(\d+) zombie (?:ports|segments) cleaned", out.getvalue()))
+    return removed + len(remove_orphans())
+
+
+SHM = Path("/dev/shm")
+_ORPHAN = re.compile(r"fastrtps_(port\d+|[0-9a-f]{16})")
+
+
+def remove_orphans(shm: Path = SHM, min_age_s: float = 2.0) -> list[Path]:
+    """Remove the Fast DDS shared-memory files Fast DDS's cleaner cannot judge: port and segment
+    files whose lock file is gone (participants that exited normally leave the port segment and
+    its mutex behind). Such a file is removed only when no live process maps it (the
+    ``/proc/<pid>/maps`` this user can read: a process whose maps it cannot read belongs to
+    another user, whose files in the sticky ``/dev/shm`` it cannot remove either, or is the
+    machine's init) and it was created more than ``min_age_s`` seconds ago (not one a starting
+    participant is setting up). Returns the files removed."""
+    mapped: set[str] = set()
+    for maps in Path("/proc").glob("[0-9]*/maps"):
+        try:
+            text = maps.read_text()
+        except OSError:
+            continue  # ended meanwhile, or not ours (see above)
+        mapped.update(line.rsplit(" ", 1)[-1] for line in text.splitlines() if "fastrtps_" in line)
+    now = time.time()
+    removed = []
+    for seg in shm.glob("fastrtps_*"):
+        if not _ORPHAN.fullmatch(seg.name) or str(seg) in mapped:
+            continue
+        if any((shm / f"{seg.name}{lock}").exists() for lock in ("_el", "_sl")):
+            continue  # Fast DDS's cleaner judges it by its lock
+        try:
+            if now - seg.stat().st_ctime < min_age_s:
+                continue
+            seg.unlink()
+        except (FileNotFoundError, PermissionError):
+            continue
+        removed.append(seg)
+        with contextlib.suppress(FileNotFoundError, PermissionError):
+            (shm / f"sem.{seg.name}_mutex").unlink()  # (ports only)
+    return removed

@@ -239,3 +239,30 @@ def test_killed_simulator_with_respawn_restarts_the_run(tmp_path: Path) -> None:
     assert steps[:restart] == list(range(restart))
     # the restarted simulator waits for the sensor, the monitor and the recorder: its step 0 is recorded
     assert steps[restart:] == list(range(out["steps"] + 1))
+
+
+def test_orphaned_shared_memory_files_are_removed_and_files_in_use_kept(tmp_path: Path) -> None:
+    """Port and segment files whose lock is gone (a participant that exited normally leaves its
+    port segment and mutex) are removed; a locked one, a mapped one and a young one stay."""
+    import mmap
+
+    from contgrasp_ros.processes import remove_orphans
+
+    def make(name: str, size: int = 4096) -> Path:
+        path = tmp_path / name
+        path.write_bytes(b"\0" * size)
+        return path
+
+    orphan_port, orphan_mutex = make("fastrtps_port23456"), make("sem.fastrtps_port23456_mutex")
+    orphan_segment = make("fastrtps_0123456789abcdef")
+    locked, lock = make("fastrtps_port23457"), make("fastrtps_port23457_el")
+    mapped = make("fastrtps_fedcba9876543210")
+    other = make("something_else")
+    with open(mapped, "r+b") as fd, mmap.mmap(fd.fileno(), 4096) as view:  # a live participant's segment
+        # (maps lists the real path: the test's /tmp file stands in for /dev/shm)
+        assert remove_orphans(tmp_path, min_age_s=3600.0) == []  # all young
+        removed = remove_orphans(tmp_path, min_age_s=0.0)
+        view[0] = 1
+    assert sorted(removed) == sorted([orphan_port, orphan_segment])
+    assert not orphan_mutex.exists()
+    assert all(p.exists() for p in (locked, lock, mapped, other))
