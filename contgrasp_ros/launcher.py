@@ -98,6 +98,17 @@ def _domain_id(given: int | None) -> int:
     return domain
 
 
+def _port(text: str) -> int:
+    """``--foxglove PORT``: a TCP port, 0 = any free one."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port must be in 0..65535 (0 = any free port), got {port}")
+    return port
+
+
 def _parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog="contgrasp-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", type=Path, default=None, help="ROS 2 YAML parameter file (default: the packaged paper scenario)")
@@ -119,7 +130,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--bag-layout", choices=("folder", "file"), default=None,
                    help="a rosbag2 bag folder with metadata.yaml (default) or one .mcap file (default when --bag ends in .mcap)")
     p.add_argument("--no-record", action="store_true", help="do not record the run")
-    p.add_argument("--foxglove", type=int, nargs="?", const=8765, default=None, metavar="PORT",
+    p.add_argument("--foxglove", type=_port, nargs="?", const=8765, default=None, metavar="PORT",
                    help="serve the run live over the Foxglove WebSocket protocol on 127.0.0.1:PORT (default 8765; "
                         "0 = any free port): open ws://127.0.0.1:PORT in the Foxglove app")
     p.add_argument("--allow-unrecorded", action="store_true",

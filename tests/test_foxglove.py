@@ -87,3 +87,38 @@ def test_launcher_serves_the_run_live_to_a_foxglove_client(tmp_path: Path) -> No
     finally:
         launch.close()
     assert code == 130 and out["foxglove"] == f"ws://127.0.0.1:{port}"
+
+
+def test_launcher_refuses_a_bad_port() -> None:
+    import subprocess
+    import sys
+
+    for bad in ("70000", "-1", "x"):
+        out = subprocess.run([str(Path(sys.executable).parent / "contgrasp-launch"), f"--foxglove={bad}", "--no-record"],
+                             capture_output=True, text=True, timeout=60)
+        assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1 and "--foxglove" in out.stderr
+
+
+def test_bridge_drops_and_counts_malformed_messages(ros_context) -> None:  # type: ignore[no-untyped-def]
+    """A malformed rod or contact state is dropped with its reason and counted; the bridge keeps
+    serving well-formed ones."""
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import Header
+
+    from contgrasp_msgs.msg import ContactState, RodState
+    from contgrasp_ros.nodes.foxglove_bridge import FoxgloveBridge
+
+    node = FoxgloveBridge(context=ros_context, parameter_overrides=[Parameter("port", value=0)])
+    try:
+        n = 5
+        good = RodState(header=Header(), step=0, s=[0.0, 0.05, 0.1, 0.15, 0.2], x=[0.0] * n, y=[0.0, 0.05, 0.1, 0.15, 0.2],
+                        theta=[1.5] * n, kappa=[0.0] * n, radius=[0.01] * n)
+        bad = RodState(header=Header(), step=1, s=good.s, x=[0.0] * 3, y=good.y, theta=good.theta, kappa=good.kappa,
+                       radius=good.radius)
+        node.on_rod_state(bad)
+        node.on_contact(ContactState(header=Header(), step=1, s=[0.0, 1.0], rho=[float("nan"), 1.0]))
+        assert node.drops.total == 2 and not any("internal error" in k for k in node.drops.counts)
+        node.on_rod_state(good)  # still serving
+        assert node.drops.total == 2
+    finally:
+        node.destroy_node()

@@ -14,6 +14,7 @@ at its header stamp (simulated time, so the app's timeline is the simulation's):
 
 The same node runs by hand (``ros2 run contgrasp_ros foxglove_bridge``) or inside
 ``contgrasp-launch --foxglove [PORT]``. It only listens: the loop does not wait for it.
+Malformed messages are dropped and counted like in every node (``/diagnostics``).
 """
 
 from __future__ import annotations
@@ -27,10 +28,20 @@ from foxglove.channels import SceneUpdateChannel
 from foxglove.messages import Color, LinePrimitive, LinePrimitiveLineType, Point3, SceneEntity, SceneUpdate, Timestamp
 from rclpy.node import Node
 
-from contgrasp_core.boundary import Boundary
+from contgrasp_core.errors import ContgraspError
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos, topics
-from contgrasp_ros.runtime import DropCounter, ObjectTracker, StampGate, declare, guarded, run_node, sim_time_by_default
+from contgrasp_ros.convert import ContactArrays, RodArrays, contact_arrays, rod_state_arrays
+from contgrasp_ros.runtime import (
+    Diagnostics,
+    DropCounter,
+    ObjectTracker,
+    StampGate,
+    declare,
+    guarded,
+    run_node,
+    sim_time_by_default,
+)
 
 __all__ = ["FoxgloveBridge", "SCENE", "STATUS"]
 
@@ -63,14 +74,16 @@ class FoxgloveBridge(Node):
         declare(self, "scene_period", 0.02, "simulated seconds between scene updates (0 = every rod state)", lo=0.0, hi=1e6)
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
-        self.object = ObjectTracker(self, self.drops, self.stamps)
+        self.diagnostics = Diagnostics(self, self.drops)
+        self.outline: np.ndarray | None = None  # the object's outline, sampled once per object
+        self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._sample_object)
         self.server = foxglove.start_server(name="contgrasp", host=host, port=port)
         self.port = self.server.port
         self.scene = SceneUpdateChannel(SCENE)
         self.json = {name: foxglove.Channel(name, message_encoding="json") for name in
                      (topics.ROD_STATE, topics.CONTACT, topics.QUALITY, STATUS)}
         self.next_scene_t = 0.0
-        self.contact: ContactState | None = None
+        self.contact: ContactArrays | None = None
         self.create_subscription(RodState, topics.ROD_STATE, self.on_rod_state, qos.STREAM)
         self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM)
         self.create_subscription(GraspQuality, topics.QUALITY, self.on_quality, qos.STREAM)
@@ -81,29 +94,37 @@ class FoxgloveBridge(Node):
         self.server.stop()
         super().destroy_node()
 
+    def _sample_object(self) -> None:
+        boundary = self.object.boundary
+        self.outline = None if boundary is None else boundary.sample(256)[1]
+
     @guarded(topics.ROD_STATE)
     def on_rod_state(self, msg: RodState) -> None:
+        try:
+            rod = rod_state_arrays(msg)
+        except ContgraspError as exc:
+            self.drops.drop_error(topics.ROD_STATE, exc)
+            return
         t_ns = _ns(msg.header)
-        x, y = np.asarray(msg.x), np.asarray(msg.y)
         self.json[topics.ROD_STATE].log({
-            "step": int(msg.step), "t": t_ns * 1e-9, "s": list(msg.s), "x": list(msg.x), "y": list(msg.y),
-            "theta": list(msg.theta), "kinetic_energy": float(msg.kinetic_energy)}, log_time=t_ns)
+            "step": rod.step, "t": t_ns * 1e-9, "s": rod.s.tolist(), "x": rod.x.tolist(), "y": rod.y.tolist(),
+            "theta": rod.theta.tolist(), "kinetic_energy": float(msg.kinetic_energy)}, log_time=t_ns)
         period = float(self.get_parameter("scene_period").value)
         if t_ns * 1e-9 + 1e-12 < self.next_scene_t and period > 0:
             return
         self.next_scene_t = t_ns * 1e-9 + period
-        self.scene.log(self._scene(msg, np.stack([x, y], -1), self.object.boundary), log_time=t_ns)
+        self.scene.log(self._scene(msg, rod), log_time=t_ns)
 
-    def _scene(self, msg: RodState, centreline: np.ndarray, boundary: Boundary | None) -> SceneUpdate:
+    def _scene(self, msg: RodState, rod: RodArrays) -> SceneUpdate:
         stamp = Timestamp(sec=int(msg.header.stamp.sec), nsec=int(msg.header.stamp.nanosec))
-        radius = float(np.mean(msg.radius)) if len(msg.radius) else 0.002
+        centreline = np.stack([rod.x, rod.y], -1)
+        radius = float(np.mean(rod.radius))
         lines = [_line(centreline, _ARM, thickness=radius)]
-        if boundary is not None:
-            _, pts = boundary.sample(256)
-            lines.append(_line(pts, _OBJECT, thickness=0.0015, loop=True))
+        if self.outline is not None:
+            lines.append(_line(self.outline, _OBJECT, thickness=0.0015, loop=True))
         c = self.contact
-        if c is not None and c.step == msg.step and len(c.in_contact) == len(centreline):
-            touching = centreline[np.asarray(c.in_contact, dtype=bool)]
+        if c is not None and c.step == rod.step and len(c.in_contact) == len(centreline):
+            touching = centreline[c.in_contact]
             if len(touching) > 1:
                 lines.append(_line(touching, _CONTACT, thickness=2.2 * radius))
         entity = SceneEntity(timestamp=stamp, frame_id="world", id="grasp", lines=lines)
@@ -111,11 +132,16 @@ class FoxgloveBridge(Node):
 
     @guarded(topics.CONTACT)
     def on_contact(self, msg: ContactState) -> None:
-        self.contact = msg
+        try:
+            c = contact_arrays(msg)
+        except ContgraspError as exc:
+            self.drops.drop_error(topics.CONTACT, exc)
+            return
+        self.contact = c
         t_ns = _ns(msg.header)
         self.json[topics.CONTACT].log({
-            "step": int(msg.step), "t": t_ns * 1e-9, "s": list(msg.s), "rho": list(msg.rho), "alpha": list(msg.alpha),
-            "delta": list(msg.delta), "in_contact": [bool(v) for v in msg.in_contact]}, log_time=t_ns)
+            "step": c.step, "t": t_ns * 1e-9, "s": c.s.tolist(), "rho": c.rho.tolist(), "alpha": c.alpha.tolist(),
+            "delta": c.delta.tolist(), "in_contact": c.in_contact.tolist()}, log_time=t_ns)
 
     @guarded(topics.QUALITY)
     def on_quality(self, msg: GraspQuality) -> None:
