@@ -15,7 +15,7 @@ parameters per node (the layout of ``contgrasp_ros/config/default.yaml``, tested
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,8 +23,12 @@ from contgrasp_core.control.gains import FeedbackGains, paper_gains
 from contgrasp_core.control.law import CENTIMETRE
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+from contgrasp_core.rod.body import ObjectDynamics
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.model import RodModel
+
+if TYPE_CHECKING:
+    from contgrasp_core.rod.integrator import RodSystem
 
 __all__ = ["GainSettings", "SensingSettings", "Scenario", "PAPER", "ROD_PARAMETERS", "NODES", "SIMULATOR", "SENSOR",
            "CONTROLLER", "QUALITY", "object_from_parameters"]
@@ -80,17 +84,19 @@ class SensingSettings:
 
 @dataclass(frozen=True)
 class Scenario:
-    """A closed-loop grasp: rod, object, loop, gains and sensing (SI units)."""
+    """A closed-loop grasp: rod, object (its shape and how it moves: ``dynamics``, fixed by
+    default, as in the paper), loop, gains and sensing (SI units)."""
 
     rod: RodModel
     object: ObjectSpec
     loop: ClosedLoopConfig
     gains: GainSettings = field(default_factory=GainSettings)
     sensing: SensingSettings = field(default_factory=SensingSettings)
+    dynamics: ObjectDynamics = field(default_factory=ObjectDynamics)
 
     def __post_init__(self) -> None:
         for name, cls in (("rod", RodModel), ("object", ObjectSpec), ("loop", ClosedLoopConfig),
-                          ("gains", GainSettings), ("sensing", SensingSettings)):
+                          ("gains", GainSettings), ("sensing", SensingSettings), ("dynamics", ObjectDynamics)):
             if not isinstance(getattr(self, name), cls):
                 raise InvalidParameterError(f"Scenario.{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
 
@@ -98,6 +104,15 @@ class Scenario:
     def feedback_gains(self) -> FeedbackGains:
         """The gains at the rod's joints (:meth:`GainSettings.gains`)."""
         return self.gains.gains(self.rod, self.object)
+
+    def system(self) -> RodSystem:
+        """The rod engine of this scenario: the rod, the object's obstacle and, unless the object
+        is fixed, its rigid body."""
+        from contgrasp_core.rod.integrator import RodSystem
+        from contgrasp_core.rod.obstacle import Obstacle
+
+        boundary = self.object.boundary()
+        return RodSystem(self.rod, Obstacle(boundary), body=self.dynamics.body(boundary))
 
     @property
     def reference(self) -> tuple[float, float]:

@@ -18,6 +18,7 @@ from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.control import FeedbackGains, paper_gains
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.rod import Obstacle, RodModel, RodSystem
+from contgrasp_core.rod.body import MODES, ObjectDynamics
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_core.scenario import PAPER
@@ -49,6 +50,20 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
                         f"{PAPER.sensing.contact_tolerance} m, as the ROS graph's sensor)")
     if not parents:
         p.add_argument("--json", action="store_true", help="print the result as JSON")
+    g = p.add_argument_group("a movable object (beyond the paper; docs/rod.md)")
+    g.add_argument("--object-mode", choices=MODES, default="fixed",
+                   help="fixed (the paper's immovable object, default), spring (held to its start pose by a "
+                   "spring-damper) or free")
+    d = ObjectDynamics()
+    g.add_argument("--object-density", type=float, default=d.areal_density,
+                   help=f"areal density, kg/m^2: mass and inertia from the enclosed area (default {d.areal_density:g})")
+    g.add_argument("--object-mass", type=float, default=None, help="mass, kg (instead of the density's)")
+    g.add_argument("--object-inertia", type=float, default=None,
+                   help="moment of inertia about the centroid, kg m^2 (instead of the density's)")
+    g.add_argument("--object-stiffness", type=float, nargs=3, metavar=("KX", "KY", "KPSI"), default=None,
+                   help="spring to the start pose: N/m, N/m, N m/rad (spring mode; default 50 50 0.05)")
+    g.add_argument("--object-damping", type=float, nargs=3, metavar=("CX", "CY", "CPSI"), default=None,
+                   help="damper to the start pose: N s/m, N s/m, N m s/rad (spring mode; default 1 1 0.001)")
     p.add_argument("--plot", metavar="FILE", help="write the paper's Fig. 4 (PNG/PDF/SVG)")
     p.add_argument("--animate", metavar="FILE.gif", help="write an animation of the grasp")
     p.set_defaults(func=run)
@@ -82,7 +97,17 @@ def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_
         **asdict(stats),
         "damping_per_s": m.damping,
         "control": "continuous" if res.config.control_period is None else f"{hold} {res.config.control_period} s",
+        **_object_motion(res),
     }
+
+
+def _object_motion(res: ClosedLoopResult) -> dict[str, Any]:
+    """A movable object's final displacement from its start pose and velocity (empty when fixed)."""
+    body = res.final_state.body
+    if body is None:
+        return {}
+    return {"object_displacement": {"x": float(body.q[0]), "y": float(body.q[1]), "angle": float(body.q[2])},
+            "object_velocity": {"x": float(body.v[0]), "y": float(body.v[1]), "angle": float(body.v[2])}}
 
 
 def loop_config(args: argparse.Namespace, record_period: float | None = 0.01) -> ClosedLoopConfig:
@@ -183,6 +208,23 @@ def _check_animation_path(path: str) -> None:
         raise InvalidParameterError(f"--animate {path}: not a writable file name")
 
 
+SPRING_DEFAULTS = ((50.0, 50.0, 0.05), (1.0, 1.0, 0.001))
+"""The spring mode's stiffness and damping when not given (N/m, N/m, N m/rad; N s/m, N s/m, N m s/rad)."""
+
+
+def object_dynamics(args: argparse.Namespace) -> ObjectDynamics:
+    """How the object moves, from ``--object-mode`` and the ``--object-*`` options (a spring's
+    stiffness or damping without ``--object-mode spring`` is a usage error)."""
+    spring = args.object_mode == "spring"
+    if not spring and (args.object_stiffness is not None or args.object_damping is not None):
+        raise InvalidParameterError("--object-stiffness/--object-damping set the spring: give --object-mode spring")
+    stiffness = SPRING_DEFAULTS[0] if args.object_stiffness is None else tuple(args.object_stiffness)
+    damping = SPRING_DEFAULTS[1] if args.object_damping is None else tuple(args.object_damping)
+    return ObjectDynamics(mode=args.object_mode, areal_density=args.object_density, mass=args.object_mass,
+                          inertia=args.object_inertia, stiffness=stiffness if spring else (0.0, 0.0, 0.0),
+                          damping=damping if spring else (0.0, 0.0, 0.0))
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run the scenario; write the plot/animation if asked; return the JSON-able result."""
     if not 3 <= args.nodes <= MAX_NODES:
@@ -207,12 +249,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     warning = zoh_warning(model, args.control_period, args.hold)
     if warning:
         print(f"contgrasp simulate: {warning}", file=sys.stderr)
-    system, gains = RodSystem(model, Obstacle(boundary)), paper_gains(model, r_obj)
+    system = RodSystem(model, Obstacle(boundary), body=object_dynamics(args).body(boundary))
+    gains = paper_gains(model, r_obj)
     if args.hold == "first-order":
         res = run_first_order(system, gains, cfg)
     else:
         res = run_closed_loop(system, gains, cfg)
     out = summarize(res, args.contact_tol, "zoh" if args.hold == "zero-order" else "first-order hold")
+    out["object_mode"] = args.object_mode
     if args.plot:
         plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" else None)
     if args.animate:

@@ -112,10 +112,15 @@ class ClosedLoopResult:
     integrator_steps: int = 0
 
 
-def _speeds(model: RodModel, st: RodState) -> float:
+def _speeds(system: RodSystem, st: RodState) -> float:
+    """The largest node speed, and a movable object's largest speed within the arm's reach (m/s)."""
+    model = system.model
     _, b = chain.frames(st.theta)
     v = np.cumsum(model.h * b * st.omega[:, None], axis=0)
-    return float(np.hypot(v[:, 0], v[:, 1]).max())
+    speed = float(np.hypot(v[:, 0], v[:, 1]).max())
+    if system.body is not None and st.body is not None:
+        speed = max(speed, system.body.max_speed(st.body, chain.nodes(model, st.theta)))
+    return speed
 
 
 def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig = ClosedLoopConfig(),
@@ -137,7 +142,6 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     dt = period / config.substeps
     rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / period)))
     continuous = config.control_period is None
-    fb = StateFeedback(m, obstacle, gains) if continuous else None
     r_nodes = m.radius(m.s_nodes)
     rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
     iters = 0
@@ -147,10 +151,12 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     settled = False
     wall0 = time.perf_counter()
     for k in range(n_ctrl + 1):
+        if system.body is not None:  # a movable object: sensed where it is at the start of the period
+            obstacle = system.obstacle_at(st)
         shape = chain.arm_shape(m, st.theta)
         sn = sense(shape, obstacle, r_nodes)
         u = feedback_couple(sn.rho[:-1], sn.alpha[:-1], ei, gains.mu1, gains.mu2, length_unit=gains.length_unit)
-        speed = _speeds(m, st)
+        speed = _speeds(system, st)
         done = False
         if speed < config.settle_speed:
             quiet_since = st.t if quiet_since is None else quiet_since
@@ -170,7 +176,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
             break
         if k == n_ctrl:
             break
-        loads = RodLoads(feedback=fb) if continuous else RodLoads(couple=u)
+        loads = RodLoads(feedback=StateFeedback(m, obstacle, gains)) if continuous else RodLoads(couple=u)
         st, info = system.advance(st, period, loads, dt_try=dt_next)
         dt_next = min(info["dt_next"], dt)
         iters += info["iterations"]

@@ -49,6 +49,8 @@ import numpy as np
 from contgrasp_core.blas import single_thread_blas
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.rod import _kernels, chain
+from contgrasp_core.rod.body import BodyState, RigidBody, to_object_frame
+from contgrasp_core.rod.coupling import body_coupling
 from contgrasp_core.rod.loads import ContactFrame, contact_forces, contact_frame, contact_tensors, drag_forces
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
@@ -68,11 +70,13 @@ class StepFailedError(RunFailure):
 
 @dataclass(frozen=True)
 class RodState:
-    """Time ``t`` (s), element angles ``theta`` (N,) (rad) and rates ``omega`` (N,) (rad/s)."""
+    """Time ``t`` (s), element angles ``theta`` (N,) (rad) and rates ``omega`` (N,) (rad/s); the
+    movable object's state ``body`` (None while the object is fixed)."""
 
     t: float
     theta: np.ndarray
     omega: np.ndarray
+    body: BodyState | None = None
 
 
 class CoupleFeedback(Protocol):
@@ -90,11 +94,13 @@ class RodLoads:
     (eq. (17) ``u``, held over the step), point forces on the nodes (N+1, 2) in N, and an
     optional state feedback (a :class:`CoupleFeedback`, e.g.
     :class:`~contgrasp_core.control.StateFeedback`) whose couple is evaluated implicitly at the new
-    state and added to ``couple``."""
+    state and added to ``couple``; ``wrench`` (3,) applied to a movable object (force x, y in N
+    at its centroid, torque in N m)."""
 
     couple: np.ndarray | None = None
     node_forces: np.ndarray | None = None
     feedback: CoupleFeedback | None = None
+    wrench: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -137,28 +143,40 @@ class _Eval(_StepEval):
 
 @dataclass(frozen=True)
 class RodSystem:
-    """A rod (:class:`RodModel`) and an optional fixed obstacle; the integrator's entry point."""
+    """A rod (:class:`RodModel`) and an optional obstacle, fixed or (with ``body``) a rigid body
+    that the contact moves (:mod:`contgrasp_core.rod.body`); the integrator's entry point.
+
+    With a body the step's unknowns are the rod's rates and the object's velocity ``(vx, vy,
+    omega)``, solved together by Newton with the exact matrix (:mod:`contgrasp_core.rod.coupling`);
+    without one (a fixed object) the step is exactly what it was before bodies existed."""
 
     model: RodModel
     obstacle: Obstacle | None = None
     options: StepOptions = field(default_factory=StepOptions)
+    body: RigidBody | None = None
 
     def __post_init__(self) -> None:
+        if self.body is not None and self.obstacle is None:
+            raise InvalidParameterError("a movable object (body) needs its obstacle (the object's boundary)")
         _kernels.load()  # numba and the compiled kernels, at set-up rather than in the first step
 
     # ---------------------------------------------------------------- states and energies
     def straight_state(self, t: float = 0.0) -> RodState:
         """The straight rod at rest along the base angle."""
         n = self.model.n_elements
-        return RodState(t=t, theta=np.full(n, float(self.model.base_angle)), omega=np.zeros(n))
+        return RodState(t=t, theta=np.full(n, float(self.model.base_angle)), omega=np.zeros(n),
+                        body=None if self.body is None else BodyState.rest())
 
     def kinetic_energy(self, state: RodState) -> float:
-        """``1/2 omega^T M omega`` (J)."""
+        """``1/2 omega^T M omega`` of the rod, plus the object's ``1/2 v^T M_o v`` (J)."""
+        extra = 0.0
+        if self.body is not None and state.body is not None:
+            extra = 0.5 * float(np.sum(self.body.mass_matrix * state.body.v**2))
         if _kernels.ENABLED:
             m = self.model
             return float(_kernels.kinetic_energy(_kernels.f64(state.theta), _kernels.f64(state.omega), m.h,
-                                                 m.weight_matrix, m.rot_inertia))
-        return float(0.5 * state.omega @ chain.mass_matrix(self.model, state.theta) @ state.omega)
+                                                 m.weight_matrix, m.rot_inertia)) + extra
+        return float(0.5 * state.omega @ chain.mass_matrix(self.model, state.theta) @ state.omega) + extra
 
     def elastic_energy(self, state: RodState, loads: RodLoads | None = None) -> float:
         """Bending energy ``sum 1/2 EI kappa^2 D`` plus the potential ``sum u kappa D`` of a held
@@ -170,6 +188,10 @@ class RodSystem:
             e += np.sum(np.asarray(loads.couple) * kap * m.joint_len)
         if loads is not None and loads.node_forces is not None:
             e -= np.sum(np.asarray(loads.node_forces) * chain.nodes(m, state.theta))
+        if self.body is not None and state.body is not None:
+            e += 0.5 * np.sum(np.asarray(self.body.stiffness) * state.body.q**2)
+            if loads is not None and loads.wrench is not None:
+                e -= np.sum(np.asarray(loads.wrench) * state.body.q)
         return float(e)
 
     def energy(self, state: RodState, loads: RodLoads | None = None) -> float:
@@ -317,6 +339,13 @@ class RodSystem:
         (default: the whole duration). ``info["dt_next"]`` is the step to try next time."""
         if not (np.isfinite(duration) and duration > 0):
             raise InvalidParameterError(f"dt/duration must be finite and > 0, got {duration!r}")
+        if loads.wrench is not None:
+            w = np.asarray(loads.wrench, dtype=float)
+            if self.body is None:
+                raise InvalidParameterError("a wrench on the object needs a movable object (the object is fixed)")
+            if w.shape != (3,) or not np.all(np.isfinite(w)):
+                raise InvalidParameterError(f"the object's wrench must be three finite numbers (fx, fy, torque), "
+                                            f"got {loads.wrench!r}")
         with single_thread_blas():  # (contgrasp_core.blas: small solves, one thread)
             return self._advance(state, duration, loads, dt_try)
 
@@ -339,7 +368,7 @@ class RodSystem:
                     raise StepFailedError(f"Newton failed to converge at t={state.t:.6g} s even with dt={h:.3g} s")
                 dt = max(h * factor, dt_min)
                 continue
-            rate_change = (new.omega - state.omega) / h
+            rate_change = (self.rates(new) - self.rates(state)) / h
             state = new
             if h >= dt * (1 - 1e-9) or factor < 1.0:  # (a shortened last step says nothing about growth)
                 dt = min(h * factor, duration)
@@ -351,17 +380,44 @@ class RodSystem:
         """Residual and Newton matrix of the implicit step from ``state`` over ``dt`` at the
         iterate ``w1`` (the new rates): backward Euler ``R = M(theta_1)(w1 - w0) - dt q(theta_1,
         w1)`` with ``theta_1 = theta_0 + dt w1``, or the implicit midpoint rule with both evaluated
-        at the midpoint; ``frame`` is the step's frozen contact frame."""
+        at the midpoint; ``frame`` is the step's frozen contact frame.
+
+        With a movable object ``w1`` is (N+3,): the rod's rates, then the object's velocity, whose
+        residual ``M_o (v1 - v0) - dt F`` (Newton-Euler, :mod:`.body`) joins the system with the
+        coupling blocks of :func:`.coupling.body_coupling`."""
         th0, w0 = state.theta, state.omega
-        if self.options.method == "midpoint":
-            w_ = 0.5 * (w0 + w1)
-            th_, cw, cq = th0 + 0.5 * dt * w_, 0.5, 0.25 * dt
-        else:
-            w_, th_, cw, cq = w1, th0 + dt * w1, 1.0, dt
+        n = len(th0)
+        midpoint = self.options.method == "midpoint"
+        cw, cq = (0.5, 0.25 * dt) if midpoint else (1.0, dt)
+        wr1 = w1[:n] if self.body is not None else w1
+        w_ = 0.5 * (w0 + wr1) if midpoint else wr1
+        th_ = th0 + (0.5 if midpoint else 1.0) * dt * w_
+        if self.body is None:
+            return self._rod_newton_system(th_, w_, wr1 - w0, dt, cw, cq, loads, frame)
+        res, jac, _ = self._rod_newton_system(th_, w_, wr1 - w0, dt, cw, cq, loads, None)
+        body, bs = self.body, state.body
+        assert bs is not None  # (a system with a body steps states with one)
+        vb1 = w1[n:]
+        vb_ = 0.5 * (bs.v + vb1) if midpoint else vb1
+        q_ = bs.q + (0.5 if midpoint else 1.0) * dt * vb_
+        cp = body_coupling(self.model, body, frame, th_, w_, q_, vb_, loads.wrench)
+        full = np.empty((n + 3, n + 3))
+        full[:n, :n] = jac - dt * (cw * cp.rod_omega + cq * cp.rod_theta)
+        full[:n, n:] = -dt * (cw * cp.rod_v + cq * cp.rod_q)
+        full[n:, :n] = -dt * (cw * cp.wrench_omega + cq * cp.wrench_theta)
+        full[n:, n:] = np.diag(body.mass_matrix) - dt * (cw * cp.wrench_v + cq * cp.wrench_q)
+        res = np.concatenate([res - dt * cp.rod, body.mass_matrix * (vb1 - bs.v) - dt * cp.wrench])
+        return res, full, _StepEval(penetration=cp.penetration)
+
+    def _rod_newton_system(self, th_: np.ndarray, w_: np.ndarray, delta: np.ndarray, dt: float, cw: float,
+                           cq: float, loads: RodLoads,
+                           frame: ContactFrame | None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
+        """The rod's residual and Newton matrix, forces evaluated at (``th_``, ``w_``), with
+        ``delta`` the rate increment of the step (compiled kernels or the numpy reference)."""
         if _kernels.ENABLED:
-            return self._newton_system_compiled(th_, w_, w1 - w0, dt, cw, cq, loads, frame)
-        ev = self._evaluate(th_, w_, loads, frame, w1 - w0)
-        res = ev.mass @ (w1 - w0) - dt * ev.q
+            return self._newton_system_compiled(th_, w_, delta, dt, cw, cq, loads, frame)
+        ev = self._evaluate(th_, w_, loads, frame, delta)
+        res = ev.mass @ delta - dt * ev.q
         return res, ev.mass + dt * cw * ev.jac_w + cq * (dt * ev.jac_q + ev.jac_m), ev
 
     def contact_frame(self, state: RodState, dt: float) -> ContactFrame | None:
@@ -375,7 +431,43 @@ class RodSystem:
             c0 = 0.5 * (x[:-1] + x[1:])
         else:
             c0 = chain.centres(m, th0 + 0.5 * dt * w0)
-        return contact_frame(m, self.obstacle, c0, self.options.contact_margin + 2.0 * dt * np.abs(w0).max() * m.length)
+        margin = self.options.contact_margin + 2.0 * dt * np.abs(w0).max() * m.length
+        if self.body is None:
+            return contact_frame(m, self.obstacle, c0, margin)
+        # a movable object: the frame in the object's start-pose frame, at its mid-step pose
+        bs = state.body
+        assert bs is not None  # (a system with a body steps states with one)
+        centroid = np.asarray(self.body.centroid)
+        q_mid = bs.q + 0.5 * dt * bs.v
+        margin += 2.0 * dt * self.body.max_speed(bs, c0)
+        return contact_frame(m, self.obstacle, to_object_frame(c0, q_mid, centroid), margin)
+
+    def obstacle_at(self, state: RodState) -> Obstacle:
+        """The object where it is in ``state`` (the obstacle itself while it is fixed)."""
+        if self.obstacle is None:
+            raise InvalidParameterError("the system has no obstacle")
+        if self.body is None or state.body is None:
+            return self.obstacle
+        return self.obstacle.moved(state.body.q, np.asarray(self.body.centroid))
+
+    def rates(self, state: RodState) -> np.ndarray:
+        """The step's unknowns at ``state``: the rod's rates, and the object's velocity when it moves."""
+        if self.body is None:
+            return state.omega
+        assert state.body is not None  # (a system with a body steps states with one)
+        return np.concatenate([state.omega, state.body.v])
+
+    def _new_state(self, state: RodState, w1: np.ndarray, dt: float) -> RodState:
+        """The state after a step to the unknowns ``w1`` (:meth:`rates`) under the chosen scheme."""
+        n = len(state.theta)
+        if self.body is None:
+            return RodState(t=state.t + dt, theta=self._new_angles(state, w1, dt), omega=w1)
+        bs = state.body
+        assert bs is not None  # (a system with a body steps states with one)
+        vb1 = w1[n:]
+        vb = 0.5 * (bs.v + vb1) if self.options.method == "midpoint" else vb1
+        return RodState(t=state.t + dt, theta=self._new_angles(state, w1[:n], dt), omega=w1[:n],
+                        body=BodyState(q=bs.q + dt * vb, v=vb1))
 
     def _new_angles(self, state: RodState, w1: np.ndarray, dt: float) -> np.ndarray:
         """The angles after a step to the rates ``w1`` under the chosen scheme."""
@@ -390,44 +482,51 @@ class RodSystem:
         for the stiff linear part, first order like backward Euler; None if it would rotate an
         element by more than ``max_angle_step``. Counted in ``info["linearised_steps"]``."""
         frame = self.contact_frame(state, dt)
-        res, jac, ev = self.newton_system(state, state.omega, dt, loads, frame)
-        w1 = state.omega + self._solve(jac, -res)
-        th1 = self._new_angles(state, w1, dt)
+        z0 = self.rates(state)
+        res, jac, ev = self.newton_system(state, z0, dt, loads, frame)
+        w1 = z0 + self._solve(jac, -res)
+        new = self._new_state(state, w1, dt)
         info["iterations"] += 1
-        if not (np.all(np.isfinite(w1)) and np.abs(th1 - state.theta).max() <= self.options.max_angle_step):
+        if not (np.all(np.isfinite(w1)) and np.abs(new.theta - state.theta).max() <= self.options.max_angle_step):
             return None
         info["linearised_steps"] = info.get("linearised_steps", 0) + 1
         info["substeps"] += 1
         info["penetration"] = max(info["penetration"], ev.penetration)
-        return RodState(t=state.t + dt, theta=th1, omega=w1)
+        return new
 
     def _try_step(self, state: RodState, dt: float, loads: RodLoads, info: dict,
                   rate_change: np.ndarray | None = None) -> tuple[RodState | None, float]:
         """One implicit step; returns the new state (None if rejected) and the factor for the next
         step (module docstring). ``rate_change`` extrapolates the first Newton iterate."""
         opt = self.options
-        th0, w0 = state.theta, state.omega
+        th0, n = state.theta, len(state.theta)
+        w0 = self.rates(state)
         frame = self.contact_frame(state, dt)
         w1 = w0.copy() if rate_change is None else w0 + dt * rate_change
         prev = np.inf
         for it in range(1, opt.max_iter + 1):
             res, jac, ev = self.newton_system(state, w1, dt, loads, frame)
             dw = self._solve(jac, -res)
-            size = dt * np.abs(dw).max()
+            if self.body is not None:  # the object's translation in rod lengths, beside the angles
+                dw_scaled = dw.copy()
+                dw_scaled[n:n + 2] /= self.model.length
+                size = dt * np.abs(dw_scaled).max()
+            else:
+                size = dt * np.abs(dw).max()
             if not np.isfinite(size) or (it >= 3 and size > 2.0 * prev):  # diverging: give up early
                 info["iterations"] += it
                 return None, 0.5
             prev = size
             w1 = w1 + dw
-            if size <= opt.tol * (1.0 + np.abs(th0).max() + dt * np.abs(w1).max()):
+            if size <= opt.tol * (1.0 + np.abs(th0).max() + dt * np.abs(w1[:n]).max()):
                 info["iterations"] += it
-                th1 = self._new_angles(state, w1, dt)
-                turn = np.abs(th1 - th0).max() / opt.max_angle_step
+                new = self._new_state(state, w1, dt)
+                turn = np.abs(new.theta - th0).max() / opt.max_angle_step
                 if turn > 1.0:
                     return None, 0.9 / turn  # accuracy guard: too large a rotation in one step
                 info["substeps"] += 1
                 info["penetration"] = max(info["penetration"], ev.penetration)
                 grow = 2.0 if it <= opt.max_iter // 2 else 1.0
-                return RodState(t=state.t + dt, theta=th1, omega=w1), min(grow, 0.9 / max(turn, 1e-12))
+                return new, min(grow, 0.9 / max(turn, 1e-12))
         info["iterations"] += opt.max_iter
         return None, 0.5

@@ -13,6 +13,9 @@ per call; the rod engine queries the boundary every time step. :class:`Obstacle`
 
 It returns the same geometric quantities as the paper's sensing (eq. (4)):
 foot, object arclength, tangent angle ``phi``, curvature, and the signed distance (> 0 outside).
+:meth:`Obstacle.moved` is the same object displaced rigidly (a movable object,
+:mod:`contgrasp_core.rod.body`): the points are taken into the object's start-pose frame,
+projected there, and the results taken back.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from scipy.spatial import cKDTree
 
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.rod import _kernels
+from contgrasp_core.rod.body import rotation, to_object_frame, to_world
 from contgrasp_core.errors import InvalidParameterError
 
 __all__ = ["Obstacle", "ObstacleProjection"]
@@ -98,3 +102,27 @@ class Obstacle:
         sd = np.sum((q - foot) * n_out, axis=1)
         return ObstacleProjection(foot=foot, s_o=np.mod(self._s[i] + ds, self.length), phi=phi_f,
                                   kappa_o=k, signed_distance=sd, normal_out=n_out)
+
+    def moved(self, q: np.ndarray, centroid: np.ndarray) -> Obstacle:
+        """This object displaced by ``q = (dx, dy, dpsi)`` from its start pose (a translation of
+        ``centroid`` and a rotation about it; :func:`contgrasp_core.rod.body.to_world`)."""
+        return _MovedObstacle(self, q, centroid)
+
+
+class _MovedObstacle(Obstacle):
+    """An :class:`Obstacle` displaced rigidly; shares the start pose's tables."""
+
+    def __init__(self, base: Obstacle, q: np.ndarray, centroid: np.ndarray) -> None:  # (no table to build)
+        self.boundary, self.length = base.boundary, base.length
+        self._base = base
+        self._q = np.array(q, dtype=float)
+        self._centroid = np.array(centroid, dtype=float)
+
+    def project(self, points: np.ndarray) -> ObstacleProjection:
+        q, c = self._q, self._centroid
+        pr = self._base.project(to_object_frame(np.asarray(points, dtype=float), q, c))
+        return ObstacleProjection(foot=to_world(pr.foot, q, c), s_o=pr.s_o, phi=pr.phi + q[2], kappa_o=pr.kappa_o,
+                                  signed_distance=pr.signed_distance, normal_out=pr.normal_out @ rotation(q[2]).T)
+
+    def moved(self, q: np.ndarray, centroid: np.ndarray) -> Obstacle:
+        return self._base.moved(q, centroid)

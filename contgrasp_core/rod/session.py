@@ -33,6 +33,7 @@ from contgrasp_core.control.rod_feedback import FeedbackExpansion, HeldExpansion
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.scenario import Scenario
 from contgrasp_core.rod import chain
+from contgrasp_core.rod.body import BodyState, shape_in_object_frame
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
 from contgrasp_core.rod.obstacle import Obstacle
@@ -43,6 +44,7 @@ __all__ = [
     "DivergenceLimits",
     "SimulationDivergedError",
     "run_sampled",
+    "sensed_shape",
 ]
 
 Array = NDArray[np.float64]
@@ -52,7 +54,8 @@ Array = NDArray[np.float64]
 class Observation:
     """Rod state k at the N+1 nodes (SI): arclength ``s``, positions ``x`` (N+1, 2), tangent
     angles ``theta``, curvature ``kappa`` (joints; 0 at the free tip), radius, velocities ``v``
-    (N+1, 2); kinetic energy, the largest surface penetration and node speed."""
+    (N+1, 2); kinetic energy, the largest surface penetration and node speed (the object's
+    points included when it moves); ``body`` the movable object's state (None: fixed)."""
 
     k: int
     t: float
@@ -65,6 +68,7 @@ class Observation:
     kinetic_energy: float
     penetration: float
     max_speed: float
+    body: BodyState | None = None
 
     @property
     def shape(self) -> ArmShape:
@@ -163,9 +167,13 @@ class LoopSession:
         v = np.zeros_like(x)
         np.cumsum(m.h * b * st.omega[:, None], axis=0, out=v[1:])
         speed = float(np.hypot(v[:, 0], v[:, 1]).max())
+        body = self.system.body
+        if body is not None and st.body is not None:
+            speed = max(speed, body.max_speed(st.body, x))
         radius = m.radius(m.s_nodes)
-        gap_nodes = self.obstacle.project(x).signed_distance - radius
-        gap_c = self.obstacle.project(0.5 * (x[:-1] + x[1:])).signed_distance - m.r_centres  # (chain.centres)
+        obstacle = self.system.obstacle_at(st)
+        gap_nodes = obstacle.project(x).signed_distance - radius
+        gap_c = obstacle.project(0.5 * (x[:-1] + x[1:])).signed_distance - m.r_centres  # (chain.centres)
         pen = max(float(-gap_nodes.min()), float(-gap_c.min()), 0.0)
         self.max_penetration = max(self.max_penetration, pen)
         obs = Observation(
@@ -180,6 +188,7 @@ class LoopSession:
             kinetic_energy=self.system.kinetic_energy(st),
             penetration=pen,
             max_speed=speed,
+            body=st.body,
         )
         self.settle.update(float(st.t), speed)
         self.finished = self.settled or self.k >= self.n_control
@@ -204,11 +213,12 @@ class LoopSession:
                 f"beyond the limit {limits.max_penetration:.3g} m (max_penetration_limit)")
         return obs
 
-    def advance(self, couple: Array | FeedbackExpansion) -> None:
+    def advance(self, couple: Array | FeedbackExpansion, wrench: Array | None = None) -> None:
         """Hold the couple at the joints for one control period (integrator substeps).
 
         A plain array (N,) is a zero-order hold; a :class:`FeedbackExpansion` is held to first
-        order in the state (:class:`HeldExpansion`).
+        order in the state (:class:`HeldExpansion`), sensed against the object where it is at
+        the start of the period. ``wrench`` (3,) is held on a movable object.
         """
         expansion = couple if isinstance(couple, FeedbackExpansion) else None
         u = np.asarray(expansion.u if expansion is not None else couple, dtype=float)
@@ -221,14 +231,23 @@ class LoopSession:
                 raise InvalidParameterError(f"the feedback expansion needs {n} finite values per field")
         if self.finished:
             raise InvalidParameterError("the run is finished; reset to start again")
-        held = None if expansion is None else HeldExpansion(self.system.model, self.obstacle, expansion)
-        loads = RodLoads(couple=u, feedback=held)
+        obstacle = self.system.obstacle_at(self.state)
+        held = None if expansion is None else HeldExpansion(self.system.model, obstacle, expansion)
+        loads = RodLoads(couple=u, feedback=held, wrench=wrench)
         st = self.state
         for _ in range(self.config.substeps):
             st, info = self.system.step(st, self.dt, loads)
             self.iterations += info["iterations"]
         self.state = st
         self.k += 1
+
+
+def sensed_shape(system: RodSystem, obs: Observation) -> ArmShape:
+    """The arm as the sensor sees it against the object's own boundary: the observed centreline,
+    or, for a movable object, the centreline in the object's frame (:func:`.body.shape_in_object_frame`)."""
+    if system.body is None or obs.body is None:
+        return obs.shape
+    return shape_in_object_frame(obs.shape, obs.body.q, np.asarray(system.body.centroid))
 
 
 def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSession:
@@ -240,12 +259,12 @@ def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSess
     from contgrasp_core.control import feedback_at_joints
 
     boundary = scenario.object.boundary()
-    system = RodSystem(scenario.rod, Obstacle(boundary)) if system is None else system
+    system = scenario.system() if system is None else system
     session = LoopSession(system, scenario.loop)
     gains = scenario.feedback_gains
     while True:
         obs = session.observe()
         if session.finished:
             return session
-        c = sense(obs.shape, boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
+        c = sense(sensed_shape(system, obs), boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
         session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha))
