@@ -24,6 +24,7 @@ from contgrasp_core.control.law import CENTIMETRE
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
 from contgrasp_core.rod.body import ObjectDynamics
+from contgrasp_core.rod.disturbance import Disturbance
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.model import RodModel
 
@@ -85,7 +86,8 @@ class SensingSettings:
 @dataclass(frozen=True)
 class Scenario:
     """A closed-loop grasp: rod, object (its shape and how it moves: ``dynamics``, fixed by
-    default, as in the paper), loop, gains and sensing (SI units)."""
+    default, as in the paper), loop, gains and sensing (SI units); a scripted ``disturbance``
+    on a movable object (None: none)."""
 
     rod: RodModel
     object: ObjectSpec
@@ -93,12 +95,18 @@ class Scenario:
     gains: GainSettings = field(default_factory=GainSettings)
     sensing: SensingSettings = field(default_factory=SensingSettings)
     dynamics: ObjectDynamics = field(default_factory=ObjectDynamics)
+    disturbance: Disturbance | None = None
 
     def __post_init__(self) -> None:
         for name, cls in (("rod", RodModel), ("object", ObjectSpec), ("loop", ClosedLoopConfig),
                           ("gains", GainSettings), ("sensing", SensingSettings), ("dynamics", ObjectDynamics)):
             if not isinstance(getattr(self, name), cls):
                 raise InvalidParameterError(f"Scenario.{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
+        if self.disturbance is not None:
+            if not isinstance(self.disturbance, Disturbance):
+                raise InvalidParameterError(f"Scenario.disturbance must be a Disturbance, got {type(self.disturbance).__name__}")
+            if self.dynamics.mode == "fixed":
+                raise InvalidParameterError("a disturbance pushes a movable object: set the object's mode to spring or free")
 
     @property
     def feedback_gains(self) -> FeedbackGains:

@@ -252,3 +252,25 @@ def test_simulate_object_mode_reports_the_object_and_rejects_bad_input() -> None
                 ["--object-mode", "spring", "--object-damping", "1", "nan", "1"], ["--object-stiffness", "1", "1", "1"]):
         p = subprocess.run(cmd + bad, capture_output=True, text=True)
         assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, (bad, p.stderr)
+
+
+def test_disturbance_profiles_and_validation() -> None:
+    from contgrasp_core.rod.disturbance import Disturbance
+
+    w = (0.2, -0.1, 0.003)
+    step, ramp, pulse = Disturbance("step", w, 1.0), Disturbance("ramp", w, 1.0, 0.5), Disturbance("pulse", w, 1.0, 0.25)
+    for d in (step, ramp, pulse):
+        np.testing.assert_array_equal(d.wrench_at(0.999), np.zeros(3))
+    np.testing.assert_array_equal(step.wrench_at(1.0), w)
+    np.testing.assert_allclose(ramp.wrench_at(1.25), 0.5 * np.array(w))
+    np.testing.assert_array_equal(ramp.wrench_at(3.0), w)
+    np.testing.assert_array_equal(pulse.wrench_at(1.2), w)
+    np.testing.assert_array_equal(pulse.wrench_at(1.25), np.zeros(3))
+    for bad in (dict(kind="kick", wrench=w), dict(kind="step", wrench=(1.0, np.nan, 0.0)), dict(kind="step", wrench=(1.0, 2.0)),
+                dict(kind="pulse", wrench=w, duration=0.0), dict(kind="step", wrench=w, start=-1.0)):
+        with pytest.raises(InvalidParameterError, match="disturbance|duration"):
+            Disturbance(**bad)  # type: ignore[arg-type]
+    from contgrasp_core.scenario import PAPER
+    from dataclasses import replace
+    with pytest.raises(InvalidParameterError, match="movable"):
+        replace(PAPER, disturbance=step)

@@ -254,8 +254,9 @@ def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSess
     """The scenario's sampled loop with the core functions only, stepped exactly as the ROS nodes
     step it (observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
     :class:`~contgrasp_core.boundary.Boundary` and the sensor's tolerance,
-    :func:`~contgrasp_core.control.feedback_at_joints`, advance): a lock-step ROS run of the same
-    scenario ends in the same state bit for bit. Returns the finished session."""
+    :func:`~contgrasp_core.control.feedback_at_joints`, advance with the scenario's disturbance
+    at the period's start): a lock-step ROS run of the same scenario ends in the same state bit
+    for bit. Returns the finished session."""
     from contgrasp_core.control import feedback_at_joints
 
     boundary = scenario.object.boundary()
@@ -267,4 +268,5 @@ def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSess
         if session.finished:
             return session
         c = sense(sensed_shape(system, obs), boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
-        session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha))
+        wrench = None if scenario.disturbance is None else scenario.disturbance.wrench_at(obs.t)
+        session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha), wrench)
