@@ -274,3 +274,46 @@ def test_disturbance_profiles_and_validation() -> None:
     from dataclasses import replace
     with pytest.raises(InvalidParameterError, match="movable"):
         replace(PAPER, disturbance=step)
+
+
+@pytest.mark.parametrize("movable", [True, False])
+@pytest.mark.parametrize("method", ["euler", "midpoint"])
+def test_stick_slip_newton_matrix_is_exact(movable: bool, method: str) -> None:
+    """The stick-slip tangential force (an elastic spring to the anchor inside the Coulomb cone,
+    Coulomb's force at its edge) has the exact derivative in the Newton matrix, against a
+    moving object and a fixed one; the case has both sticking and slipping contacts."""
+    from dataclasses import replace
+
+    system, state, loads = _coupled_case(method)
+    model = replace(system.model, friction_model="stick", friction=0.3)
+    if movable:
+        system = replace(system, model=model)
+    else:
+        system = RodSystem(model, system.obstacle, system.options)
+        state = replace(state, body=None)
+        loads = replace(loads, wrench=None)
+    state = replace(state, omega=np.zeros_like(state.omega),
+                    body=None if state.body is None else replace(state.body, v=np.zeros(3)))
+    dt = 2e-3
+    rng = np.random.default_rng(5)
+    frame = system.contact_frame(state, dt)
+    assert frame is not None and frame.anchors is not None
+    # anchors spread around the contacts so that some stick and some slip
+    anchors = frame.anchors.copy()
+    spread = np.where(np.arange(len(frame.rows)) % 2 == 0, 1e-7, 5e-3)[:, None]
+    anchors[frame.rows] += spread * rng.standard_normal((len(frame.rows), 2))
+    frame = replace(frame, anchors=anchors)
+    z = system.rates(state) + 0.01 * rng.standard_normal(len(system.rates(state)))
+    res, jac, ev = system.newton_system(state, z, dt, loads, frame)
+    assert ev.anchors is not None
+    moved = ~np.isnan(ev.anchors[:, 0]) & ~np.isclose(ev.anchors, anchors).all(axis=1)
+    kept = ~np.isnan(ev.anchors[:, 0]) & np.isclose(ev.anchors, anchors).all(axis=1)
+    assert moved.any() and kept.any()  # (slipping and sticking contacts)
+    fd = np.empty_like(jac)
+    for j in range(len(z)):
+        e = np.zeros_like(z)
+        e[j] = 1e-7
+        fd[:, j] = (system.newton_system(state, z + e, dt, loads, frame)[0]
+                    - system.newton_system(state, z - e, dt, loads, frame)[0]) / 2e-7
+    scale = np.abs(jac).max(axis=1, keepdims=True)
+    np.testing.assert_allclose(jac / scale, fd / scale, rtol=0, atol=1e-5)

@@ -14,9 +14,20 @@ t_i)`` with ``f_n = h max(k pen + c pen', 0)`` (active only while ``pen > 0``), 
 object. The object receives ``-f_i`` at the same point ``c_i``: forces equal, opposite and
 collinear, so rod + object conserve linear and angular momentum when nothing else acts.
 
+Stick-slip friction (``RodModel.friction_model == "stick"``): each contact keeps an anchor
+``A_i``, the object's material point (start-pose frame) where it stuck. The tangential force is
+an elastic spring to it, ``-h (k e_i + c t_i . w_i) t_i`` with ``e_i = t_i . (c_i - A_i)``,
+while that stays inside the Coulomb cone ``mu f_n``, and ``-mu f_n sign(.) t_i`` beyond (slip).
+After a step the anchors of slipping contacts are moved back to the cone's edge (the return
+map of elastoplasticity), those of contacts that opened are forgotten, and new contacts stick
+where they are. A load below the cone is then held without creep; at the cone the contact
+slides at Coulomb's force (the capstan law, tested).
+
 :func:`body_coupling` returns the rod's generalised force, the object's wrench (contact, the
 applied wrench, the spring-damper) and their exact derivatives with respect to the rod's angles
-and rates and the object's displacement and velocity (tested against finite differences).
+and rates and the object's displacement and velocity (tested against finite differences). With
+``body=None`` it is the same contact against a fixed object (zero displacement and velocity):
+the engine's path for stick-slip friction on a fixed object.
 """
 
 from __future__ import annotations
@@ -45,7 +56,8 @@ class BodyCoupling:
     """Rod generalised force ``rod`` (N,) and object wrench ``wrench`` (3,) with their
     derivatives: ``rod_theta``, ``rod_omega`` (N, N), ``rod_q``, ``rod_v`` (N, 3),
     ``wrench_theta``, ``wrench_omega`` (3, N), ``wrench_q``, ``wrench_v`` (3, 3);
-    ``penetration`` the deepest surface penetration (m, >= 0)."""
+    ``penetration`` the deepest surface penetration (m, >= 0); ``anchors`` (N, 2) the stick-slip
+    anchors after a step ending here (NaN: no contact; None with regularised friction)."""
 
     rod: Array
     wrench: Array
@@ -58,6 +70,7 @@ class BodyCoupling:
     wrench_q: Array
     wrench_v: Array
     penetration: float
+    anchors: Array | None = None
 
 
 def _perp(u: Array) -> Array:
@@ -65,20 +78,28 @@ def _perp(u: Array) -> Array:
     return np.stack([-u[..., 1], u[..., 0]], axis=-1)
 
 
-def body_coupling(model: RodModel, body: RigidBody, frame: ContactFrame | None, theta: Array, omega: Array,
-                  q: Array, v: Array, applied: Array | None = None) -> BodyCoupling:
+def body_coupling(model: RodModel, body: RigidBody | None, frame: ContactFrame | None, theta: Array,
+                  omega: Array, q: Array, v: Array, applied: Array | None = None,
+                  anchors: Array | None = None) -> BodyCoupling:
     """Contact forces between the rod at (``theta``, ``omega``) and the object at displacement
     ``q`` with velocity ``v`` (``frame`` in the object's start-pose frame, None = no centre near
-    it), plus the ``applied`` wrench (3,) and the spring-damper on the object (module docstring)."""
+    it), plus the ``applied`` wrench (3,) and the spring-damper on the object (module docstring).
+    ``body=None``: a fixed object (``q``, ``v`` zero). ``anchors`` (N, 2): the stick-slip anchors
+    of the step (every frame row has one; needed with ``friction_model == "stick"``)."""
     n = model.n_elements
-    spring_q = -np.diag(body.stiffness)
-    spring_v = -np.diag(body.damping)
-    wrench = body.support_wrench(q, v) + (0.0 if applied is None else np.asarray(applied, dtype=float))
-    zeros = BodyCoupling(rod=np.zeros(n), wrench=wrench, rod_theta=np.zeros((n, n)), rod_omega=np.zeros((n, n)),
-                         rod_q=np.zeros((n, 3)), rod_v=np.zeros((n, 3)), wrench_theta=np.zeros((3, n)),
-                         wrench_omega=np.zeros((3, n)), wrench_q=spring_q, wrench_v=spring_v, penetration=0.0)
+    stick = model.friction > 0 and model.friction_model == "stick"
+    if stick and (anchors is None or (frame is not None and np.isnan(anchors[frame.rows]).any())):
+        raise ValueError("stick-slip friction needs an anchor for every contact row")  # (a caller's bug)
+    spring_q = np.zeros((3, 3)) if body is None else -np.diag(body.stiffness)
+    spring_v = np.zeros((3, 3)) if body is None else -np.diag(body.damping)
+    wrench = np.zeros(3) if body is None else body.support_wrench(q, v)
+    if applied is not None:
+        wrench = wrench + np.asarray(applied, dtype=float)
     if frame is None:
-        return zeros
+        return BodyCoupling(rod=np.zeros(n), wrench=wrench, rod_theta=np.zeros((n, n)), rod_omega=np.zeros((n, n)),
+                            rod_q=np.zeros((n, 3)), rod_v=np.zeros((n, 3)), wrench_theta=np.zeros((3, n)),
+                            wrench_omega=np.zeros((3, n)), wrench_q=spring_q, wrench_v=spring_v, penetration=0.0,
+                            anchors=np.full((n, 2), np.nan) if stick else None)
     r, h = frame.rows, model.h
     a, b = chain.frames(theta)
     weights = chain.lower_weights(n)[r]  # w_ij of the contact rows (nr, N)
@@ -87,7 +108,7 @@ def body_coupling(model: RodModel, body: RigidBody, frame: ContactFrame | None, 
     dv_dtheta = -ga * omega  # dv_i/dtheta (nr, 2, N)
     c = chain.centres(model, theta)[r]
     vel = chain.centre_velocities(model, theta, omega)[r]
-    centroid = np.asarray(body.centroid)
+    centroid = np.zeros(2) if body is None else np.asarray(body.centroid)
     rot = rotation(q[2])
     normal = frame.normal @ rot.T
     tangent = _perp(normal)
@@ -109,16 +130,39 @@ def body_coupling(model: RodModel, body: RigidBody, frame: ContactFrame | None, 
     active = (pen > 0) & (fn > 0)
     fn = np.where(active, fn, 0.0)
     d_fn = np.where(active[:, None], h * (model.contact_stiffness * d_pen + model.contact_damping * d_rate), 0.0)
-    ratio, d_ratio = np.zeros(nr), np.zeros((nr, 10))
-    if model.friction > 0:
-        x = vt / model.friction_velocity
-        ratio = model.friction * np.tanh(x)
-        d_ratio = (model.friction / model.friction_velocity / np.cosh(x) ** 2)[:, None] * d_vt
-    push = normal - ratio[:, None] * tangent
-    d_push = -d_ratio[:, None, :] * tangent[:, :, None]
-    d_push[:, :, 6] += tangent + ratio[:, None] * normal  # dn/dpsi = t, dt/dpsi = -n
-    f = fn[:, None] * push  # on the rod (nr, 2)
-    d_f = d_fn[:, None, :] * push[:, :, None] + fn[:, None, None] * d_push  # (nr, 2, 10)
+    new_anchors = None
+    if stick:  # tangential force -ft t: elastic to the anchor inside the cone, Coulomb's at its edge
+        assert anchors is not None
+        anchor = centroid + q[:2] + (anchors[r] - centroid) @ rot.T
+        e = dot(tangent, c - anchor)
+        d_e = np.zeros((nr, 10))
+        d_e[:, _C], d_e[:, 4:6], d_e[:, 6] = tangent, -tangent, -dot(normal, rel)
+        trial = h * (model.contact_stiffness * e + model.contact_damping * vt)
+        d_trial = h * (model.contact_stiffness * d_e + model.contact_damping * d_vt)
+        limit = model.friction * fn
+        slipping = np.abs(trial) > limit
+        sign = np.sign(trial)
+        ft = np.where(active, np.where(slipping, sign * limit, trial), 0.0)
+        d_ft = np.where(active[:, None], np.where(slipping[:, None], (sign * model.friction)[:, None] * d_fn, d_trial), 0.0)
+        f = fn[:, None] * normal - ft[:, None] * tangent
+        d_f = d_fn[:, None, :] * normal[:, :, None] - d_ft[:, None, :] * tangent[:, :, None]
+        d_f[:, :, 6] += fn[:, None] * tangent + ft[:, None] * normal  # dn/dpsi = t, dt/dpsi = -n
+        # return map: a slipping contact's anchor to the cone's edge; an open contact forgets it
+        e_cone = np.where(slipping, sign * limit / (h * model.contact_stiffness), e)
+        moved = anchor + (e - e_cone)[:, None] * tangent
+        new_anchors = np.full((n, 2), np.nan)
+        new_anchors[r] = np.where(active[:, None], centroid + (moved - centroid - q[:2]) @ rot, np.nan)
+    else:
+        ratio, d_ratio = np.zeros(nr), np.zeros((nr, 10))
+        if model.friction > 0:
+            x = vt / model.friction_velocity
+            ratio = model.friction * np.tanh(x)
+            d_ratio = (model.friction / model.friction_velocity * (1.0 - np.tanh(x) ** 2))[:, None] * d_vt
+        push = normal - ratio[:, None] * tangent
+        d_push = -d_ratio[:, None, :] * tangent[:, :, None]
+        d_push[:, :, 6] += tangent + ratio[:, None] * normal  # dn/dpsi = t, dt/dpsi = -n
+        f = fn[:, None] * push  # on the rod (nr, 2)
+        d_f = d_fn[:, None, :] * push[:, :, None] + fn[:, None, None] * d_push  # (nr, 2, 10)
     # the object's wrench from -f_i at c_i: force -f, torque -(rel x f)
     d_w = np.empty((nr, 3, 10))
     d_w[:, :2] = -d_f
@@ -149,4 +193,5 @@ def body_coupling(model: RodModel, body: RigidBody, frame: ContactFrame | None, 
         wrench_q=spring_q + d_w[:, :, _Q].sum(axis=0),
         wrench_v=spring_v + d_w[:, :, _W].sum(axis=0),
         penetration=float(max(pen.max(), 0.0)),
+        anchors=new_anchors,
     )

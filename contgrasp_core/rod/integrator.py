@@ -41,7 +41,7 @@ for the comparison tests and benchmarks).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -71,12 +71,14 @@ class StepFailedError(RunFailure):
 @dataclass(frozen=True)
 class RodState:
     """Time ``t`` (s), element angles ``theta`` (N,) (rad) and rates ``omega`` (N,) (rad/s); the
-    movable object's state ``body`` (None while the object is fixed)."""
+    movable object's state ``body`` (None while the object is fixed); the stick-slip friction's
+    ``anchors`` (N, 2), the object points (start-pose frame) where contacts stuck (NaN: none)."""
 
     t: float
     theta: np.ndarray
     omega: np.ndarray
     body: BodyState | None = None
+    anchors: np.ndarray | None = None
 
 
 class CoupleFeedback(Protocol):
@@ -125,14 +127,16 @@ class StepOptions:
                 "need tol > 0, max_iter >= 1, max_halvings >= 0, contact_margin >= 0, max_angle_step > 0")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _StepEval:
-    """What a Newton iteration reports besides the residual and matrix."""
+    """What a Newton iteration reports besides the residual and matrix: the deepest penetration
+    and the stick-slip anchors after a step ending at this iterate."""
 
     penetration: float
+    anchors: np.ndarray | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _Eval(_StepEval):
     q: np.ndarray
     mass: np.ndarray
@@ -159,6 +163,11 @@ class RodSystem:
         if self.body is not None and self.obstacle is None:
             raise InvalidParameterError("a movable object (body) needs its obstacle (the object's boundary)")
         _kernels.load()  # numba and the compiled kernels, at set-up rather than in the first step
+
+    @property
+    def _coupled_contact(self) -> bool:
+        """Contact by :mod:`.coupling` (a movable object or stick-slip friction), else the kernels' own."""
+        return self.body is not None or (self.model.friction > 0 and self.model.friction_model == "stick")
 
     # ---------------------------------------------------------------- states and energies
     def straight_state(self, t: float = 0.0) -> RodState:
@@ -392,22 +401,28 @@ class RodSystem:
         wr1 = w1[:n] if self.body is not None else w1
         w_ = 0.5 * (w0 + wr1) if midpoint else wr1
         th_ = th0 + (0.5 if midpoint else 1.0) * dt * w_
-        if self.body is None:
+        if not self._coupled_contact:
             return self._rod_newton_system(th_, w_, wr1 - w0, dt, cw, cq, loads, frame)
         res, jac, _ = self._rod_newton_system(th_, w_, wr1 - w0, dt, cw, cq, loads, None)
+        anchors = None if frame is None else frame.anchors
+        if self.body is None:  # a fixed object with stick-slip friction
+            zero = np.zeros(3)
+            cp = body_coupling(self.model, None, frame, th_, w_, zero, zero, anchors=anchors)
+            return (res - dt * cp.rod, jac - dt * (cw * cp.rod_omega + cq * cp.rod_theta),
+                    _StepEval(penetration=cp.penetration, anchors=cp.anchors))
         body, bs = self.body, state.body
         assert bs is not None  # (a system with a body steps states with one)
         vb1 = w1[n:]
         vb_ = 0.5 * (bs.v + vb1) if midpoint else vb1
         q_ = bs.q + (0.5 if midpoint else 1.0) * dt * vb_
-        cp = body_coupling(self.model, body, frame, th_, w_, q_, vb_, loads.wrench)
+        cp = body_coupling(self.model, body, frame, th_, w_, q_, vb_, loads.wrench, anchors)
         full = np.empty((n + 3, n + 3))
         full[:n, :n] = jac - dt * (cw * cp.rod_omega + cq * cp.rod_theta)
         full[:n, n:] = -dt * (cw * cp.rod_v + cq * cp.rod_q)
         full[n:, :n] = -dt * (cw * cp.wrench_omega + cq * cp.wrench_theta)
         full[n:, n:] = np.diag(body.mass_matrix) - dt * (cw * cp.wrench_v + cq * cp.wrench_q)
         res = np.concatenate([res - dt * cp.rod, body.mass_matrix * (vb1 - bs.v) - dt * cp.wrench])
-        return res, full, _StepEval(penetration=cp.penetration)
+        return res, full, _StepEval(penetration=cp.penetration, anchors=cp.anchors)
 
     def _rod_newton_system(self, th_: np.ndarray, w_: np.ndarray, delta: np.ndarray, dt: float, cw: float,
                            cq: float, loads: RodLoads,
@@ -433,14 +448,22 @@ class RodSystem:
             c0 = chain.centres(m, th0 + 0.5 * dt * w0)
         margin = self.options.contact_margin + 2.0 * dt * np.abs(w0).max() * m.length
         if self.body is None:
-            return contact_frame(m, self.obstacle, c0, margin)
-        # a movable object: the frame in the object's start-pose frame, at its mid-step pose
-        bs = state.body
-        assert bs is not None  # (a system with a body steps states with one)
-        centroid = np.asarray(self.body.centroid)
-        q_mid = bs.q + 0.5 * dt * bs.v
-        margin += 2.0 * dt * self.body.max_speed(bs, c0)
-        return contact_frame(m, self.obstacle, to_object_frame(c0, q_mid, centroid), margin)
+            frame = contact_frame(m, self.obstacle, c0, margin)
+            start = chain.centres(m, th0)
+        else:  # a movable object: the frame in the object's start-pose frame, at its mid-step pose
+            bs = state.body
+            assert bs is not None  # (a system with a body steps states with one)
+            centroid = np.asarray(self.body.centroid)
+            margin += 2.0 * dt * self.body.max_speed(bs, c0)
+            frame = contact_frame(m, self.obstacle, to_object_frame(c0, bs.q + 0.5 * dt * bs.v, centroid), margin)
+            start = to_object_frame(chain.centres(m, th0), bs.q, centroid)
+        if frame is None or not (m.friction > 0 and m.friction_model == "stick"):
+            return frame
+        # stick-slip: the anchors the step starts from; a new contact sticks where it is
+        anchors = np.full((m.n_elements, 2), np.nan) if state.anchors is None else state.anchors.copy()
+        new = frame.rows[np.isnan(anchors[frame.rows, 0])]
+        anchors[new] = start[new]
+        return replace(frame, anchors=anchors)
 
     def obstacle_at(self, state: RodState) -> Obstacle:
         """The object where it is in ``state`` (the obstacle itself while it is fixed)."""
@@ -457,17 +480,18 @@ class RodSystem:
         assert state.body is not None  # (a system with a body steps states with one)
         return np.concatenate([state.omega, state.body.v])
 
-    def _new_state(self, state: RodState, w1: np.ndarray, dt: float) -> RodState:
-        """The state after a step to the unknowns ``w1`` (:meth:`rates`) under the chosen scheme."""
+    def _new_state(self, state: RodState, w1: np.ndarray, dt: float, anchors: np.ndarray | None = None) -> RodState:
+        """The state after a step to the unknowns ``w1`` (:meth:`rates`) under the chosen scheme,
+        with the stick-slip ``anchors`` the step ended with."""
         n = len(state.theta)
         if self.body is None:
-            return RodState(t=state.t + dt, theta=self._new_angles(state, w1, dt), omega=w1)
+            return RodState(t=state.t + dt, theta=self._new_angles(state, w1[:n], dt), omega=w1[:n], anchors=anchors)
         bs = state.body
         assert bs is not None  # (a system with a body steps states with one)
         vb1 = w1[n:]
         vb = 0.5 * (bs.v + vb1) if self.options.method == "midpoint" else vb1
         return RodState(t=state.t + dt, theta=self._new_angles(state, w1[:n], dt), omega=w1[:n],
-                        body=BodyState(q=bs.q + dt * vb, v=vb1))
+                        body=BodyState(q=bs.q + dt * vb, v=vb1), anchors=anchors)
 
     def _new_angles(self, state: RodState, w1: np.ndarray, dt: float) -> np.ndarray:
         """The angles after a step to the rates ``w1`` under the chosen scheme."""
@@ -485,7 +509,7 @@ class RodSystem:
         z0 = self.rates(state)
         res, jac, ev = self.newton_system(state, z0, dt, loads, frame)
         w1 = z0 + self._solve(jac, -res)
-        new = self._new_state(state, w1, dt)
+        new = self._new_state(state, w1, dt, ev.anchors)
         info["iterations"] += 1
         if not (np.all(np.isfinite(w1)) and np.abs(new.theta - state.theta).max() <= self.options.max_angle_step):
             return None
@@ -520,7 +544,7 @@ class RodSystem:
             w1 = w1 + dw
             if size <= opt.tol * (1.0 + np.abs(th0).max() + dt * np.abs(w1[:n]).max()):
                 info["iterations"] += it
-                new = self._new_state(state, w1, dt)
+                new = self._new_state(state, w1, dt, ev.anchors)
                 turn = np.abs(new.theta - th0).max() / opt.max_angle_step
                 if turn > 1.0:
                     return None, 0.9 / turn  # accuracy guard: too large a rotation in one step

@@ -34,13 +34,15 @@ class ContactFrame:
     """Tangent-line model of the object near each centre, frozen over one step.
 
     ``rows`` indices of centres considered (within ``margin`` of contact); ``foot``, ``normal``
-    (outward), ``tangent`` (n, 2) for those rows.
+    (outward), ``tangent`` (n, 2) for those rows; ``anchors`` (N, 2) the stick-slip anchors of
+    the step (stick-slip friction only, :mod:`contgrasp_core.rod.coupling`).
     """
 
     rows: np.ndarray
     foot: np.ndarray
     normal: np.ndarray
     tangent: np.ndarray
+    anchors: np.ndarray | None = None
 
 
 def contact_frame(model: RodModel, obstacle: Obstacle | None, c: np.ndarray, margin: float) -> ContactFrame | None:

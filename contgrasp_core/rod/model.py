@@ -21,8 +21,13 @@ Parameters (SI):
   ``511 * 10`` and ``511 * 0.05``).
 * ``contact_stiffness`` (N/m^2) and ``contact_damping`` (N s/m^2): penalty contact with the
   object, force per unit length ``max(k p - c dp/dt, 0)`` along the outward object normal for a
-  penetration ``p = r(s) - distance > 0`` of the rod surface; ``friction`` (Coulomb coefficient,
-  regularised over ``friction_velocity`` m/s). See :mod:`contgrasp_core.rod.loads`.
+  penetration ``p = r(s) - distance > 0`` of the rod surface; ``friction`` (Coulomb coefficient).
+  ``friction_model`` ``"regularised"`` (default): ``mu f_n tanh(v_t / friction_velocity)``, a
+  grasp under a steady load creeps; ``"stick"``: stick-slip, an elastic tangential spring of
+  stiffness ``contact_stiffness`` (and damping ``contact_damping``) per unit length to the
+  point of the object where the contact stuck, capped by the Coulomb cone ``mu f_n`` (the
+  anchor slides with the contact at the cap). See :mod:`contgrasp_core.rod.loads` and
+  :mod:`contgrasp_core.rod.coupling`.
 """
 
 from __future__ import annotations
@@ -65,6 +70,7 @@ class RodModel:
     contact_damping: float = 0.05
     friction: float = 0.0
     friction_velocity: float = 1.0e-3
+    friction_model: str = "regularised"
 
     def __post_init__(self) -> None:
         _pos("length", self.length)
@@ -78,6 +84,8 @@ class RodModel:
                      "contact_damping", "friction"):
             _pos(name, getattr(self, name), allow_zero=True)
         _pos("friction_velocity", self.friction_velocity)
+        if self.friction_model not in ("regularised", "stick"):
+            raise InvalidParameterError(f"friction_model must be 'regularised' or 'stick', got {self.friction_model!r}")
         bp = np.asarray(self.base_position, dtype=float)
         if bp.shape != (2,) or not np.all(np.isfinite(bp)):
             raise InvalidParameterError(f"base_position must be two finite numbers, got {self.base_position!r}")
