@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import ContgraspError, exit_code, one_line
-from . import grasp, kinematics, quality, simulate
+from . import grasp, hold, kinematics, quality, simulate
 
 __all__ = ["ArgumentParser", "build_parser", "main", "report", "summary_lines"]
 
@@ -92,6 +92,7 @@ def build_parser(extra: Sequence[Registrar] = ()) -> argparse.ArgumentParser:
     quality.add_parser(sub, [common])
     grasp.add_parsers(sub, [common])
     simulate.add_parser(sub, [common])
+    hold.add_parser(sub, [common])
     for register in extra:
         register(sub, [common])
     return parser

@@ -22,6 +22,7 @@ float64 unchanged), a lock-step ROS run reproduces the core-only run bit for bit
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +45,7 @@ __all__ = [
     "DivergenceLimits",
     "SimulationDivergedError",
     "run_sampled",
+    "drive",
     "sensed_shape",
 ]
 
@@ -252,21 +254,30 @@ def sensed_shape(system: RodSystem, obs: Observation) -> ArmShape:
 
 def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSession:
     """The scenario's sampled loop with the core functions only, stepped exactly as the ROS nodes
-    step it (observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
+    step it (:func:`drive`, with the scenario's disturbance): a lock-step ROS run of the same
+    scenario ends in the same state bit for bit. Returns the finished session."""
+    system = scenario.system() if system is None else system
+    session = LoopSession(system, scenario.loop)
+    drive(session, scenario, None if scenario.disturbance is None else scenario.disturbance.wrench_at)
+    return session
+
+
+def drive(session: LoopSession, scenario: Scenario, wrench: Callable[[float], Array] | None = None,
+          until: Callable[[Observation], bool] | None = None) -> Observation:
+    """Step ``session`` as the ROS nodes do until it finishes or ``until(observation)`` holds:
+    observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
     :class:`~contgrasp_core.boundary.Boundary` and the sensor's tolerance,
-    :func:`~contgrasp_core.control.feedback_at_joints`, advance with the scenario's disturbance
-    at the period's start): a lock-step ROS run of the same scenario ends in the same state bit
-    for bit. Returns the finished session."""
+    :func:`~contgrasp_core.control.feedback_at_joints`, advance with ``wrench(t)`` on the object
+    (t the period's start). Returns the last observation."""
     from contgrasp_core.control import feedback_at_joints
 
     boundary = scenario.object.boundary()
-    system = scenario.system() if system is None else system
-    session = LoopSession(system, scenario.loop)
     gains = scenario.feedback_gains
+    system = session.system
     while True:
         obs = session.observe()
-        if session.finished:
-            return session
+        if session.finished or (until is not None and until(obs)):
+            return obs
         c = sense(sensed_shape(system, obs), boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
-        wrench = None if scenario.disturbance is None else scenario.disturbance.wrench_at(obs.t)
-        session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha), wrench)
+        session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha),
+                        None if wrench is None else wrench(obs.t))

@@ -1,0 +1,92 @@
+"""``contgrasp hold``: how firmly the paper's closed loop holds the object (beyond the paper).
+
+Grasps the object with the scenario's closed loop (object fixed, as in the paper), releases it
+onto a soft support with stick-slip friction, and measures the grasp stiffness matrix K and the
+holding capacity per wrench direction (:func:`contgrasp_core.holding.measure_holding`), beside
+Q1-Q3 of the settled contact (paper Sec. IV).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from ..errors import InvalidParameterError
+from ..holding import HoldSettings, measure_holding
+from ..objects import ROD_SCALE
+from ..scenario import PAPER
+from .common import add_object_arguments, object_from_args
+
+__all__ = ["add_parser", "run", "format_text"]
+
+
+def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
+    """Register the ``hold`` subcommand."""
+    d = HoldSettings()
+    p = sub.add_parser("hold", parents=parents, description=__doc__.splitlines()[0],
+                       help="grasp stiffness K and holding capacity of one settled grasp, with Q1-Q3 (docs/holding.md)")
+    add_object_arguments(p, ROD_SCALE)
+    p.add_argument("--nodes", type=int, default=PAPER.rod.n_elements + 1, help="rod nodes (elements + 1; default 101)")
+    p.add_argument("--base", type=float, nargs=3, metavar=("X", "Y", "ANGLE"), default=None,
+                   help="the arm's base position (m) and heading (rad) (default: the scenario's, 0 0 0)")
+    p.add_argument("--mu", type=float, default=d.mu, help=f"friction coefficient, stick-slip (default {d.mu:g})")
+    p.add_argument("--support", type=float, default=d.support,
+                   help=f"stiffness of the released object's support, N/m (default {d.support:g})")
+    p.add_argument("--density", type=float, default=d.areal_density,
+                   help=f"the object's areal density, kg/m^2 (default {d.areal_density:g})")
+    p.add_argument("--directions", type=int, default=d.directions,
+                   help=f"force directions of the capacity ramps, plus two pure torques (default {d.directions})")
+    p.add_argument("--rate", type=float, default=d.rate, help=f"capacity ramp rate, N/s (default {d.rate:g})")
+    p.add_argument("--ramp-time", type=float, default=d.ramp_time, help=f"longest ramp, s (default {d.ramp_time:g})")
+    p.add_argument("--escape-distance", type=float, default=d.escape_distance,
+                   help=f"escaped beyond this displacement, in object radii (default {d.escape_distance:g})")
+    p.add_argument("--escape-angle", type=float, default=d.escape_angle,
+                   help=f"escaped beyond this rotation, rad (default {d.escape_angle:g})")
+    p.set_defaults(func=run, format_text=format_text)
+
+
+def format_text(out: dict[str, Any]) -> str:
+    """The text result: K's eigenvalues, the capacity per direction and its minimum, Q1-Q3."""
+    k = np.asarray(out["stiffness"])
+    lines = [f"object: {out['object']}, base {out['base']}",
+             f"grasp settled at {out['settle_time_s']:.3f} s; released object came to rest "
+             f"{1e3 * float(np.hypot(*out['released_displacement'][:2])):.2f} mm / {out['released_displacement'][2]:.4f} rad away",
+             "grasp stiffness K (fx, fy, torque by x, y, rotation):",
+             *("  " + "  ".join(f"{v:11.4g}" for v in row) for row in k),
+             "eigenvalues of its symmetric part, torque and rotation scaled by the object radius (N/m): "
+             + ", ".join(f"{v:.4g}" for v in out["stiffness_eigenvalues"]),
+             "holding capacity (N, torque / radius) per direction (fx, fy, tau):"]
+    for c in out["capacity"]:
+        state = "held to the ramp's end" if c["held"] else c["reason"]
+        lines.append(f"  ({c['direction'][0]:+.2f}, {c['direction'][1]:+.2f}, {c['direction'][2]:+.0f}): "
+                     f"{c['magnitude']:.4g} ({state})")
+    lines += [f"capacity_min {out['capacity_min']:.4g} N",
+              f"Q1 {out['Q1']:.4g}, Q2 {out['Q2']:.4g}, Q3 {out['Q3']:.4g}",
+              f"wall time {out['wall_time_s']:.1f} s"]
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Measure the holding of one grasp; return the JSON-able result."""
+    if not 3 <= args.nodes <= 1001:
+        raise InvalidParameterError(f"--nodes must be in [3, 1001], got {args.nodes}")
+    obj = object_from_args(args, ROD_SCALE)
+    rod = replace(PAPER.rod, n_elements=args.nodes - 1)
+    if args.base is not None:
+        if not np.all(np.isfinite(args.base)):
+            raise InvalidParameterError(f"--base must be three finite numbers, got {args.base}")
+        rod = replace(rod, base_position=(args.base[0], args.base[1]), base_angle=args.base[2])
+    settings = HoldSettings(areal_density=args.density, support=args.support, mu=args.mu, rate=args.rate,
+                            ramp_time=args.ramp_time, directions=args.directions,
+                            escape_distance=args.escape_distance, escape_angle=args.escape_angle)
+    scenario = replace(PAPER.with_object(obj), rod=rod)
+    t0 = time.perf_counter()
+    progress = None if args.json else (lambda phase: print(f"contgrasp hold: {phase}", file=sys.stderr, flush=True))
+    result = measure_holding(scenario, settings, progress)
+    return {"object": obj.text(), "base": [float(rod.base_position[0]), float(rod.base_position[1]), float(rod.base_angle)],
+            **result.to_dict(), "wall_time_s": time.perf_counter() - t0}

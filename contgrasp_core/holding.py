@@ -1,0 +1,302 @@
+"""What a grasp resists (beyond the paper): the stiffness and the holding capacity of a settled grasp.
+
+The paper rates a grasp by the eigenvalues of the continuum grasp map's Gramian W (Sec. IV,
+Q1-Q3) and never loads the object. :func:`measure_holding` loads it, on the rod engine with the
+object as a rigid body (:mod:`contgrasp_core.rod.body`) and friction that holds (stick-slip,
+:mod:`contgrasp_core.rod.coupling`), the feedback law running throughout (the ROS graph's
+sampled loop, :func:`contgrasp_core.rod.session.drive`):
+
+1. **Grasp.** The scenario's closed loop with the object fixed, until settled; Q1-Q3 of that
+   contact state (:func:`contgrasp_core.quality.quality_of_state`, about the scenario's
+   reference point).
+2. **Release.** The object becomes a rigid body on a soft support (:class:`HoldSettings`
+   ``support``: a spring-damper to its pose in the grasp, mass and inertia from ``areal_density``),
+   friction ``mu`` turns stick-slip, and the loop runs on for ``release_time``: the object comes
+   to rest where grasp and support hold it (``released_displacement``). The support stands for
+   what keeps a real object in place while it is grasped (a table, a fixture): released entirely
+   free, the paper's settled grasp pushes the object out (the law presses the arm onto it and
+   nothing balances the net force; docs/holding.md).
+3. **Stiffness.** From the released state, wrench steps of ``+-probe`` along each axis (force x,
+   force y, torque), each held ``hold_time``: the compliance ``C[:, j] = (q+ - q-) / (2 probe_j)``
+   (the half difference cancels the released grasp's slow drift, ~1e-3 rad/s without load),
+   the stiffness ``C^-1`` and the grasp's own stiffness ``K = C^-1 - K_support`` (3 x 3; N/m,
+   N/rad, N m/m, N m/rad). Its symmetric part's eigenvalues are reported in the scaled form
+   ``D K D``, ``D = diag(1, 1, 1/a)`` with ``a`` the object's nominal radius (torques as forces
+   at ``a``, rotations as arcs at ``a``: one unit, N/m).
+4. **Holding capacity.** Per direction ``d`` of the scaled wrench space (``directions`` unit
+   vectors: force directions evenly around the circle, and pure torques both ways), the wrench
+   ``W(t) = d rate t`` (torque component times ``a``) rises until the object escapes: its
+   centroid moved more than ``escape_distance`` or it turned more than ``escape_angle`` from the
+   released pose, no node is in contact, or the simulation fails (a tear-out is a result, not an
+   error). The capacity is ``|W|`` at that moment (the support's share included: the same for
+   every grasp); a direction still held at ``ramp_time`` is reported as held (its capacity a
+   lower bound).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from contgrasp_core.contact import sense
+from contgrasp_core.errors import InvalidParameterError, RunFailure
+from contgrasp_core.quality import GraspQuality, quality_of_state
+from contgrasp_core.rod.body import BodyState, ObjectDynamics, mass_properties
+from contgrasp_core.rod.integrator import RodState
+from contgrasp_core.rod.session import LoopSession, Observation, drive, run_sampled, sensed_shape
+from contgrasp_core.scenario import Scenario
+
+__all__ = ["HoldSettings", "Capacity", "HoldResult", "HoldExperiment", "measure_holding", "wrench_directions"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class HoldSettings:
+    """How :func:`measure_holding` loads a grasp (SI; module docstring): the released object's
+    ``areal_density`` (kg/m^2) and ``support`` stiffness (N/m; the rotation's is ``support a^2``
+    N m/rad, ``a`` the object's nominal radius) with damping ratio ``support_damping_ratio``;
+    friction coefficient ``mu`` (stick-slip), the ``release_time``, the stiffness ``probe``
+    wrench (fx, fy, torque) and ``hold_time``, the capacity ramp's ``rate`` (N/s in the scaled
+    wrench space) and ``ramp_time``, the number of force ``directions`` (plus the two pure
+    torques), and the escape thresholds (``escape_distance`` in object radii)."""
+
+    areal_density: float = 10.0
+    support: float = 2.0
+    support_damping_ratio: float = 1.0
+    mu: float = 0.5
+    release_time: float = 0.5
+    probe: tuple[float, float, float] = (2e-3, 2e-3, 5e-5)
+    hold_time: float = 1.0
+    rate: float = 0.05
+    ramp_time: float = 2.0
+    directions: int = 8
+    escape_distance: float = 0.5
+    escape_angle: float = 0.5
+
+    def dynamics(self, scale: float, area: float, polar: float) -> ObjectDynamics:
+        """The released object on the support spring-damper (``scale`` the object's radius, m;
+        ``area`` and ``polar`` moment of its region, m^2 and m^4, for mass, inertia and the
+        damping ratio)."""
+        k = np.array([self.support, self.support, self.support * scale**2])
+        inertia = self.areal_density * np.array([area, area, polar])
+        c = 2.0 * self.support_damping_ratio * np.sqrt(k * inertia)
+        return ObjectDynamics(mode="spring", areal_density=self.areal_density, stiffness=tuple(k), damping=tuple(c))
+
+    def __post_init__(self) -> None:
+        for name in ("areal_density", "support", "support_damping_ratio", "mu", "release_time", "hold_time", "rate",
+                     "ramp_time", "escape_distance", "escape_angle"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise InvalidParameterError(f"hold {name} must be a finite number > 0, got {v!r}")
+        p = np.asarray(self.probe, dtype=float)
+        if p.shape != (3,) or not np.all(np.isfinite(p)) or np.any(p <= 0):
+            raise InvalidParameterError(f"hold probe must be three finite numbers > 0 (fx, fy, torque), got {self.probe!r}")
+        if int(self.directions) != self.directions or self.directions < 1:
+            raise InvalidParameterError(f"hold directions must be an integer >= 1, got {self.directions!r}")
+
+
+@dataclass(frozen=True)
+class Capacity:
+    """The ramp along ``direction`` (unit, scaled wrench space): the ``wrench`` (fx, fy, torque)
+    and its scaled magnitude ``magnitude`` (N) when the object escaped (``held`` False, with the
+    ``reason``) or when the ramp ended with the object still held (``held`` True)."""
+
+    direction: tuple[float, float, float]
+    wrench: tuple[float, float, float]
+    magnitude: float
+    held: bool
+    reason: str
+
+
+@dataclass(frozen=True)
+class HoldResult:
+    """A grasp's measured holding (module docstring)."""
+
+    stiffness: Array
+    support: Array
+    stiffness_eigenvalues: Array
+    capacity: list[Capacity]
+    Q1: float
+    Q2: float
+    Q3: float
+    scale: float
+    released_displacement: Array
+    settle_time: float | None
+
+    @property
+    def capacity_min(self) -> float:
+        """The worst direction's capacity (N, scaled wrench space)."""
+        return min(c.magnitude for c in self.capacity)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON-able result (``contgrasp hold --json``)."""
+        return {
+            "stiffness": self.stiffness.tolist(),
+            "support_stiffness": self.support.tolist(),
+            "stiffness_eigenvalues": self.stiffness_eigenvalues.tolist(),
+            "capacity": [{"direction": list(c.direction), "wrench": list(c.wrench), "magnitude": c.magnitude,
+                          "held": c.held, "reason": c.reason} for c in self.capacity],
+            "capacity_min": self.capacity_min,
+            "Q1": self.Q1, "Q2": self.Q2, "Q3": self.Q3,
+            "scale_m": self.scale,
+            "released_displacement": self.released_displacement.tolist(),
+            "settle_time_s": self.settle_time,
+        }
+
+
+def wrench_directions(n_force: int) -> Array:
+    """Unit directions in the scaled wrench space: ``n_force`` force directions evenly around
+    the circle, then the pure torques +1 and -1 (rows, (n_force + 2, 3))."""
+    ang = 2.0 * np.pi * np.arange(n_force) / n_force
+    forces = np.stack([np.cos(ang), np.sin(ang), np.zeros(n_force)], axis=1)
+    return np.vstack([forces, [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]])
+
+
+def _escape(obs: Observation, q0: Array, settings: HoldSettings, in_contact: Callable[[Observation], bool]) -> str:
+    """Why the object counts as escaped at ``obs`` ('' while held)."""
+    assert obs.body is not None
+    dq = obs.body.q - q0
+    if np.hypot(dq[0], dq[1]) > settings.escape_distance:
+        return "moved"
+    if abs(dq[2]) > settings.escape_angle:
+        return "turned"
+    if not in_contact(obs):
+        return "contact lost"
+    return ""
+
+
+class HoldExperiment:
+    """One grasp loaded step by step (module docstring): :meth:`grasp`, :meth:`release`, then any
+    number of :meth:`load` runs from the released state (:meth:`stiffness`, :meth:`capacity`)."""
+
+    def __init__(self, scenario: Scenario, settings: HoldSettings = HoldSettings()) -> None:
+        if scenario.dynamics.mode != "fixed":
+            raise InvalidParameterError("the grasp is made with the object fixed; give a scenario with a fixed object")
+        self.scenario, self.settings = scenario, settings
+        self.boundary = scenario.object.boundary()
+        self.scale = float(scenario.object.radius)
+        area, _, polar = mass_properties(self.boundary)
+        self.dynamics = settings.dynamics(self.scale, area, polar)
+        self.held = replace(scenario, rod=replace(scenario.rod, friction=settings.mu, friction_model="stick"),
+                            dynamics=self.dynamics)
+        self.system = self.held.system()
+        self.escape = replace(settings, escape_distance=settings.escape_distance * self.scale)
+        self.grasped: LoopSession | None = None
+        self.released: RodState | None = None
+
+    def grasp(self) -> GraspQuality:
+        """The scenario's closed loop with the object fixed, until settled; Q1-Q3 of its contact."""
+        grasp = run_sampled(self.scenario)
+        if not grasp.settled:
+            raise RunFailure(f"the grasp did not settle within {self.scenario.loop.duration:g} s; no holding to measure")
+        obs = grasp.observe()
+        contact = sense(obs.shape, self.boundary, obs.radius, tol=self.scenario.sensing.contact_tolerance)
+        self.grasped = grasp
+        return quality_of_state(contact, self.boundary, ref=self.scenario.reference)
+
+    def release(self) -> Array:
+        """Release the grasped object onto its support; its displacement once at rest (3,)."""
+        if self.grasped is None:
+            self.grasp()
+        assert self.grasped is not None
+        st = self.grasped.state
+        released, _, failed = self.load(RodState(0.0, st.theta, st.omega, body=BodyState.rest()),
+                                        self.settings.release_time, lambda t: np.zeros(3))
+        if failed or released.body is None:
+            raise RunFailure(f"the released object is not held: {failed}")
+        self.released = released
+        return released.body.q
+
+    def _from_release(self) -> RodState:
+        if self.released is None:
+            self.release()
+        assert self.released is not None
+        return self.released
+
+    def in_contact(self, obs: Observation) -> bool:
+        """Whether any node touches the object (the scenario's contact set)."""
+        c = sense(sensed_shape(self.system, obs), self.boundary, obs.radius, tol=self.scenario.sensing.contact_tolerance)
+        return bool(c.in_contact.any())
+
+    def load(self, state: RodState, duration: float, wrench: Callable[[float], Array],
+             until: Callable[[Observation], bool] | None = None) -> tuple[RodState, Observation, str]:
+        """The closed loop from ``state`` (time reset to 0) with ``wrench(t)`` on the object, for
+        ``duration`` or until ``until(observation)``: the final state and observation, and why
+        the simulation failed ('' if it did not: a tear-out that breaks the run is a result)."""
+        loop = replace(self.held.loop, duration=duration, min_time=duration + 1.0)  # (never "settled")
+        session = LoopSession(self.system, loop, replace(state, t=0.0))
+        try:
+            last = drive(session, self.held, wrench, until)
+        except RunFailure as exc:
+            return session.state, session.observe(), f"simulation failed ({exc})"
+        return session.state, last, ""
+
+    def displacement_under(self, wrench: Array, duration: float | None = None) -> Array:
+        """The object's displacement from its released pose under a constant ``wrench`` held
+        for ``duration`` (default ``hold_time``)."""
+        start = self._from_release()
+        st, _, failed = self.load(start, self.settings.hold_time if duration is None else duration,
+                                  lambda t: np.asarray(wrench, dtype=float))
+        if failed or st.body is None or start.body is None:
+            raise RunFailure(f"the grasp gave way under the wrench {np.asarray(wrench).tolist()}: {failed}")
+        return st.body.q - start.body.q
+
+    def stiffness(self) -> tuple[Array, Array]:
+        """The grasp's own stiffness ``K = C^-1 - K_support`` from the ``+-probe`` steps, and the
+        compliance ``C`` (grasp and support together)."""
+        compliance = np.empty((3, 3))
+        for j in range(3):
+            w = np.zeros(3)
+            w[j] = self.settings.probe[j]
+            compliance[:, j] = (self.displacement_under(w) - self.displacement_under(-w)) / (2.0 * w[j])
+        grasp = np.asarray(np.linalg.inv(compliance) - np.diag(self.dynamics.stiffness), dtype=np.float64)
+        return grasp, compliance
+
+    def capacity(self, direction: Array) -> Capacity:
+        """The ramp along ``direction`` (unit, scaled wrench space) until the object escapes."""
+        start = self._from_release()
+        assert start.body is not None
+        q0 = start.body.q
+        unscaled = np.asarray(direction, dtype=float) * np.array([1.0, 1.0, self.scale])
+        rate = self.settings.rate
+        reason = [""]
+
+        def escaped(o: Observation) -> bool:
+            reason[0] = _escape(o, q0, self.escape, self.in_contact)
+            return bool(reason[0])
+
+        _, last, failed = self.load(start, self.settings.ramp_time, lambda t: rate * t * unscaled, escaped)
+        why = failed or reason[0]
+        magnitude = rate * last.t
+        return Capacity(direction=tuple(float(x) for x in direction),  # type: ignore[arg-type]
+                        wrench=tuple(float(x) for x in magnitude * unscaled),  # type: ignore[arg-type]
+                        magnitude=float(magnitude), held=not why, reason=why or "held to the ramp's end")
+
+
+def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
+                    progress: Callable[[str], None] | None = None) -> HoldResult:
+    """Grasp, release, probe and ramp (module docstring). ``progress`` is told each phase."""
+    say = progress or (lambda _: None)
+    exp = HoldExperiment(scenario, settings)
+    say("grasp")
+    quality = exp.grasp()
+    say("release")
+    q0 = exp.release()
+    say("stiffness")
+    stiffness, _ = exp.stiffness()
+    d = np.diag([1.0, 1.0, 1.0 / exp.scale])
+    scaled = d @ stiffness @ d
+    eig = np.asarray(np.linalg.eigvalsh(0.5 * (scaled + scaled.T)), dtype=float)
+    capacity = []
+    for direction in wrench_directions(settings.directions):
+        say(f"capacity along {np.round(direction, 3).tolist()}")
+        capacity.append(exp.capacity(direction))
+    assert exp.grasped is not None
+    return HoldResult(stiffness=stiffness, support=np.diag(exp.dynamics.stiffness), stiffness_eigenvalues=eig,
+                      capacity=capacity, Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, scale=exp.scale,
+                      released_displacement=q0, settle_time=exp.grasped.settle_time)
