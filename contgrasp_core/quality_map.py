@@ -303,46 +303,11 @@ class QualityMap:
 def _run_columns(spec: MapSpec, executor: str, workers: int | None, scheduler: str | None, progress: bool) -> list[list[PoseResult]]:
     from functools import partial
 
-    task = partial(_column, spec)
+    from .executors import run_tasks
+
     psis = [float(p) for p in spec.psi]
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(psis), desc=f"quality map {spec.object.text()}", unit="psi")
-    out: list[list[PoseResult]] = []
-    try:
-        if executor == "serial":
-            for p in psis:
-                out.append(task(p))
-                if bar:
-                    bar.update()
-        elif executor == "processes":
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
-
-            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as pool:
-                for res in pool.map(task, psis):
-                    out.append(res)
-                    if bar:
-                        bar.update()
-        elif executor == "dask":
-            from distributed import Client
-
-            if not scheduler:
-                raise InvalidParameterError("the dask executor needs a scheduler address (--scheduler tcp://host:port)")
-            with Client(scheduler) as client:
-                futures = client.map(task, psis, pure=False)
-                for fut in futures:  # keep psi order
-                    out.append(fut.result())
-                    if bar:
-                        bar.update()
-        else:
-            raise InvalidParameterError(f"unknown executor {executor!r}: serial, processes or dask")
-    finally:
-        if bar:
-            bar.close()
-    return out
+    return list(run_tasks(partial(_column, spec), psis, executor, workers=workers, scheduler=scheduler,
+                          progress=f"quality map {spec.object.text()}" if progress else None, unit="psi"))
 
 
 def quality_map(

@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import ContgraspError, exit_code, one_line
-from . import grasp, hold, kinematics, quality, simulate
+from . import grasp, hold, holding_study, kinematics, quality, simulate
 
 __all__ = ["ArgumentParser", "build_parser", "main", "report", "summary_lines"]
 
@@ -93,6 +93,7 @@ def build_parser(extra: Sequence[Registrar] = ()) -> argparse.ArgumentParser:
     grasp.add_parsers(sub, [common])
     simulate.add_parser(sub, [common])
     hold.add_parser(sub, [common])
+    holding_study.add_parser(sub, [common])
     for register in extra:
         register(sub, [common])
     return parser

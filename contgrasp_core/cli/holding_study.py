@@ -1,0 +1,73 @@
+"""``contgrasp holding-study``: do Q1-Q3 predict how firmly a grasp holds? (beyond the paper)
+
+For every base pose of the object's quality map (paper Sec. IV-C) and each metric's optimum:
+the static Q1-Q3, then the rod's closed-loop grasp from that pose with its settled Q1-Q3, grasp
+stiffness and holding capacity (:mod:`contgrasp_core.holding_study`); Spearman correlations
+with bootstrap intervals. Results go to ``--out FILE.jsonl`` as they arrive; running the same
+command again resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from ..errors import InvalidParameterError
+from ..executors import EXECUTORS
+from ..holding import HoldSettings
+from ..holding_study import PREDICTORS, RESPONSES, StudySpec, correlations, run_study
+
+__all__ = ["add_parser", "run", "format_text"]
+
+
+def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
+    """Register the ``holding-study`` subcommand."""
+    d = StudySpec()
+    p = sub.add_parser("holding-study", parents=parents, description=__doc__.splitlines()[0],
+                       help="Q1-Q3 against measured grasp stiffness and holding capacity over a quality map's poses")
+    p.add_argument("--object", default=d.object, help="built-in shape in the paper's units (default circle)")
+    p.add_argument("--psi-steps", type=int, default=d.psi_steps, help=f"polar angles (default {d.psi_steps})")
+    p.add_argument("--d-steps", type=int, default=d.d_steps, help=f"distances (default {d.d_steps})")
+    p.add_argument("--nodes", type=int, default=d.nodes, help=f"rod nodes (default {d.nodes})")
+    p.add_argument("--directions", type=int, default=d.hold.directions,
+                   help=f"force directions of the capacity ramps, plus two torques (default {d.hold.directions})")
+    p.add_argument("--out", required=True, metavar="FILE.jsonl", help="results, one pose per line (resumed if present)")
+    p.add_argument("--executor", choices=EXECUTORS, default="processes")
+    p.add_argument("--workers", type=int, default=None, help="process-pool size (default: all cores)")
+    p.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (with --executor dask)")
+    p.add_argument("--plot", metavar="FILE", help="the static quality map beside the measured stiffness and capacity")
+    p.set_defaults(func=run, format_text=format_text)
+
+
+def format_text(out: dict[str, Any]) -> str:
+    """The poses' outcome and the correlation table."""
+    lines = [f"object {out['object']}: {out['poses']} poses, {out['grasped']} grasped and measured "
+             f"({out['not_grasped']} did not settle or were not held); results in {out['out']}",
+             "Spearman rho [95 % bootstrap interval] (n poses):",
+             f"{'':12s}" + "".join(f"{r:>28s}" for r in RESPONSES)]
+    for pred in PREDICTORS:
+        cells = []
+        for resp in RESPONSES:
+            c = out["correlations"][pred][resp]
+            cells.append(f"{c['rho']:+.2f} [{c['low']:+.2f}, {c['high']:+.2f}] ({c['n']})" if c["n"] >= 4 else "n < 4")
+        lines.append(f"{pred:12s}" + "".join(f"{c:>28s}" for c in cells))
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Run (or resume) the study; return the JSON-able summary."""
+    if args.workers is not None and args.workers < 1:
+        raise InvalidParameterError(f"--workers must be >= 1, got {args.workers}")
+    spec = StudySpec(object=args.object, psi_steps=args.psi_steps, d_steps=args.d_steps, nodes=args.nodes,
+                     hold=HoldSettings(directions=args.directions))
+    qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,
+                         progress=not args.json)
+    ok = [r for r in rows if r.get("status") == "ok"]
+    out = {"object": args.object, "out": args.out, "poses": len(rows), "grasped": len(ok),
+           "not_grasped": len(rows) - len(ok), "correlations": correlations(rows),
+           "correlations_with_optima": correlations(rows, grid_only=False)}
+    if args.plot:
+        from ..figures.holding import plot_study
+
+        out["plot"] = str(plot_study(qm, rows, args.plot))
+    return out

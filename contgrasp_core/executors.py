@@ -1,0 +1,63 @@
+"""Running independent tasks serially, on a process pool or on a Dask cluster, in order.
+
+The sweeps (:mod:`contgrasp_core.quality_map`, :mod:`contgrasp_core.holding_study`) are pure
+functions of their items; :func:`run_tasks` yields their results in the items' order whatever
+the executor, with a tqdm progress bar on request, so every executor gives the same results.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any, TypeVar
+
+from .errors import InvalidParameterError
+
+__all__ = ["EXECUTORS", "run_tasks"]
+
+EXECUTORS = ("serial", "processes", "dask")
+
+T = TypeVar("T")
+
+
+def run_tasks(task: Callable[[Any], T], items: Sequence[Any], executor: str = "serial", *, workers: int | None = None,
+              scheduler: str | None = None, progress: str | None = None, unit: str = "task") -> Iterator[T]:
+    """``task(item)`` for each item, yielded in order as they complete in order: ``serial``,
+    ``processes`` (a fork-based pool of ``workers``) or ``dask`` (the cluster at ``scheduler``).
+    ``progress``: the description of a progress bar (None: no bar)."""
+    if executor not in EXECUTORS:
+        raise InvalidParameterError(f"unknown executor {executor!r}: serial, processes or dask")
+    if executor == "dask" and not scheduler:
+        raise InvalidParameterError("the dask executor needs a scheduler address (--scheduler tcp://host:port)")
+    bar = None
+    if progress is not None:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(items), desc=progress, unit=unit)
+    try:
+        for result in _results(task, items, executor, workers, scheduler):
+            if bar:
+                bar.update()
+            yield result
+    finally:
+        if bar:
+            bar.close()
+
+
+def _results(task: Callable[[Any], T], items: Sequence[Any], executor: str, workers: int | None,
+             scheduler: str | None) -> Iterator[T]:
+    if executor == "serial":
+        for item in items:
+            yield task(item)
+    elif executor == "processes":
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as pool:
+            yield from pool.map(task, items)
+    else:
+        from distributed import Client
+
+        with Client(scheduler) as client:
+            futures = client.map(task, list(items), pure=False)
+            for fut in futures:  # keep the items' order
+                yield fut.result()

@@ -1,0 +1,210 @@
+"""Do the paper's quality measures predict how firmly a grasp holds? (beyond the paper)
+
+For every base pose of a quality map (paper Sec. IV-C: polar angle ``psi`` and boundary
+distance ``d`` of the disc region D, heading tangent to it), and for the Nelder-Mead optimum of
+each metric, :func:`run_study`
+
+1. takes the static map's Q1-Q3 (the paper's optimal grasp of eq. (9) from that base,
+   :func:`contgrasp_core.quality_map.quality_map`, in the paper's dimensionless units);
+2. places the rod scenario's arm, with the map's length (half the object's perimeter) and
+   radius (uniform), at the same pose scaled to metres (``scale`` m per paper unit about the
+   object's centre: the paper's R = 5 circle becomes the rod scenario's 2.5 cm one), runs its
+   closed loop to settlement and measures Q1-Q3 of the settled contact, the grasp stiffness K
+   and the holding capacity (:func:`contgrasp_core.holding.measure_holding`).
+
+Poses run as independent tasks (serial, processes or Dask, :mod:`contgrasp_core.executors`);
+each result is appended to a JSON-lines file as it arrives, so an interrupted study resumes
+where it stopped. :func:`correlations` gives Spearman's rank correlation of each quality
+measure with each holding measure over the poses that grasped, with bootstrap confidence
+intervals.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import ContgraspError, InvalidParameterError, WriteError
+from .executors import run_tasks
+from .holding import HoldSettings, measure_holding
+from .objects import FIG2_SCALE, ObjectSpec
+from .quality_map import MapSpec, QualityMap, quality_map
+from .scenario import PAPER
+
+__all__ = ["StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose"]
+
+PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "Q1", "Q2", "Q3")
+"""The quality measures: the static map's (the paper's optimal grasp) and the settled grasp's."""
+RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min")
+"""The holding measures: lambda_min and det of K's scaled symmetric part, the worst capacity."""
+
+
+@dataclass(frozen=True)
+class StudySpec:
+    """The study of one object (``object``: a built-in shape in the paper's units, e.g.
+    ``circle`` or ``ellipse``): the map grid, ``scale`` (m per paper unit), the rod's ``nodes``
+    and how each grasp is loaded (``hold``)."""
+
+    object: str = "circle"
+    psi_steps: int = 24
+    d_steps: int = 6
+    d_min: float = 3.0
+    d_max: float = 13.0
+    scale: float = 0.005
+    nodes: int = 51
+    hold: HoldSettings = field(default_factory=lambda: HoldSettings(directions=4))
+
+    def __post_init__(self) -> None:
+        self.map_spec()  # validates object and grid
+        if not (np.isfinite(self.scale) and self.scale > 0):
+            raise InvalidParameterError(f"scale must be a finite number > 0 (m per paper unit), got {self.scale!r}")
+        if int(self.nodes) != self.nodes or not 3 <= self.nodes <= 1001:
+            raise InvalidParameterError(f"nodes must be an integer in [3, 1001], got {self.nodes!r}")
+
+    def map_spec(self) -> MapSpec:
+        """The static quality map's specification (paper units)."""
+        return MapSpec(object=ObjectSpec.parse(self.object, FIG2_SCALE), psi_steps=self.psi_steps,
+                       d_steps=self.d_steps, d_min=self.d_min, d_max=self.d_max)
+
+    def rod_object(self) -> ObjectSpec:
+        """The object in metres: the paper's shape scaled by ``scale`` about its centre, placed
+        at the rod scenario's object centre."""
+        spec = ObjectSpec.parse(self.object, FIG2_SCALE)
+        if spec.shape == "outline":
+            raise InvalidParameterError("the study takes a built-in shape (its static map is in the paper's units)")
+        params = tuple(p * self.scale if name in ("R", "a", "b") else p
+                       for name, p in zip(_param_names(spec.shape), spec.params, strict=True))
+        return ObjectSpec(spec.shape, params, PAPER.object.center, spec.angle)
+
+
+def _param_names(shape: str) -> tuple[str, ...]:
+    from .objects import SHAPES
+
+    return SHAPES[shape]
+
+
+def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float],
+               static_q: tuple[float, float, float]) -> dict[str, Any]:
+    """One pose of the study: the grasp from the base ``base_paper`` (x, y, heading in the
+    paper's units about the object frame) on the rod scenario, measured (a failed grasp is a
+    result with its ``status``)."""
+    x, y, heading = base_paper
+    cx, cy = PAPER.object.center
+    obj = spec.rod_object()
+    ms = spec.map_spec()
+    rod = replace(PAPER.rod, n_elements=spec.nodes - 1, length=ms.length_fraction * obj.boundary().length,
+                  radius_base=ms.arm_radius * spec.scale, radius_tip=ms.arm_radius * spec.scale,
+                  base_position=(cx + spec.scale * x, cy + spec.scale * y), base_angle=float(heading))
+    scenario = replace(PAPER.with_object(obj), rod=rod)
+    out: dict[str, Any] = {"key": key, "base": [float(v) for v in rod.base_position] + [float(heading)],
+                           "static_Q1": static_q[0], "static_Q2": static_q[1], "static_Q3": static_q[2]}
+    t0 = time.perf_counter()
+    try:
+        result = measure_holding(scenario, spec.hold)
+    except ContgraspError as exc:
+        out.update(status=f"{type(exc).__name__}: {exc}", seconds=time.perf_counter() - t0)
+        return out
+    d = result.to_dict()
+    eig = np.asarray(result.stiffness_eigenvalues)
+    out.update(status="ok", seconds=time.perf_counter() - t0, Q1=result.Q1, Q2=result.Q2, Q3=result.Q3,
+               stiffness=d["stiffness"], stiffness_eigenvalues=d["stiffness_eigenvalues"],
+               stiffness_min=float(eig[0]), stiffness_det=float(np.prod(eig)), capacity=d["capacity"],
+               capacity_min=result.capacity_min, released_displacement=d["released_displacement"])
+    return out
+
+
+def _task(args: tuple[StudySpec, str, tuple[float, float, float], tuple[float, float, float]]) -> dict[str, Any]:
+    return study_pose(*args)
+
+
+def load_results(path: str | Path) -> list[dict[str, Any]]:
+    """The poses done so far (the JSON-lines file of :func:`run_study`; [] if there is none)."""
+    p = Path(path)
+    if not p.exists():
+        return []
+    rows = []
+    for n, line in enumerate(p.read_text().splitlines(), 1):
+        if line.strip():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError as exc:
+                raise InvalidParameterError(f"{p}:{n}: not a study result line ({exc.msg})") from exc
+    return rows
+
+
+def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes", workers: int | None = None,
+              scheduler: str | None = None, progress: bool = False) -> tuple[QualityMap, list[dict[str, Any]]]:
+    """The static map, then every pose not yet in ``path`` (JSON lines, appended as results
+    arrive): grid poses ``grid:i,j`` and the optima ``optimum:Q1|Q2|Q3``. Returns the map and
+    all results (earlier ones included)."""
+    qm = quality_map(spec.map_spec(), executor="serial" if executor == "dask" else executor, workers=workers,
+                     progress=progress)
+    tasks = []
+    for i in range(spec.psi_steps):
+        for j in range(spec.d_steps):
+            if qm.valid[i, j]:
+                tasks.append((f"grid:{i},{j}", tuple(qm.base[i, j]), tuple(qm.Q[:, i, j])))
+    for metric, opt in qm.optimum.items():
+        b = opt["base"]
+        k = ("Q1", "Q2", "Q3").index(metric)
+        static = [np.nan, np.nan, np.nan]
+        static[k] = opt["value"]
+        tasks.append((f"optimum:{metric}", (b["x"], b["y"], b["theta"]), tuple(static)))
+    p = Path(path)
+    done = {r["key"] for r in load_results(p)}
+    todo = [(spec, key, tuple(float(v) for v in base), tuple(float(v) for v in q))
+            for key, base, q in tasks if key not in done]
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        with p.open("a") as fh:
+            if not done:
+                fh.write(json.dumps({"key": "spec", **_spec_dict(spec)}) + "\n")
+            for row in run_tasks(_task, todo, executor, workers=workers, scheduler=scheduler,
+                                 progress=f"holding study {spec.object}" if progress else None, unit="pose"):
+                fh.write(json.dumps(row, allow_nan=True) + "\n")
+                fh.flush()
+    except OSError as exc:
+        raise WriteError(f"cannot write the study results to {p}: {exc.strerror or exc}") from exc
+    return qm, [r for r in load_results(p) if r["key"] != "spec"]
+
+
+def _spec_dict(spec: StudySpec) -> dict[str, Any]:
+    d = asdict(spec)
+    d["hold"] = asdict(spec.hold)
+    return d
+
+
+def correlations(rows: list[dict[str, Any]], *, boot: int = 2000, seed: int = 0,
+                 grid_only: bool = True) -> dict[str, dict[str, dict[str, float]]]:
+    """Spearman's rank correlation of each :data:`PREDICTORS` with each :data:`RESPONSES` over
+    the poses that grasped (``status == "ok"``; grid poses only unless ``grid_only`` is False),
+    with a percentile bootstrap 95 % interval (``boot`` resamples of the poses): ``{predictor:
+    {response: {"rho", "low", "high", "n"}}}``."""
+    from scipy.stats import spearmanr
+
+    ok = [r for r in rows if r.get("status") == "ok" and (not grid_only or r["key"].startswith("grid:"))]
+    rng = np.random.default_rng(seed)
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for pred in PREDICTORS:
+        out[pred] = {}
+        for resp in RESPONSES:
+            pairs = np.array([(r[pred], r[resp]) for r in ok
+                              if np.isfinite(r.get(pred, np.nan)) and np.isfinite(r.get(resp, np.nan))])
+            n = len(pairs)
+            if n < 4:
+                out[pred][resp] = {"rho": float("nan"), "low": float("nan"), "high": float("nan"), "n": n}
+                continue
+            rho = float(spearmanr(pairs[:, 0], pairs[:, 1]).statistic)
+            samples = []
+            for _ in range(boot):
+                pick = pairs[rng.integers(0, n, n)]
+                if np.ptp(pick[:, 0]) > 0 and np.ptp(pick[:, 1]) > 0:
+                    samples.append(spearmanr(pick[:, 0], pick[:, 1]).statistic)
+            low, high = np.percentile(samples, [2.5, 97.5]) if samples else (np.nan, np.nan)
+            out[pred][resp] = {"rho": rho, "low": float(low), "high": float(high), "n": n}
+    return out
