@@ -88,7 +88,7 @@ def body_coupling(model: RodModel, body: RigidBody | None, frame: ContactFrame |
     of the step (every frame row has one; needed with ``friction_model == "stick"``)."""
     n = model.n_elements
     stick = model.friction > 0 and model.friction_model == "stick"
-    if stick and (anchors is None or (frame is not None and np.isnan(anchors[frame.rows]).any())):
+    if stick and frame is not None and (anchors is None or np.isnan(anchors[frame.rows]).any()):
         raise ValueError("stick-slip friction needs an anchor for every contact row")  # (a caller's bug)
     spring_q = np.zeros((3, 3)) if body is None else -np.diag(body.stiffness)
     spring_v = np.zeros((3, 3)) if body is None else -np.diag(body.damping)
@@ -173,21 +173,21 @@ def body_coupling(model: RodModel, body: RigidBody | None, frame: ContactFrame |
     d_w[:, 2, 5] -= f[:, 0]
 
     def wrt_rod(d: Array) -> tuple[Array, Array]:  # per-row partials -> d/dtheta, d/domega (nr, k, N)
-        return (np.einsum("ikl,ilm->ikm", d[:, :, _C], g) + np.einsum("ikl,ilm->ikm", d[:, :, _V], dv_dtheta),
-                np.einsum("ikl,ilm->ikm", d[:, :, _V], g))
+        return d[:, :, _C] @ g + d[:, :, _V] @ dv_dtheta, d[:, :, _V] @ g
 
     f_theta, f_omega = wrt_rod(d_f)
     w_theta, w_omega = wrt_rod(d_w)
-    rod_theta = np.einsum("ikj,ikm->jm", g, f_theta)
-    rod_theta[np.diag_indices(n)] -= np.einsum("ikj,ik->j", ga, f)  # b_j turns with theta_j: d b_j = -a_j
+    gt = g.reshape(2 * nr, n).T  # G^T: the generalised force of the rows' centre forces (N, 2 nr)
+    rod_theta = gt @ f_theta.reshape(2 * nr, n)
+    rod_theta[np.diag_indices(n)] -= ga.reshape(2 * nr, n).T @ f.reshape(-1)  # b_j turns with theta_j: d b_j = -a_j
     torque = -(rel[:, 0] * f[:, 1] - rel[:, 1] * f[:, 0])
     return BodyCoupling(
-        rod=np.einsum("ikj,ik->j", g, f),
+        rod=gt @ f.reshape(-1),
         wrench=wrench + np.array([-f[:, 0].sum(), -f[:, 1].sum(), torque.sum()]),
         rod_theta=rod_theta,
-        rod_omega=np.einsum("ikj,ikm->jm", g, f_omega),
-        rod_q=np.einsum("ikj,ikl->jl", g, d_f[:, :, _Q]),
-        rod_v=np.einsum("ikj,ikl->jl", g, d_f[:, :, _W]),
+        rod_omega=gt @ f_omega.reshape(2 * nr, n),
+        rod_q=gt @ d_f[:, :, _Q].reshape(2 * nr, 3),
+        rod_v=gt @ d_f[:, :, _W].reshape(2 * nr, 3),
         wrench_theta=w_theta.sum(axis=0),
         wrench_omega=w_omega.sum(axis=0),
         wrench_q=spring_q + d_w[:, :, _Q].sum(axis=0),
