@@ -80,3 +80,19 @@ def test_stick_slip_holds_below_the_limit_where_regularised_friction_creeps() ->
         rates[model] = abs(np.polyfit(late[:, 0], late[:, 2], 1)[0])
     assert rates["stick"] < 1e-6, rates
     assert rates["regularised"] > 1e-2, rates
+
+
+def test_stick_slip_away_from_the_object_is_the_frictionless_rod() -> None:
+    """Before it touches anything, a rod with stick-slip friction moves exactly as one without
+    friction (no contact frame, no anchors needed)."""
+    from dataclasses import replace
+
+    model = RodModel(n_elements=12, damping=1.0)
+    far = Obstacle(circle(0.02, (0.5, 0.5)))
+    couple = np.full(12, 1e-6)
+    runs = []
+    for m in (model, replace(model, friction=0.5, friction_model="stick")):
+        system = RodSystem(m, far)
+        state, _ = system.advance(system.straight_state(), 0.05, RodLoads(couple=couple), dt_try=0.005)
+        runs.append(state.theta)
+    np.testing.assert_array_equal(runs[0], runs[1])
