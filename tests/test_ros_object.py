@@ -170,6 +170,35 @@ def test_wrench_inputs_are_validated_and_refused_for_a_fixed_object(ros_context:
         spring.destroy_node()
 
 
+def test_markers_draw_the_object_where_it_is() -> None:
+    """The outline marker follows a movable object's displacement (a circle: its points are R
+    from the moved centre); the contact marker is judged against the moved object."""
+    from dataclasses import replace
+
+    from std_msgs.msg import Header
+
+    from contgrasp_core.rod.body import BodyState, ObjectDynamics
+    from contgrasp_core.rod.session import LoopSession
+    from contgrasp_ros.markers import scene_markers
+
+    scenario = replace(PAPER, rod=replace(PAPER.rod, n_elements=20), dynamics=ObjectDynamics("free"))
+    system = scenario.system()
+    assert system.body is not None
+    obs = LoopSession(system, scenario.loop).observe()
+    boundary = scenario.object.boundary()
+
+    def markers(q: tuple[float, float, float]) -> Any:
+        moved = replace(obs, body=BodyState(q=np.array(q), v=np.zeros(3)))
+        return scene_markers(boundary, moved, Header(), system.body.centroid).markers  # type: ignore[union-attr]
+
+    outline = np.array([[p.x, p.y] for p in markers((0.01, -0.02, 0.3))[1].points])
+    np.testing.assert_allclose(np.hypot(*(outline - (0.09, 0.06)).T), 0.025, rtol=0, atol=1e-12)
+    # the straight arm along the x axis touches the circle only once it is moved down onto it
+    assert markers((0.0, 0.0, 0.0))[2].points == []
+    touching = np.array([[p.x, p.y] for p in markers((0.0, -0.06, 0.0))[2].points])
+    assert len(touching) > 0 and np.all(np.abs(touching[:, 0] - 0.08) < 0.025)
+
+
 # ------------------------------------------------------------------ (a) lock-step determinism
 @pytest.mark.parametrize(("mode", "extra"), [
     ("free", {"disturbance_kind": "step", "disturbance_wrench": [0.01, -0.005, 1e-5], "disturbance_start": 0.02}),
