@@ -639,7 +639,9 @@ def write_csv(run: RunData, rc: Recomputation, out_dir: str | Path) -> dict[str,
     i, s, rho, alpha, delta, s_o, shadow_x, shadow_y, in_contact, contact_tolerance) in long format,
     one row per recorded state and node; ``quality.csv`` (t, step, q1, q2, q3, contact_length,
     valid, recomputed_q1..3) one row per quality message, the recomputed values empty where the
-    rod state of that step was not recorded. Floats are written round-trip exact."""
+    rod state of that step was not recorded; for a movable object ``object.csv`` (t, step, dx,
+    dy, dpsi, vx, vy, omega, fx, fy, torque) one row per rod state. Floats are written
+    round-trip exact."""
     d = Path(out_dir)
     r, c, q = run.rod, run.contact, run.quality
     files: dict[str, dict[str, Any]] = {}
@@ -665,6 +667,12 @@ def write_csv(run: RunData, rc: Recomputation, out_dir: str | Path) -> dict[str,
                   int(q.valid[j]), *again.get(j, ["", "", ""])] for j in range(len(q.step))),
             )
             files["quality"] = {"path": str(d / "quality.csv"), "rows": rows}
+        if r.object is not None:
+            o = r.object
+            rows = _write_rows(d / "object.csv", ["t", "step", "dx", "dy", "dpsi", "vx", "vy", "omega", "fx", "fy", "torque"],
+                               ([float(r.t[k]), int(r.step[k]), *o.q[k].tolist(), *o.v[k].tolist(), *o.wrench[k].tolist()]
+                                for k in range(len(r.step))))
+            files["object"] = {"path": str(d / "object.csv"), "rows": rows}
     except OSError as exc:
         raise WriteError(f"cannot write CSV files to {d}: {exc.strerror or exc}") from exc
     return files

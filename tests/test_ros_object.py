@@ -231,9 +231,12 @@ def test_a_movable_object_with_a_scripted_disturbance_runs_through_the_graph_as_
     np.testing.assert_array_equal(run.rod.object.wrench, [scenario.disturbance.wrench_at(t) for t in run.rod.t])
     names = {t["name"]: t["count"] for t in run.topics}
     assert names[topics.OBJECT_POSE] == names[topics.OBJECT_TWIST] == names[topics.ROD_STATE] == obs.k + 1
-    result = analyze(tmp_path / "bag")
+    result = analyze(tmp_path / "bag", csv_dir=tmp_path / "csv")
     assert result["max_recompute_error"] == 0.0  # sensed in the object's frame, as the sensor did
     assert result["object"]["mode"] == mode and result["object"]["final_q"] == obs.body.q.tolist()
+    rows = np.loadtxt(result["csv"]["object"]["path"], delimiter=",", skiprows=1)
+    assert rows.shape == (obs.k + 1, 11)
+    np.testing.assert_array_equal(rows[-1, 2:5], obs.body.q)
 
 
 # ------------------------------------------------------------------ (b) a push by hand
