@@ -127,7 +127,8 @@ def test_simulator_with_bad_object_parameters_exits_2_with_one_line(capsys: pyte
 
 def test_wrench_inputs_are_validated_and_refused_for_a_fixed_object(ros_context: Any) -> None:
     """A NaN or out-of-plane wrench is dropped and counted; a fixed object refuses the topic and
-    the service; the service applies a valid pulse from the next control period on."""
+    the service; the service applies a valid pulse from the next control period on, and refuses
+    once the run is over."""
     from geometry_msgs.msg import WrenchStamped
     from rclpy.parameter import Parameter
 
@@ -166,6 +167,9 @@ def test_wrench_inputs_are_validated_and_refused_for_a_fixed_object(ros_context:
         assert ok.success and ok.step == 0  # nothing went out yet: from the first state on
         np.testing.assert_array_equal(spring.wrenches.freeze(0, 0.0), [0.5, 1.25, 0.0])
         assert spring.on_apply_wrench(ApplyWrench.Request(kind="step", wrench=[0.0, 0.0, 1e-3]), ApplyWrench.Response()).step == 1
+        spring.session.finished = True  # (as at the end of a run)
+        over = spring.on_apply_wrench(ApplyWrench.Request(kind="step", wrench=[0.0, 0.0, 1e-3]), ApplyWrench.Response())
+        assert not over.success and "the run is over" in over.message
     finally:
         spring.destroy_node()
 

@@ -385,6 +385,9 @@ class RodSimulator(Node):
         if self.system.body is None:
             resp.success, resp.message = False, "the object is fixed (object_mode): no wrench moves it"
             return resp
+        if self.session.finished or self.failure:
+            resp.success, resp.message = False, f"the run is over ({self._status()}): ~/reset starts a new one"
+            return resp
         try:
             self.wrenches.apply(req.kind, (float(req.wrench[0]), float(req.wrench[1]), float(req.wrench[2])), float(req.duration))
         except ContgraspError as exc:
