@@ -259,7 +259,7 @@ def test_a_push_on_the_wrench_topic_and_a_pulse_from_the_service_are_in_the_reco
     from contgrasp_ros import qos
 
     push, torque = (0.0, -0.05, 0.0), 2e-4
-    params = object_params(tmp_path, 0.5, object_mode="spring", object_stiffness=[10.0, 10.0, 0.01],
+    params = object_params(tmp_path, 0.6, object_mode="spring", object_stiffness=[10.0, 10.0, 0.01],
                            object_damping=[0.05, 0.05, 1e-4])
     domain = fresh_domain_id()
     ctx = Context()
