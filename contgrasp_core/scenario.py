@@ -23,6 +23,7 @@ from contgrasp_core.control.gains import FeedbackGains, paper_gains
 from contgrasp_core.control.law import CENTIMETRE
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+from contgrasp_core.boundary import Boundary
 from contgrasp_core.rod.body import ObjectDynamics
 from contgrasp_core.rod.disturbance import Disturbance
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
@@ -32,7 +33,7 @@ if TYPE_CHECKING:
     from contgrasp_core.rod.integrator import RodSystem
 
 __all__ = ["GainSettings", "SensingSettings", "Scenario", "PAPER", "ROD_PARAMETERS", "NODES", "SIMULATOR", "SENSOR",
-           "CONTROLLER", "QUALITY", "object_from_parameters"]
+           "CONTROLLER", "QUALITY", "object_from_parameters", "motion_from_parameters", "motion_parameters", "rod_system"]
 
 SIMULATOR, SENSOR, CONTROLLER, QUALITY = "rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"
 NODES = (SIMULATOR, SENSOR, CONTROLLER, QUALITY)
@@ -102,11 +103,9 @@ class Scenario:
                           ("gains", GainSettings), ("sensing", SensingSettings), ("dynamics", ObjectDynamics)):
             if not isinstance(getattr(self, name), cls):
                 raise InvalidParameterError(f"Scenario.{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
-        if self.disturbance is not None:
-            if not isinstance(self.disturbance, Disturbance):
-                raise InvalidParameterError(f"Scenario.disturbance must be a Disturbance, got {type(self.disturbance).__name__}")
-            if self.dynamics.mode == "fixed":
-                raise InvalidParameterError("a disturbance pushes a movable object: set the object's mode to spring or free")
+        if self.disturbance is not None and not isinstance(self.disturbance, Disturbance):
+            raise InvalidParameterError(f"Scenario.disturbance must be a Disturbance, got {type(self.disturbance).__name__}")
+        _check_disturbance(self.dynamics, self.disturbance)
 
     @property
     def feedback_gains(self) -> FeedbackGains:
@@ -116,11 +115,7 @@ class Scenario:
     def system(self) -> RodSystem:
         """The rod engine of this scenario: the rod, the object's obstacle and, unless the object
         is fixed, its rigid body."""
-        from contgrasp_core.rod.integrator import RodSystem
-        from contgrasp_core.rod.obstacle import Obstacle
-
-        boundary = self.object.boundary()
-        return RodSystem(self.rod, Obstacle(boundary), body=self.dynamics.body(boundary))
+        return rod_system(self.rod, self.object.boundary(), self.dynamics)
 
     @property
     def reference(self) -> tuple[float, float]:
@@ -142,6 +137,7 @@ class Scenario:
         cfg = self.loop
         sim.update({"duration": cfg.duration, "control_period": float(cfg.control_period or 0.0), "dt": float(cfg.dt or 0.0),
                     "settle_speed": cfg.settle_speed, "settle_hold": cfg.settle_hold, "min_time": cfg.min_time})
+        sim.update(motion_parameters(self.dynamics, self.disturbance))
         g = self.gains
         ctl = {"mu1": g.mu1, "mu2": g.mu2, "adaptive_mu2": g.adaptive_mu2,
                "object_radius": float(o.radius if g.object_radius is None else g.object_radius),
@@ -181,7 +177,8 @@ class Scenario:
         sensing = SensingSettings(contact_tolerance=float(sen["contact_tolerance"]),
                                   quality_rate_hz=float(qual["rate_hz"]),
                                   reference=(float(qual["reference_x"]), float(qual["reference_y"])))
-        return cls(rod=rod, object=obj, loop=loop, gains=gains, sensing=sensing)
+        dynamics, disturbance = motion_from_parameters(sim)
+        return cls(rod=rod, object=obj, loop=loop, gains=gains, sensing=sensing, dynamics=dynamics, disturbance=disturbance)
 
     def with_object(self, obj: ObjectSpec) -> Scenario:
         """The same scenario around another object (the adaptive gain follows its nominal radius)."""
@@ -198,6 +195,60 @@ def object_from_parameters(text: str, outline: str, center: Any, angle: float) -
         return ObjectSpec.from_outline(outline)
     spec = ObjectSpec.parse(text, ROD_SCALE)
     return ObjectSpec(spec.shape, spec.params, tuple(center), float(angle))
+
+
+def motion_parameters(dynamics: ObjectDynamics, disturbance: Disturbance | None) -> dict[str, Any]:
+    """The simulator's parameters of how the object moves and what pushes it (plain types; 0 for
+    a mass or inertia taken from the density, ``disturbance_kind`` '' for no disturbance)."""
+    d = disturbance
+    return {"object_mode": dynamics.mode, "object_density": float(dynamics.areal_density),
+            "object_mass": float(dynamics.mass or 0.0), "object_inertia": float(dynamics.inertia or 0.0),
+            "object_stiffness": list(dynamics.stiffness), "object_damping": list(dynamics.damping),
+            "disturbance_kind": "" if d is None else d.kind,
+            "disturbance_wrench": [0.0, 0.0, 0.0] if d is None else list(d.wrench),
+            "disturbance_start": 0.0 if d is None else float(d.start),
+            "disturbance_duration": 0.0 if d is None else float(d.duration)}
+
+
+def motion_from_parameters(p: dict[str, Any]) -> tuple[ObjectDynamics, Disturbance | None]:
+    """The object's dynamics and scripted disturbance of the simulator's parameters
+    (:func:`motion_parameters`); :class:`InvalidParameterError` for bad values (a negative mass,
+    a stiffness that is not three numbers >= 0, a NaN wrench, a disturbance on a fixed object)."""
+    mass, inertia = float(p["object_mass"]), float(p["object_inertia"])
+    dynamics = ObjectDynamics(mode=str(p["object_mode"]), areal_density=float(p["object_density"]),
+                              mass=None if mass == 0.0 else mass, inertia=None if inertia == 0.0 else inertia,
+                              stiffness=_triple_parameter("object_stiffness", p["object_stiffness"]),
+                              damping=_triple_parameter("object_damping", p["object_damping"]))
+    disturbance = None
+    if p["disturbance_kind"]:
+        disturbance = Disturbance(kind=str(p["disturbance_kind"]),
+                                  wrench=_triple_parameter("disturbance_wrench", p["disturbance_wrench"]),
+                                  start=float(p["disturbance_start"]), duration=float(p["disturbance_duration"]))
+    _check_disturbance(dynamics, disturbance)
+    return dynamics, disturbance
+
+
+def _triple_parameter(name: str, value: Any) -> tuple[float, float, float]:
+    """Three numbers of an array parameter (what they must be is checked where they are used)."""
+    try:
+        x, y, z = (float(v) for v in value)
+    except (TypeError, ValueError) as exc:
+        raise InvalidParameterError(f"{name} must be three numbers (x, y, rotation), got {value!r}") from exc
+    return x, y, z
+
+
+def _check_disturbance(dynamics: ObjectDynamics, disturbance: Disturbance | None) -> None:
+    if disturbance is not None and dynamics.mode == "fixed":
+        raise InvalidParameterError("a disturbance pushes a movable object: set the object's mode to spring or free")
+
+
+def rod_system(rod: RodModel, boundary: Boundary, dynamics: ObjectDynamics) -> RodSystem:
+    """The rod engine of a rod, the object's boundary (its obstacle) and, unless the object is
+    fixed, its rigid body (what :meth:`Scenario.system` and the simulator node build)."""
+    from contgrasp_core.rod.integrator import RodSystem
+    from contgrasp_core.rod.obstacle import Obstacle
+
+    return RodSystem(rod, Obstacle(boundary), body=dynamics.body(boundary))
 
 
 def _plain(value: Any) -> Any:

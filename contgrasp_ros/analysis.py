@@ -41,12 +41,21 @@ from contgrasp_ros import topics
 from contgrasp_ros.bag import BagInputError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
 from contgrasp_core.scenario import PAPER
-from contgrasp_ros.convert import ContactArrays, RodArrays, boundary_from_msg, contact_arrays, rod_state_arrays, stamp_seconds
+from contgrasp_ros.convert import (
+    ContactArrays,
+    ObjectArrays,
+    RodArrays,
+    boundary_from_msg,
+    contact_arrays,
+    rod_state_arrays,
+    stamp_seconds,
+)
 from contgrasp_ros.evaluate import contact_quality
 from contgrasp_ros.summary import FinalQuality, FinalState, build_summary, contact_stats
 
 __all__ = [
     "RodSeries",
+    "ObjectSeries",
     "ContactSeries",
     "QualitySeries",
     "RunData",
@@ -54,6 +63,7 @@ __all__ = [
     "load_run",
     "recompute",
     "summarize",
+    "object_motion",
     "write_csv",
     "write_plots",
     "analyze",
@@ -92,8 +102,20 @@ def _default(node: str, key: str) -> Any:
 
 
 @dataclass
+class ObjectSeries:
+    """A movable object in the recorded rod states (K rows): its centroid at the start pose
+    (K, 2), displacement ``q``, velocity ``v`` and the wrench held on it (K, 3)."""
+
+    centroid: Array
+    q: Array
+    v: Array
+    wrench: Array
+
+
+@dataclass
 class RodSeries:
-    """Recorded rod states: ``step``/``t`` (K,), per-node arrays (K, n), ``max_penetration`` (K,)."""
+    """Recorded rod states: ``step``/``t`` (K,), per-node arrays (K, n), ``max_penetration`` (K,),
+    the movable object's ``object`` (None: fixed)."""
 
     step: IntArray
     t: Array
@@ -105,11 +127,14 @@ class RodSeries:
     vx: Array
     vy: Array
     max_penetration: Array
+    object: ObjectSeries | None = None
 
     def arrays(self, k: int) -> RodArrays:
         """The k-th state as the sensor node reads it (:func:`contgrasp_ros.convert.rod_state_arrays`)."""
+        o = self.object
+        body = None if o is None else ObjectArrays(o.centroid[k], o.q[k], o.v[k], o.wrench[k])
         return RodArrays(int(self.step[k]), float(self.t[k]), self.s[k], self.x[k], self.y[k], self.theta[k],
-                         np.zeros(0), self.radius[k])
+                         np.zeros(0), self.radius[k], body)
 
     @property
     def max_speed(self) -> Array:
@@ -186,6 +211,7 @@ def _json_values(record: dict[str, str]) -> dict[str, Any]:
 def _rod_series(msgs: list[Any]) -> RodSeries:
     cols: dict[str, list[Any]] = {k: [] for k in ("s", "x", "y", "theta", "radius", "vx", "vy")}
     steps, ts, pens = [], [], []
+    bodies: list[ObjectArrays | None] = []
     for i, msg in enumerate(msgs):
         try:
             a = rod_state_arrays(msg)
@@ -197,10 +223,22 @@ def _rod_series(msgs: list[Any]) -> RodSeries:
         steps.append(a.step)
         ts.append(a.t)
         pens.append(float(msg.max_penetration))
+        bodies.append(a.object)
         for key, val in (("s", a.s), ("x", a.x), ("y", a.y), ("theta", a.theta), ("radius", a.radius), ("vx", vx), ("vy", vy)):
             cols[key].append(val)
     st = {k: _stack(v, topics.ROD_STATE) for k, v in cols.items()}
-    return RodSeries(np.asarray(steps, dtype=np.int64), np.asarray(ts), max_penetration=np.asarray(pens), **st)
+    return RodSeries(np.asarray(steps, dtype=np.int64), np.asarray(ts), max_penetration=np.asarray(pens),
+                     object=_object_series(bodies), **st)
+
+
+def _object_series(bodies: list[ObjectArrays | None]) -> ObjectSeries | None:
+    moving = [b for b in bodies if b is not None]
+    if not moving:
+        return None
+    if len(moving) != len(bodies):
+        raise BagInputError(f"{topics.ROD_STATE}: {len(moving)} of {len(bodies)} rod states carry the object's motion "
+                            "(a run's object is either fixed or movable)")
+    return ObjectSeries(*(np.stack([getattr(b, k) for b in moving]) for k in ("centroid", "q", "v", "wrench")))
 
 
 def _contact_series(msgs: list[Any]) -> ContactSeries | None:
@@ -383,7 +421,7 @@ def recompute(
     def sensed_state(i: int) -> Any:
         if i not in sensed:
             rod = run.rod.arrays(i)
-            sensed[i] = sense(rod.shape, run.boundary, rod.radius, tol=s_tol)
+            sensed[i] = sense(rod.sensed_shape, run.boundary, rod.radius, tol=s_tol)
         return sensed[i]
 
     def bump(key: str, value: float) -> None:
@@ -503,6 +541,39 @@ def history(run: RunData, period: float = 0.01) -> list[dict[str, Any]]:
     return out
 
 
+def object_motion(run: RunData) -> dict[str, Any] | None:
+    """How a movable object moved and what pushed it, over the recorded rod states (None: the
+    object is fixed): largest and final displacement of the centroid (m) and rotation (rad),
+    final velocity, and the external wrench held on it (largest force and torque, the times of
+    the first and last state with a wrench, the final one)."""
+    o, t = run.rod.object, run.rod.t
+    if o is None:
+        return None
+    dist = np.hypot(o.q[:, 0], o.q[:, 1])
+    force = np.hypot(o.wrench[:, 0], o.wrench[:, 1])
+    pushed = np.flatnonzero(np.any(o.wrench != 0.0, axis=1))
+    i = int(np.argmax(dist))
+    return {
+        "mode": None if run.params is None else run.params.get(SIMULATOR, {}).get("object_mode"),
+        "centroid": o.centroid[0].tolist(),
+        "max_displacement": float(dist[i]),
+        "max_displacement_t": float(t[i]),
+        "max_rotation": float(np.abs(o.q[:, 2]).max()),
+        "final_displacement": float(dist[-1]),
+        "final_q": o.q[-1].tolist(),
+        "final_v": o.v[-1].tolist(),
+        "final_speed": float(np.hypot(o.v[-1, 0], o.v[-1, 1])),
+        "wrench": {
+            "max_force": float(force.max()),
+            "max_torque": float(np.abs(o.wrench[:, 2]).max()),
+            "first_t": float(t[pushed[0]]) if len(pushed) else None,
+            "last_t": float(t[pushed[-1]]) if len(pushed) else None,
+            "states": len(pushed),
+            "final": o.wrench[-1].tolist(),
+        },
+    }
+
+
 def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
     """The JSON result: the run's :class:`~contgrasp_ros.summary.RunSummary` built from the
     recording (simulator status, last rod state, contact and quality; by the launcher's own
@@ -522,6 +593,7 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
         "topics": run.topics,
         **summary.to_dict(),
         "recorded_sim_time_s": float(rod.t[-1] - rod.t[0]),
+        "object": object_motion(run),
         "settled_recomputed": settled_re,
         "settle_time_recomputed_s": settle_re,
         "max_penetration_recomputed": float(rod.max_penetration.max()) if gaps["contiguous"] and gaps["first_step"] == 0 else None,
@@ -567,7 +639,9 @@ def write_csv(run: RunData, rc: Recomputation, out_dir: str | Path) -> dict[str,
     i, s, rho, alpha, delta, s_o, shadow_x, shadow_y, in_contact, contact_tolerance) in long format,
     one row per recorded state and node; ``quality.csv`` (t, step, q1, q2, q3, contact_length,
     valid, recomputed_q1..3) one row per quality message, the recomputed values empty where the
-    rod state of that step was not recorded. Floats are written round-trip exact."""
+    rod state of that step was not recorded; for a movable object ``object.csv`` (t, step, dx,
+    dy, dpsi, vx, vy, omega, fx, fy, torque) one row per rod state. Floats are written
+    round-trip exact."""
     d = Path(out_dir)
     r, c, q = run.rod, run.contact, run.quality
     files: dict[str, dict[str, Any]] = {}
@@ -593,6 +667,12 @@ def write_csv(run: RunData, rc: Recomputation, out_dir: str | Path) -> dict[str,
                   int(q.valid[j]), *again.get(j, ["", "", ""])] for j in range(len(q.step))),
             )
             files["quality"] = {"path": str(d / "quality.csv"), "rows": rows}
+        if r.object is not None:
+            o = r.object
+            rows = _write_rows(d / "object.csv", ["t", "step", "dx", "dy", "dpsi", "vx", "vy", "omega", "fx", "fy", "torque"],
+                               ([float(r.t[k]), int(r.step[k]), *o.q[k].tolist(), *o.v[k].tolist(), *o.wrench[k].tolist()]
+                                for k in range(len(r.step))))
+            files["object"] = {"path": str(d / "object.csv"), "rows": rows}
     except OSError as exc:
         raise WriteError(f"cannot write CSV files to {d}: {exc.strerror or exc}") from exc
     return files

@@ -21,6 +21,7 @@ from contgrasp_core.arm import ArmShape
 from contgrasp_core.boundary import Boundary, from_points
 from contgrasp_core.contact import ContactState
 from contgrasp_core.errors import ContgraspError, InputError
+from contgrasp_core.rod.body import shape_in_object_frame
 from contgrasp_core.quality import GraspQuality
 from contgrasp_core.objects import ObjectSpec
 from contgrasp_core.control import FeedbackExpansion
@@ -30,12 +31,17 @@ if TYPE_CHECKING:
     from contgrasp_msgs.msg import CoupleControl, ObjectBoundary
     from contgrasp_msgs.msg import GraspQuality as GraspQualityMsg
     from contgrasp_msgs.msg import RodState as RodStateMsg
+    from contgrasp_core.rod.body import BodyState
+    from geometry_msgs.msg import WrenchStamped
     from std_msgs.msg import Header
 
 __all__ = [
     "MessageError",
     "RodArrays",
+    "ObjectArrays",
     "rod_state_arrays",
+    "object_fields",
+    "wrench_arrays",
     "contact_to_msg",
     "ContactArrays",
     "contact_arrays",
@@ -108,8 +114,20 @@ def _arrays(msg: object, names: tuple[str, ...], *, min_len: int = 2, max_abs: f
 
 
 @dataclass(frozen=True)
+class ObjectArrays:
+    """The movable object in a RodState message (SI): its ``centroid`` at the start pose (2,),
+    displacement ``q`` and velocity ``v`` (3,) (:class:`~contgrasp_core.rod.body.BodyState`) and
+    the external ``wrench`` (3,) held on it over the control period from this state."""
+
+    centroid: Array
+    q: Array
+    v: Array
+    wrench: Array
+
+
+@dataclass(frozen=True)
 class RodArrays:
-    """Arrays of a RodState message (SI)."""
+    """Arrays of a RodState message (SI); ``object`` when the object moves (None: fixed)."""
 
     step: int
     t: float
@@ -119,11 +137,50 @@ class RodArrays:
     theta: Array
     kappa: Array
     radius: Array
+    object: ObjectArrays | None = None
 
     @property
     def shape(self) -> ArmShape:
-        """The centreline at the nodes, what :func:`contgrasp_core.contact.sense` senses."""
+        """The centreline at the nodes (world frame)."""
         return ArmShape(s=self.s, r=np.stack([self.x, self.y], -1), theta=self.theta)
+
+    @property
+    def sensed_shape(self) -> ArmShape:
+        """What :func:`contgrasp_core.contact.sense` senses against the object's boundary: the
+        centreline, in the object's start-pose frame when the object moves (as the core loop,
+        :func:`contgrasp_core.rod.session.sensed_shape`)."""
+        if self.object is None:
+            return self.shape
+        return shape_in_object_frame(self.shape, self.object.q, self.object.centroid)
+
+
+_OBJECT_FIELDS = (("object_centroid", 2), ("object_q", 3), ("object_v", 3), ("object_wrench", 3))
+
+
+def object_fields(centroid: tuple[float, float] | None, body: BodyState | None, wrench: Array | None) -> dict[str, list[float]]:
+    """The object fields of a RodState message: empty while the object is fixed (``body`` None);
+    a movable object without an external wrench (``wrench`` None) carries zeros."""
+    if centroid is None or body is None:
+        return {name: [] for name, _ in _OBJECT_FIELDS}
+    return {"object_centroid": [float(c) for c in centroid], "object_q": body.q.tolist(), "object_v": body.v.tolist(),
+            "object_wrench": [0.0, 0.0, 0.0] if wrench is None else np.asarray(wrench, dtype=float).tolist()}
+
+
+def _object_arrays(msg: RodStateMsg) -> ObjectArrays | None:
+    # (recordings made before the object could move have none of these fields)
+    values = {name: np.asarray(getattr(msg, name, ()), dtype=float) for name, _ in _OBJECT_FIELDS}
+    if all(v.size == 0 for v in values.values()):
+        return None
+    for name, n in _OBJECT_FIELDS:
+        v = values[name]
+        if v.shape != (n,):
+            raise MessageError(f"RodState: field '{name}' must be empty (a fixed object) or have {n} values, got {v.size}",
+                               reason="length mismatch")
+        if not np.all(np.isfinite(v)):
+            raise MessageError(f"RodState: field '{name}' contains NaN or Inf", reason="NaN/Inf")
+        if np.any(np.abs(v) > MAX_ABS):
+            raise MessageError(f"RodState: field '{name}' has values beyond +-{MAX_ABS:g}", reason="out of range")
+    return ObjectArrays(values["object_centroid"], values["object_q"], values["object_v"], values["object_wrench"])
 
 
 def rod_state_arrays(msg: RodStateMsg) -> RodArrays:
@@ -136,7 +193,26 @@ def rod_state_arrays(msg: RodStateMsg) -> RodArrays:
         raise MessageError("RodState: field 'kappa' contains NaN or Inf", reason="NaN/Inf")
     if np.any(a["radius"] < 0.0):
         raise MessageError("RodState: radius must be >= 0", reason="out of range")
-    return RodArrays(int(msg.step), stamp_seconds(msg.header), a["s"], a["x"], a["y"], a["theta"], kappa, a["radius"])
+    return RodArrays(int(msg.step), stamp_seconds(msg.header), a["s"], a["x"], a["y"], a["theta"], kappa, a["radius"],
+                     _object_arrays(msg))
+
+
+def wrench_arrays(msg: WrenchStamped) -> Array:
+    """The planar wrench (fx, fy, torque) (3,) of a geometry_msgs/WrenchStamped in the world
+    frame (force at the object's centroid, torque about it); the out-of-plane components must be 0."""
+    f, m = msg.wrench.force, msg.wrench.torque
+    w = np.array([f.x, f.y, m.z, f.z, m.x, m.y], dtype=float)
+    if not np.all(np.isfinite(w)):
+        raise MessageError("WrenchStamped: the wrench contains NaN or Inf", reason="NaN/Inf")
+    if np.any(np.abs(w) > MAX_ABS):
+        raise MessageError(f"WrenchStamped: values beyond +-{MAX_ABS:g}", reason="out of range")
+    if np.any(w[3:] != 0.0):
+        raise MessageError("WrenchStamped: the object moves in the plane: force.z, torque.x and torque.y must be 0",
+                           reason="out of plane")
+    if msg.header.frame_id not in ("", "world"):
+        raise MessageError(f"WrenchStamped: frame '{msg.header.frame_id}' (the wrench is given in 'world')",
+                           reason="wrong frame")
+    return w[:3]
 
 
 def contact_to_msg(state: ContactState, header: Header, step: int) -> ContactStateMsg:

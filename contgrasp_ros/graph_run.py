@@ -59,14 +59,17 @@ __all__ = ["Monitor", "run_graph"]
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
 DECIMATED_STREAMS = (topics.ROD_STATE, topics.CONTACT, topics.COUPLE)  # the bulky per-step topics
 RECORDED_STREAMS = (topics.OBJECT, topics.ROD_STATE, topics.CONTACT, topics.COUPLE, topics.QUALITY, topics.CLOCK)
+OBJECT_STREAMS = (topics.OBJECT_POSE, topics.OBJECT_TWIST)  # (published when the object moves)
 
 
 class Monitor(Node):
     """Observes the run: last rod state, contact and quality, a history, the simulator status."""
 
-    def __init__(self, history_period: float | None = 0.01, recording: bool = False, **kw: Any) -> None:
+    def __init__(self, history_period: float | None = 0.01, recording: bool = False,
+                 recorded_streams: tuple[str, ...] = RECORDED_STREAMS, **kw: Any) -> None:
         super().__init__("contgrasp_monitor", **kw)
         self.recording = recording
+        self.recorded_streams = recorded_streams
         self.rod: RodState | None = None
         self.contact: ContactState | None = None
         self.quality: GraspQuality | None = None
@@ -119,7 +122,7 @@ class Monitor(Node):
         if not set(NODES) <= names or not self.pause.service_is_ready():
             return False
         if self.recording and not all(
-            any(i.node_name == RECORDER for i in self.get_subscriptions_info_by_topic(t)) for t in RECORDED_STREAMS
+            any(i.node_name == RECORDER for i in self.get_subscriptions_info_by_topic(t)) for t in self.recorded_streams
         ):
             return False
         return (
@@ -291,7 +294,9 @@ def run_graph(
     on_recorder_lost: Callable[[], None] | None = None
     foxglove_url = ""
     try:
-        mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None)
+        moves = sim_params.get("object_mode", "fixed") != "fixed"
+        mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None,
+                      recorded_streams=RECORDED_STREAMS + (OBJECT_STREAMS if moves else ()))
         nodes.append(mon)
         if foxglove is not None:
             from contgrasp_ros.nodes.foxglove_bridge import FoxgloveBridge

@@ -1,5 +1,5 @@
-"""RViz / Foxglove markers of the scene: the arm as a thick line strip, the object outline and
-the nodes in contact."""
+"""RViz / Foxglove markers of the scene: the arm as a thick line strip, the object outline (where
+the object is, when it moves) and the nodes in contact."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from contgrasp_core.boundary import Boundary
+from contgrasp_core.rod.body import to_object_frame, to_world
 from contgrasp_core.rod.session import Observation
 
 __all__ = ["scene_markers"]
@@ -18,20 +19,27 @@ def _points(xy: np.ndarray) -> list[Point]:
     return [Point(x=float(x), y=float(y), z=0.0) for x, y in xy]
 
 
-def scene_markers(boundary: Boundary, obs: Observation, header: Header, contact_tol: float = 1e-4) -> MarkerArray:
-    """Markers for one rod observation (contact = rod surface within ``contact_tol`` of the object)."""
+def scene_markers(boundary: Boundary, obs: Observation, header: Header, centroid: tuple[float, float] | None = None,
+                  contact_tol: float = 1e-4) -> MarkerArray:
+    """Markers for one rod observation (contact = rod surface within ``contact_tol`` of the object).
+    A movable object (``obs.body``, with its ``centroid`` at the start pose) is drawn where it is."""
     arm = Marker(header=header, ns="arm", id=0, type=Marker.LINE_STRIP, action=Marker.ADD)
     arm.scale.x = float(2.0 * np.mean(obs.radius))
     arm.color = ColorRGBA(r=0.55, g=0.35, b=0.75, a=0.8)
     arm.points = _points(obs.x)
     arm.pose.orientation.w = 1.0
     _, pts = boundary.sample(256)
+    arm_in_object = obs.x
+    if obs.body is not None and centroid is not None:
+        c = np.asarray(centroid, dtype=float)
+        pts = to_world(pts, obs.body.q, c)
+        arm_in_object = to_object_frame(obs.x, obs.body.q, c)
     outline = Marker(header=header, ns="object", id=1, type=Marker.LINE_STRIP, action=Marker.ADD)
     outline.scale.x = float(0.005 * boundary.length)
     outline.color = ColorRGBA(r=0.2, g=0.2, b=0.2, a=1.0)
     outline.points = _points(np.vstack([pts, pts[:1]]))
     outline.pose.orientation.w = 1.0
-    gap = boundary.project(obs.x).signed_distance - obs.radius
+    gap = boundary.project(arm_in_object).signed_distance - obs.radius
     contact = Marker(header=header, ns="contact", id=2, type=Marker.POINTS, action=Marker.ADD)
     contact.scale.x = contact.scale.y = float(np.mean(obs.radius))
     contact.color = ColorRGBA(r=1.0, g=0.5, b=0.0, a=1.0)

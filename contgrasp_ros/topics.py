@@ -4,7 +4,8 @@ The quality-of-service profiles are in :mod:`contgrasp_ros.qos`."""
 
 from __future__ import annotations
 
-__all__ = ["OBJECT", "ROD_STATE", "CONTACT", "COUPLE", "QUALITY", "MARKERS", "DIAGNOSTICS", "CLOCK"]
+__all__ = ["OBJECT", "ROD_STATE", "CONTACT", "COUPLE", "QUALITY", "MARKERS", "DIAGNOSTICS", "CLOCK", "OBJECT_POSE",
+           "OBJECT_TWIST", "OBJECT_WRENCH", "APPLY_WRENCH"]
 
 OBJECT = "/contgrasp/object"
 """contgrasp_msgs/ObjectBoundary, transient-local: the object's sampled boundary."""
@@ -16,6 +17,20 @@ COUPLE = "/contgrasp/couple"
 """contgrasp_msgs/CoupleControl: the feedback couple at the joints, answering one rod state."""
 QUALITY = "/contgrasp/quality"
 """contgrasp_msgs/GraspQuality: the Gramian W and Q1..Q3."""
+OBJECT_POSE = "/contgrasp/object_pose"
+"""geometry_msgs/PoseStamped (frame ``world``), a movable object only, one per rod state: its
+centroid and its rotation from the start pose (the object's frame is parallel to ``world`` at
+the start)."""
+OBJECT_TWIST = "/contgrasp/object_twist"
+"""geometry_msgs/TwistStamped (frame ``world``), a movable object only, one per rod state: the
+centroid's velocity and the rotation rate."""
+OBJECT_WRENCH = "/contgrasp/object_wrench"
+"""geometry_msgs/WrenchStamped (frame ``world``), subscribed by the simulator: a wrench held on
+the movable object from the next control period on (force at the centroid, torque about it),
+added to the scripted disturbance, until the next message (zeros release it)."""
+APPLY_WRENCH = "/rod_simulator/apply_wrench"
+"""contgrasp_msgs/srv/ApplyWrench, the simulator's service (``~/apply_wrench``): a step, ramp or
+pulse on the movable object from the next control period on."""
 MARKERS = "/contgrasp/markers"
 """visualization_msgs/MarkerArray: the rod and the object for RViz (fixed frame ``world``)."""
 DIAGNOSTICS = "/diagnostics"

@@ -32,7 +32,7 @@ WHEEL_NUMPY_INCLUDE = "/opt/python/cp311-cp311/lib/python3.11/site-packages/nump
 
 def source_hash() -> str:
     h = hashlib.sha256()
-    for path in sorted([HERE / "CMakeLists.txt", HERE / "package.xml", *HERE.glob("msg/*.msg")]):
+    for path in sorted([HERE / "CMakeLists.txt", HERE / "package.xml", *HERE.glob("msg/*.msg"), *HERE.glob("srv/*.srv")]):
         h.update(path.name.encode())
         h.update(path.read_bytes())
     return h.hexdigest()
@@ -93,7 +93,8 @@ def main() -> int:
 
 
 def import_ok() -> bool:
-    code = "from contgrasp_msgs.msg import RodState, ContactState, CoupleControl, GraspQuality, ObjectBoundary"
+    code = ("from contgrasp_msgs.msg import RodState, ContactState, CoupleControl, GraspQuality, ObjectBoundary; "
+            "from contgrasp_msgs.srv import ApplyWrench")
     return subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0
 
 

@@ -727,7 +727,7 @@ def test_invalid_start_up_parameter_exits_with_code_2() -> None:
 def _nan_state(sim: Any) -> None:
     from contgrasp_core.rod.integrator import RodState as CoreState
 
-    def advance(_couple: object) -> None:
+    def advance(_couple: object, _wrench: object = None) -> None:
         st_ = sim.session.state
         sim.session.state = CoreState(t=st_.t + 0.01, theta=st_.theta, omega=np.full_like(st_.omega, np.nan))
         sim.session.k += 1
@@ -736,7 +736,7 @@ def _nan_state(sim: Any) -> None:
 
 
 def _newton_fails(sim: Any) -> None:
-    def advance(_couple: object) -> None:
+    def advance(_couple: object, _wrench: object = None) -> None:
         raise StepFailedError(f"Newton failed to converge at t={sim.session.state.t + 0.004:.6g} s even with dt=1e-05 s")
 
     sim.session.advance = advance

@@ -47,6 +47,23 @@ def test_scenario_round_trips_through_ros_parameters() -> None:
     assert back.gains.object_radius == pytest.approx(np.sqrt(0.03 * 0.02))  # the nominal radius, made explicit
 
 
+def test_object_motion_round_trips_through_ros_parameters() -> None:
+    """The object's dynamics and the scripted disturbance are the simulator's parameters; the
+    paper's fixed object without a disturbance is the packaged default."""
+    from contgrasp_core.rod.body import ObjectDynamics
+    from contgrasp_core.rod.disturbance import Disturbance
+
+    sim = PAPER.to_ros_parameters()["rod_simulator"]
+    assert sim["object_mode"] == "fixed" and sim["disturbance_kind"] == "" and PAPER.disturbance is None
+    for dynamics, disturbance in [
+        (ObjectDynamics("spring", 12.0, 0.05, 2e-5, (30.0, 20.0, 0.5), (0.2, 0.1, 0.01)), Disturbance("pulse", (0.1, -0.2, 1e-3), 0.5, 0.2)),
+        (ObjectDynamics("free", areal_density=3.0), Disturbance("ramp", (0.0, 1.0, 0.0), 0.0, 1.0)),
+        (ObjectDynamics("free", mass=0.2), None),
+    ]:
+        scenario = replace(PAPER, dynamics=dynamics, disturbance=disturbance)
+        assert Scenario.from_ros_parameters(scenario.to_ros_parameters()) == scenario
+
+
 def test_paper_scenario_is_the_reference_run() -> None:
     """PAPER is the scenario tests/golden/reference.json was computed for (before the model existed)."""
     ref = json.loads((Path(__file__).parent / "golden" / "reference.json").read_text())["lockstep_paper_run"]

@@ -9,6 +9,10 @@ N m; force at the object's centroid) starting at ``start`` (s of simulated time)
 
 The closed loop holds the wrench of the start of each control period over that period (like
 the couple), so a scripted disturbance gives the same run in the core loop and in the ROS graph.
+
+:class:`WrenchInput` adds what a user applies while the loop runs (the ROS simulator's wrench
+topic and service) to the scripted disturbance: an input received while period k is held takes
+effect from period k + 1 on, so the wrench of every period is fixed when its state goes out.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ from numpy.typing import NDArray
 
 from contgrasp_core.errors import InvalidParameterError
 
-__all__ = ["KINDS", "Disturbance"]
+__all__ = ["KINDS", "Disturbance", "WrenchInput"]
 
 KINDS = ("step", "ramp", "pulse")
 
@@ -59,3 +63,56 @@ class Disturbance:
         if self.kind == "pulse" and t >= self.start + self.duration:
             return np.zeros(3)
         return w.copy()
+
+
+class WrenchInput:
+    """The wrench on the object per control period: the scripted disturbance (if any), plus the
+    latest held wrench (:meth:`hold`: stays until replaced; zeros release it), plus every
+    disturbance applied so far (:meth:`apply`: a step, ramp or pulse that starts with the next
+    period). Inputs wait until :meth:`freeze` fixes the wrench of the next period's state."""
+
+    def __init__(self, scripted: Disturbance | None = None) -> None:
+        self.scripted = scripted
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the live inputs (a new run); the scripted disturbance stays."""
+        self.held = np.zeros(3)
+        self.applied: list[Disturbance] = []
+        self._pending_held: NDArray[np.float64] | None = None
+        self._pending: list[tuple[str, tuple[float, float, float], float]] = []
+        self._frozen: tuple[int, NDArray[np.float64] | None] | None = None
+
+    def hold(self, wrench: NDArray[np.float64]) -> None:
+        """Hold ``wrench`` (3,) from the next period on, until another replaces it."""
+        w = np.asarray(wrench, dtype=float)
+        if w.shape != (3,) or not np.all(np.isfinite(w)):
+            raise InvalidParameterError(f"a held wrench must be three finite numbers (fx, fy, torque), got {wrench!r}")
+        self._pending_held = w.copy()
+
+    def apply(self, kind: str, wrench: tuple[float, float, float], duration: float = 0.0) -> None:
+        """Apply a step, ramp or pulse (:class:`Disturbance`) starting with the next period; the
+        values are checked now (:class:`InvalidParameterError`)."""
+        Disturbance(kind, wrench, 0.0, duration)
+        self._pending.append((kind, wrench, duration))
+
+    def next_step(self, k: int) -> int:
+        """The first period an input received now acts on, the loop being at step ``k``."""
+        return k + 1 if self._frozen is not None and self._frozen[0] == k else k
+
+    def freeze(self, k: int, t: float) -> NDArray[np.float64] | None:
+        """The wrench (3,) held over period ``k``, which starts at ``t`` (None: none at all, the
+        scripted-free run's exact path); the waiting inputs take effect here. The same for
+        repeated calls with the same ``k``."""
+        if self._frozen is not None and self._frozen[0] == k:
+            return self._frozen[1]
+        if self._pending_held is not None:
+            self.held, self._pending_held = self._pending_held, None
+        self.applied += [Disturbance(kind, w, t, d) for kind, w, d in self._pending]
+        self._pending.clear()
+        total = None if self.scripted is None else self.scripted.wrench_at(t)
+        for extra in (self.held if np.any(self.held) else None, *(d.wrench_at(t) for d in self.applied)):
+            if extra is not None:
+                total = extra.copy() if total is None else total + extra
+        self._frozen = (k, total)
+        return total

@@ -1,7 +1,10 @@
 """boundary_sensor: rod state + object boundary -> contact state (rho, alpha, delta, s_o, contact set).
 
 Thin wrapper of :func:`contgrasp_core.contact.sense` of the rod state's arm shape (paper eqs.
-(4), (5), Definition 1; the object's ``Boundary.project``). Malformed rod states or objects, bad
+(4), (5), Definition 1; the object's ``Boundary.project``). When the object moves, the rod state
+carries the object's displacement of the same step and the arm is sensed in the object's
+start-pose frame (:attr:`~contgrasp_ros.convert.RodArrays.sensed_shape`): the contact state
+(its feet ``shadow_x/y`` included) is then in that frame, against the boundary as published. Malformed rod states or objects, bad
 stamps and states whose sensing fails are dropped with a throttled warning and counted per
 reason (``/diagnostics``); see :mod:`contgrasp_ros.runtime`.
 """
@@ -71,7 +74,7 @@ class BoundarySensor(Node):
         boundary = self.object.boundary
         assert boundary is not None  # (sensed only once the object is known)
         try:
-            state = sense(rod.shape, boundary, rod.radius, tol=float(self.get_parameter("contact_tolerance").value))
+            state = sense(rod.sensed_shape, boundary, rod.radius, tol=float(self.get_parameter("contact_tolerance").value))
             require_finite("the sensed contact state", state.rho, state.alpha, state.delta, state.s_o, state.foot)
         except ContgraspError as exc:
             self.drops.drop_error(topics.ROD_STATE, exc)

@@ -5,9 +5,10 @@ the app to ``ws://HOST:PORT``, default ``ws://127.0.0.1:8765``). Channels, each 
 at its header stamp (simulated time, so the app's timeline is the simulation's):
 
 * ``/contgrasp/scene`` (``foxglove.SceneUpdate``, frame ``world``): the arm (a line strip at
-  the rod's centreline), the object's outline and the nodes in contact; one per
-  ``scene_period`` of simulated time;
-* ``/contgrasp/rod_state`` (JSON: step, t, s, x, y, theta, kinetic_energy) for plots;
+  the rod's centreline), the object's outline (where the object is, when it moves) and the
+  nodes in contact; one per ``scene_period`` of simulated time;
+* ``/contgrasp/rod_state`` (JSON: step, t, s, x, y, theta, kinetic_energy; a movable object's
+  object_q, object_v, object_wrench) for plots;
 * ``/contgrasp/contact`` (JSON: step, t, s, rho, alpha, delta, in_contact);
 * ``/contgrasp/quality`` (JSON: step, t, Q1, Q2, Q3, contact_length, valid);
 * ``/contgrasp/status`` (JSON: the simulator's status from ``/diagnostics``).
@@ -29,6 +30,7 @@ from foxglove.messages import Color, LinePrimitive, LinePrimitiveLineType, Point
 from rclpy.node import Node
 
 from contgrasp_core.errors import ContgraspError
+from contgrasp_core.rod.body import to_world
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import ContactArrays, RodArrays, contact_arrays, rod_state_arrays
@@ -106,9 +108,11 @@ class FoxgloveBridge(Node):
             self.drops.drop_error(topics.ROD_STATE, exc)
             return
         t_ns = _ns(msg.header)
+        body = {} if rod.object is None else {"object_q": rod.object.q.tolist(), "object_v": rod.object.v.tolist(),
+                                              "object_wrench": rod.object.wrench.tolist()}
         self.json[topics.ROD_STATE].log({
             "step": rod.step, "t": t_ns * 1e-9, "s": rod.s.tolist(), "x": rod.x.tolist(), "y": rod.y.tolist(),
-            "theta": rod.theta.tolist(), "kinetic_energy": float(msg.kinetic_energy)}, log_time=t_ns)
+            "theta": rod.theta.tolist(), "kinetic_energy": float(msg.kinetic_energy), **body}, log_time=t_ns)
         period = float(self.get_parameter("scene_period").value)
         if t_ns * 1e-9 + 1e-12 < self.next_scene_t and period > 0:
             return
@@ -121,7 +125,9 @@ class FoxgloveBridge(Node):
         radius = float(np.mean(rod.radius))
         lines = [_line(centreline, _ARM, thickness=radius)]
         if self.outline is not None:
-            lines.append(_line(self.outline, _OBJECT, thickness=0.0015, loop=True))
+            o = rod.object
+            outline = self.outline if o is None else to_world(self.outline, o.q, o.centroid)
+            lines.append(_line(outline, _OBJECT, thickness=0.0015, loop=True))
         c = self.contact
         if c is not None and c.step == rod.step and len(c.in_contact) == len(centreline):
             touching = centreline[c.in_contact]

@@ -20,6 +20,18 @@ deeper inside the object than ``max_penetration_limit``, kinetic energy above
 ``max_kinetic_energy`` - stops stepping: state ``failed``, the cause and simulated time in
 the status ``message``, logged once. The status (``/diagnostics``, name ``rod_simulator``)
 goes out after every state, every second of wall time and at once on the first drop.
+
+The object is fixed (the paper), or moves (``object_mode`` spring or free: a rigid body in the
+rod engine, :meth:`contgrasp_core.scenario.Scenario.system`). A movable object's displacement,
+velocity and the wrench held on it go out in every rod state (so the sensor senses against
+the object where it is at that very step), and on ``/contgrasp/object_pose`` and
+``/contgrasp/object_twist`` for RViz and Foxglove. The wrench over each control period is the
+scripted disturbance (``disturbance_*``) plus the live inputs, ``/contgrasp/object_wrench``
+(geometry_msgs/WrenchStamped, held until the next one) and the service ``~/apply_wrench``
+(contgrasp_msgs/srv/ApplyWrench: a step, ramp or pulse); an input takes effect from the next
+control period on (:class:`contgrasp_core.rod.disturbance.WrenchInput`), so the wrench of
+every period is fixed when its state goes out and a lock-step run stays deterministic. Inputs
+for a fixed object are refused (dropped and counted; the service answers ``success`` false).
 """
 
 from __future__ import annotations
@@ -30,6 +42,7 @@ from typing import Any
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -38,14 +51,16 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from contgrasp_core.errors import ContgraspError
-from contgrasp_core.rod import Obstacle, RodSystem
+from contgrasp_core.rod.body import MODES
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
-from contgrasp_core.rod.session import DivergenceLimits, LoopSession
-from contgrasp_core.scenario import PAPER, object_from_parameters
+from contgrasp_core.rod.disturbance import KINDS, WrenchInput
+from contgrasp_core.rod.session import DivergenceLimits, LoopSession, Observation
+from contgrasp_core.scenario import PAPER, motion_from_parameters, object_from_parameters, rod_system
 from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
+from contgrasp_msgs.srv import ApplyWrench
 from contgrasp_ros import qos, topics
-from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays
+from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, object_fields, wrench_arrays
 from contgrasp_ros.lockstep import LockStep, Peers, StartGate
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
@@ -117,8 +132,10 @@ class RodSimulator(Node):
                 "the run fails when the rod surface is deeper inside the object than this [m]; 0 = the tip radius",
                 lo=0.0, hi=100.0)
         declare(self, "max_kinetic_energy", 10.0, "the run fails when the rod's kinetic energy exceeds this [J]", lo=1e-12, hi=1e12)
+        dynamics, disturbance = motion_from_parameters(self._declare_motion(paper))
         self.boundary = object_from_parameters(*obj).boundary()
-        self.system = RodSystem(self.model, Obstacle(self.boundary))
+        self.system = rod_system(self.model, self.boundary, dynamics)
+        self.wrenches = WrenchInput(disturbance)
 
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
@@ -129,8 +146,13 @@ class RodSimulator(Node):
         self.pub_object = self.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
         self.pub_markers = self.create_publisher(MarkerArray, topics.MARKERS, qos.STREAM)
         self.sub_couple = self.create_subscription(CoupleControl, topics.COUPLE, self.on_couple, qos.STREAM)
+        if self.system.body is not None:
+            self.pub_pose = self.create_publisher(PoseStamped, topics.OBJECT_POSE, qos.STREAM)
+            self.pub_twist = self.create_publisher(TwistStamped, topics.OBJECT_TWIST, qos.STREAM)
+        self.create_subscription(WrenchStamped, topics.OBJECT_WRENCH, self.on_wrench, qos.STREAM)
         self.create_service(SetBool, "~/pause", self.on_pause)
         self.create_service(Trigger, "~/reset", self.on_reset)
+        self.create_service(ApplyWrench, "~/apply_wrench", self.on_apply_wrench)
         self.pub_object.publish(boundary_to_msg(self.boundary, Header(frame_id="world")))
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._reset_session()
@@ -141,6 +163,33 @@ class RodSimulator(Node):
         self.create_timer(period, self.on_tick, clock=self._steady)
         if not self.paused:
             self._publish_first_observation()
+
+    def _declare_motion(self, paper: dict[str, Any]) -> dict[str, Any]:
+        """Declare how the object moves and the scripted disturbance (read-only; the arrays and
+        the combination are checked by :func:`~contgrasp_core.scenario.motion_from_parameters`)."""
+        return {
+            "object_mode": declare(self, "object_mode", paper["object_mode"], "how the object moves: fixed (the paper), "
+                                   "spring (held to its start pose by object_stiffness / object_damping) or free",
+                                   choices=MODES, read_only=True),
+            "object_density": declare(self, "object_density", paper["object_density"], "areal density: mass and inertia "
+                                      "from the enclosed area [kg/m^2]", lo=1e-12, hi=1e12, read_only=True),
+            "object_mass": declare(self, "object_mass", paper["object_mass"], "mass (0 = from the density) [kg]",
+                                   lo=0.0, hi=1e12, read_only=True),
+            "object_inertia": declare(self, "object_inertia", paper["object_inertia"], "moment of inertia about the "
+                                      "centroid (0 = from the density) [kg m^2]", lo=0.0, hi=1e12, read_only=True),
+            "object_stiffness": declare(self, "object_stiffness", paper["object_stiffness"], "spring mode: stiffness to the "
+                                        "start pose [N/m, N/m, N m/rad]", read_only=True),
+            "object_damping": declare(self, "object_damping", paper["object_damping"], "spring mode: damping to the start "
+                                      "pose [N s/m, N s/m, N m s/rad]", read_only=True),
+            "disturbance_kind": declare(self, "disturbance_kind", paper["disturbance_kind"], "scripted wrench on a movable "
+                                        "object: '' (none), step, ramp or pulse", choices=("", *KINDS), read_only=True),
+            "disturbance_wrench": declare(self, "disturbance_wrench", paper["disturbance_wrench"], "its wrench: force at "
+                                          "the centroid and torque about it [N, N, N m]", read_only=True),
+            "disturbance_start": declare(self, "disturbance_start", paper["disturbance_start"], "its start [s]",
+                                         lo=0.0, hi=1e9, read_only=True),
+            "disturbance_duration": declare(self, "disturbance_duration", paper["disturbance_duration"],
+                                            "ramp rise time / pulse length [s]", lo=0.0, hi=1e9, read_only=True),
+        }
 
     @property
     def missed(self) -> int:
@@ -155,6 +204,7 @@ class RodSimulator(Node):
         self.next_marker_t = 0.0
         self.failure = ""
         self.stamps.reset()
+        self.wrenches.reset()
         self.finish.rearm()
 
     def limits(self) -> DivergenceLimits:
@@ -178,21 +228,38 @@ class RodSimulator(Node):
             self._fail(str(exc))
             return
         header = Header(stamp=_stamp(obs.t), frame_id="world")
+        wrench = self.wrenches.freeze(obs.k, obs.t)  # held over the period from this state
+        centroid = None if self.system.body is None else self.system.body.centroid
         self.pub_clock.publish(ClockMsg(clock=header.stamp))
         self.pub_state.publish(
             RodState(
                 header=header, step=obs.k, s=obs.s.tolist(), x=obs.x[:, 0].tolist(), y=obs.x[:, 1].tolist(),
                 theta=obs.theta.tolist(), kappa=obs.kappa.tolist(), radius=obs.radius.tolist(),
                 vx=obs.v[:, 0].tolist(), vy=obs.v[:, 1].tolist(), kinetic_energy=obs.kinetic_energy,
-                max_penetration=obs.penetration,
+                max_penetration=obs.penetration, **object_fields(centroid, obs.body, wrench),
             )
         )
+        self._publish_object_motion(obs, header)
         period = self.get_parameter("marker_period").value
         if period > 0 and obs.t + 1e-12 >= self.next_marker_t:
             self.next_marker_t = obs.t + period
-            self.pub_markers.publish(scene_markers(self.boundary, obs, header))
+            self.pub_markers.publish(scene_markers(self.boundary, obs, header, centroid))
         self.rule.published(time.monotonic())
         self._publish_status()
+
+    def _publish_object_motion(self, obs: Observation, header: Header) -> None:
+        """A movable object's pose (centroid, rotation from the start pose) and twist."""
+        body = self.system.body
+        if body is None or obs.body is None:
+            return
+        x, y, psi = body.pose(obs.body.q)
+        pose = PoseStamped(header=header)
+        pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+        pose.pose.orientation.z, pose.pose.orientation.w = float(np.sin(0.5 * psi)), float(np.cos(0.5 * psi))
+        self.pub_pose.publish(pose)
+        twist = TwistStamped(header=header)
+        twist.twist.linear.x, twist.twist.linear.y, twist.twist.angular.z = (float(v) for v in obs.body.v)
+        self.pub_twist.publish(twist)
 
     def _status(self) -> str:
         if self.failure:
@@ -223,7 +290,7 @@ class RodSimulator(Node):
     def _advance(self, couple: np.ndarray | FeedbackExpansion) -> None:
         try:
             with np.errstate(all="ignore"):  # (as in _publish_observation)
-                self.session.advance(couple)
+                self.session.advance(couple, self.wrenches.freeze(self.session.k, float(self.session.state.t)))
         except FatalNodeError:
             raise
         except Exception as exc:  # Newton failure, or anything else: the state can no longer be trusted
@@ -297,7 +364,38 @@ class RodSimulator(Node):
                 )
             self._advance(self.last_couple if fallback == "hold" else np.zeros(self.model.n_elements))
 
+    @guarded(topics.OBJECT_WRENCH)
+    def on_wrench(self, msg: WrenchStamped) -> None:
+        """Validate a wrench and hold it on the object from the next control period on (its
+        stamp is not used: the wrench acts from the next period whenever it was sent)."""
+        try:
+            wrench = wrench_arrays(msg)
+            if self.system.body is None:
+                raise MessageError("the object is fixed (object_mode): no wrench moves it", reason="object is fixed")
+        except ContgraspError as exc:
+            self.drops.drop_error(topics.OBJECT_WRENCH, exc)
+            return
+        self.wrenches.hold(wrench)
+
     # ------------------------------------------------------------------ services
+    @guarded("~/apply_wrench", on_error=service_failure)
+    def on_apply_wrench(self, req: ApplyWrench.Request, resp: ApplyWrench.Response) -> ApplyWrench.Response:
+        """A step, ramp or pulse on the movable object from the next control period on."""
+        resp.step = self.wrenches.next_step(self.session.k)
+        if self.system.body is None:
+            resp.success, resp.message = False, "the object is fixed (object_mode): no wrench moves it"
+            return resp
+        if self.session.finished or self.failure:
+            resp.success, resp.message = False, f"the run is over ({self._status()}): ~/reset starts a new one"
+            return resp
+        try:
+            self.wrenches.apply(req.kind, (float(req.wrench[0]), float(req.wrench[1]), float(req.wrench[2])), float(req.duration))
+        except ContgraspError as exc:
+            resp.success, resp.message = False, str(exc)
+            return resp
+        resp.success, resp.message = True, f"{req.kind} from step {resp.step}"
+        return resp
+
     @guarded("~/pause", on_error=service_failure)
     def on_pause(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
         self.paused = bool(req.data)
