@@ -8,7 +8,9 @@ sampled loop, :func:`contgrasp_core.rod.session.drive`):
 
 1. **Grasp.** The scenario's closed loop with the object fixed, until settled; Q1-Q3 of that
    contact state (:func:`contgrasp_core.quality.quality_of_state`, about the scenario's
-   reference point).
+   reference point), and a variant weighted by the contact forces: ``W_f = sum_i f_i G_i G_i^T``
+   over the element centres with the penalty force ``f_i = h k max(pen_i, 0)`` in place of the
+   arclength weights (:func:`force_weighted_quality`).
 2. **Release.** The object becomes a rigid body on a soft support (:class:`HoldSettings`
    ``support``: a spring-damper to its pose in the grasp, mass and inertia from ``areal_density``),
    friction ``mu`` turns stick-slip, and the loop runs on for ``release_time``: the object comes
@@ -50,7 +52,8 @@ from contgrasp_core.rod.integrator import RodState
 from contgrasp_core.rod.session import LoopSession, Observation, drive, run_sampled, sensed_shape
 from contgrasp_core.scenario import Scenario
 
-__all__ = ["HoldSettings", "Capacity", "HoldResult", "HoldExperiment", "measure_holding", "wrench_directions"]
+__all__ = ["HoldSettings", "Capacity", "HoldResult", "HoldExperiment", "measure_holding", "wrench_directions",
+           "force_weighted_quality"]
 
 Array = NDArray[np.float64]
 
@@ -124,6 +127,7 @@ class HoldResult:
     Q1: float
     Q2: float
     Q3: float
+    force_weighted: GraspQuality
     scale: float
     released_displacement: Array
     settle_time: float | None
@@ -143,10 +147,25 @@ class HoldResult:
                           "held": c.held, "reason": c.reason} for c in self.capacity],
             "capacity_min": self.capacity_min,
             "Q1": self.Q1, "Q2": self.Q2, "Q3": self.Q3,
+            "Q1_force": self.force_weighted.Q1, "Q2_force": self.force_weighted.Q2, "Q3_force": self.force_weighted.Q3,
             "scale_m": self.scale,
             "released_displacement": self.released_displacement.tolist(),
             "settle_time_s": self.settle_time,
         }
+
+
+def force_weighted_quality(scenario: Scenario, theta: Array) -> GraspQuality:
+    """Q1-Q3 of ``W_f = sum_i f_i G_i G_i^T``: the point grasp maps (paper Sec. IV-A) at the
+    feet of the rod's element centres, weighted by their penalty contact forces ``f_i = h k
+    max(pen_i, 0)`` (N) instead of arclength (the rod at rest on the fixed object)."""
+    from contgrasp_core.quality import metrics_from_gramian, weighted_gramian
+    from contgrasp_core.rod import chain
+
+    m = scenario.rod
+    proj = scenario.object.boundary().project(chain.centres(m, theta))
+    force = m.h * m.contact_stiffness * np.maximum(m.r_centres - proj.signed_distance, 0.0)
+    w = weighted_gramian(proj.foot, proj.phi, force, scenario.reference)
+    return metrics_from_gramian(w, float(m.h * np.count_nonzero(force)))
 
 
 def wrench_directions(n_force: int) -> Array:
@@ -189,15 +208,17 @@ class HoldExperiment:
         self.grasped: LoopSession | None = None
         self.released: RodState | None = None
 
-    def grasp(self) -> GraspQuality:
-        """The scenario's closed loop with the object fixed, until settled; Q1-Q3 of its contact."""
+    def grasp(self) -> tuple[GraspQuality, GraspQuality]:
+        """The scenario's closed loop with the object fixed, until settled; Q1-Q3 of its contact,
+        and the force-weighted variant (:func:`force_weighted_quality`)."""
         grasp = run_sampled(self.scenario)
         if not grasp.settled:
             raise RunFailure(f"the grasp did not settle within {self.scenario.loop.duration:g} s; no holding to measure")
         obs = grasp.observe()
         contact = sense(obs.shape, self.boundary, obs.radius, tol=self.scenario.sensing.contact_tolerance)
         self.grasped = grasp
-        return quality_of_state(contact, self.boundary, ref=self.scenario.reference)
+        return (quality_of_state(contact, self.boundary, ref=self.scenario.reference),
+                force_weighted_quality(self.scenario, grasp.state.theta))
 
     def release(self) -> Array:
         """Release the grasped object onto its support; its displacement once at rest (3,)."""
@@ -284,7 +305,7 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
     say = progress or (lambda _: None)
     exp = HoldExperiment(scenario, settings)
     say("grasp")
-    quality = exp.grasp()
+    quality, forced = exp.grasp()
     say("release")
     q0 = exp.release()
     say("stiffness")
@@ -298,5 +319,6 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
         capacity.append(exp.capacity(direction))
     assert exp.grasped is not None
     return HoldResult(stiffness=stiffness, support=np.diag(exp.dynamics.stiffness), stiffness_eigenvalues=eig,
-                      capacity=capacity, Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, scale=exp.scale,
+                      capacity=capacity, Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, force_weighted=forced,
+                      scale=exp.scale,
                       released_displacement=q0, settle_time=exp.grasped.settle_time)

@@ -38,8 +38,9 @@ from .scenario import PAPER
 
 __all__ = ["StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose"]
 
-PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "Q1", "Q2", "Q3")
-"""The quality measures: the static map's (the paper's optimal grasp) and the settled grasp's."""
+PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "Q1", "Q2", "Q3", "Q1_force", "Q2_force", "Q3_force")
+"""The quality measures: the static map's (the paper's optimal grasp), the settled grasp's, and
+the settled grasp's weighted by its contact forces (:func:`contgrasp_core.holding.force_weighted_quality`)."""
 RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min")
 """The holding measures: lambda_min and det of K's scaled symmetric part, the worst capacity."""
 
@@ -112,6 +113,7 @@ def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float]
     d = result.to_dict()
     eig = np.asarray(result.stiffness_eigenvalues)
     out.update(status="ok", seconds=time.perf_counter() - t0, Q1=result.Q1, Q2=result.Q2, Q3=result.Q3,
+               Q1_force=d["Q1_force"], Q2_force=d["Q2_force"], Q3_force=d["Q3_force"],
                stiffness=d["stiffness"], stiffness_eigenvalues=d["stiffness_eigenvalues"],
                stiffness_min=float(eig[0]), stiffness_det=float(np.prod(eig)), capacity=d["capacity"],
                capacity_min=result.capacity_min, released_displacement=d["released_displacement"])

@@ -39,6 +39,7 @@ __all__ = [
     "singular_value_metrics",
     "contact_weights",
     "gramian",
+    "weighted_gramian",
     "continuum_operator",
     "GraspQuality",
     "metrics_from_gramian",
@@ -179,8 +180,19 @@ def gramian(
     ``gamma``/``phi`` are the contact (shadow) points and boundary tangent angles along the
     arm grid ``s``; ``delta`` the contact depth (eq. (5)).
     """
-    w, maps = _weights_and_maps(s, gamma, phi, delta, tol, ref)
-    return np.einsum("i,iak,ibk->ab", w, maps, maps), float(w.sum())
+    w = contact_weights(s, delta, tol)
+    return weighted_gramian(gamma, phi, w, ref), float(w.sum())
+
+
+def weighted_gramian(gamma: ArrayLike, phi: ArrayLike, weights: ArrayLike, ref: ArrayLike = (0.0, 0.0)) -> NDArray[np.float64]:
+    """``W = sum_i w_i G_i G_i^T`` with the point grasp maps ``G_i`` (Definition 2) and any
+    weights: the arclength quadrature of :func:`contact_weights` gives the Gramian of Prop. 4.1
+    (:func:`gramian`); contact forces give the force-weighted variant of docs/holding.md."""
+    maps = point_grasp_maps(gamma, phi, ref)
+    w = float_array("weights", weights)
+    if w.shape != (len(maps),) or not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise InvalidParameterError(f"weights must be {len(maps)} finite numbers >= 0, got shape {w.shape}")
+    return np.einsum("i,iak,ibk->ab", w, maps, maps)
 
 
 def continuum_operator(

@@ -163,3 +163,17 @@ def test_no_contact_and_bad_input() -> None:
         metrics_from_gramian(np.ones((3, 2)))
     with pytest.raises(InvalidParameterError):
         point_grasp_maps([[0.0, 1.0]], [0.0], ref=(0.0,))
+
+
+def test_weighted_gramian_of_an_evenly_loaded_full_wrap() -> None:
+    """n points evenly around a circle of radius R about the reference, each weighted f (a
+    force-weighted grasp): the off-diagonal terms cancel and ``W = n f diag(1, 1, R^2)``."""
+    import numpy as np
+
+    from contgrasp_core.quality import weighted_gramian
+
+    n, radius, f = 64, 0.7, 0.3
+    ang = 2 * np.pi * np.arange(n) / n
+    points = radius * np.stack([np.cos(ang), np.sin(ang)], axis=1) + np.array([1.0, -2.0])
+    w = weighted_gramian(points, ang + 0.5 * np.pi, np.full(n, f), ref=(1.0, -2.0))
+    np.testing.assert_allclose(w, n * f * np.diag([1.0, 1.0, radius**2]), atol=1e-12)
