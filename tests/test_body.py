@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from newton_checks import assert_quadratic_convergence, difference_matrix
 
 from contgrasp_core.boundary import circle, ellipse
 from contgrasp_core.errors import InvalidParameterError
@@ -49,12 +50,7 @@ def test_coupled_newton_matrix_is_the_exact_jacobian(method: str, spring: bool) 
     z = system.rates(state) + np.concatenate([5.0 * rng.standard_normal(14), [0.02, -0.05, 0.7]])
     res, jac, ev = system.newton_system(state, z, dt, loads, frame)
     assert ev.penetration > 0 and jac.shape == (17, 17)
-    fd = np.empty_like(jac)
-    for j in range(len(z)):
-        e = np.zeros_like(z)
-        e[j] = 1e-6
-        fd[:, j] = (system.newton_system(state, z + e, dt, loads, frame)[0]
-                    - system.newton_system(state, z - e, dt, loads, frame)[0]) / 2e-6
+    fd = difference_matrix(system, state, z, dt, loads, frame)
     scale = np.abs(jac).max(axis=1, keepdims=True)  # rows differ in units (rod / object)
     np.testing.assert_allclose(jac / scale, fd / scale, rtol=0, atol=1e-6)
     assert np.abs(jac[:14, 14:]).max() > 0 and np.abs(jac[14:, :14]).max() > 0  # (really coupled)
@@ -64,19 +60,7 @@ def test_coupled_newton_converges_quadratically() -> None:
     """With the exact coupled matrix the increments square once they are small, down to round-off."""
     system, state, loads = _coupled_case("euler")
     dt = 2e-3
-    frame = system.contact_frame(state, dt)
-    z = system.rates(state).copy()
-    sizes = []
-    for _ in range(12):
-        res, jac, _ = system.newton_system(state, z, dt, loads, frame)
-        dz = np.linalg.solve(jac, -res)
-        z = z + dz
-        sizes.append(np.abs(dz).max())
-        if sizes[-1] < 1e-11:
-            break
-    assert sizes[-1] < 1e-11, sizes
-    pairs = [(a, b) for a, b in zip(sizes[:-1], sizes[1:], strict=True) if 1e-6 < a < 1.0]
-    assert len(pairs) >= 2 and all(b <= 10.0 * a**2 for a, b in pairs), sizes
+    assert_quadratic_convergence(system, state, system.rates(state).copy(), dt, loads, system.contact_frame(state, dt))
 
 
 def _far_object(body: RigidBody) -> RodSystem:
@@ -309,11 +293,6 @@ def test_stick_slip_newton_matrix_is_exact(movable: bool, method: str) -> None:
     moved = ~np.isnan(ev.anchors[:, 0]) & ~np.isclose(ev.anchors, anchors).all(axis=1)
     kept = ~np.isnan(ev.anchors[:, 0]) & np.isclose(ev.anchors, anchors).all(axis=1)
     assert moved.any() and kept.any()  # (slipping and sticking contacts)
-    fd = np.empty_like(jac)
-    for j in range(len(z)):
-        e = np.zeros_like(z)
-        e[j] = 1e-7
-        fd[:, j] = (system.newton_system(state, z + e, dt, loads, frame)[0]
-                    - system.newton_system(state, z - e, dt, loads, frame)[0]) / 2e-7
+    fd = difference_matrix(system, state, z, dt, loads, frame, eps=1e-7)
     scale = np.abs(jac).max(axis=1, keepdims=True)
     np.testing.assert_allclose(jac / scale, fd / scale, rtol=0, atol=1e-5)
