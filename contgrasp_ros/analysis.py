@@ -544,8 +544,9 @@ def history(run: RunData, period: float = 0.01) -> list[dict[str, Any]]:
 def object_motion(run: RunData) -> dict[str, Any] | None:
     """How a movable object moved and what pushed it, over the recorded rod states (None: the
     object is fixed): largest and final displacement of the centroid (m) and rotation (rad),
-    final velocity, and the external wrench held on it (largest force and torque, the times of
-    the first and last state with a wrench, the final one)."""
+    final velocity, the external wrench held on it (largest force and torque, the times of
+    the first and last state with a wrench, the final one), and the measured holding per
+    constant push (:func:`holding_under_pushes`)."""
     o, t = run.rod.object, run.rod.t
     if o is None:
         return None
@@ -571,7 +572,35 @@ def object_motion(run: RunData) -> dict[str, Any] | None:
             "states": len(pushed),
             "final": o.wrench[-1].tolist(),
         },
+        "holding": holding_under_pushes(t, o.q, o.v, o.wrench),
     }
+
+
+def holding_under_pushes(t: Array, q: Array, v: Array, wrench: Array) -> list[dict[str, Any]]:
+    """The grasp's measured holding in a recording: for each run of states holding the same
+    non-zero wrench (a step or pulse; a ramp gives one run per state), the object's displacement
+    from the state before the push to the run's last state, the secant compliances along the
+    force (``(dq_xy . f) / |f|^2``, m/N) and for the torque (``dpsi / tau``, rad/(N m)) and the
+    object's speed at the end (near zero: it came to rest, so the secant is the static one)."""
+    out: list[dict[str, Any]] = []
+    k, n = 0, len(t)
+    while k < n:
+        if not np.any(wrench[k] != 0.0):
+            k += 1
+            continue
+        end = k
+        while end + 1 < n and np.array_equal(wrench[end + 1], wrench[k]):
+            end += 1
+        before = max(k - 1, 0)
+        dq = q[end] - q[before]
+        w = wrench[k]
+        f2 = float(w[0] ** 2 + w[1] ** 2)
+        out.append({"t_start": float(t[k]), "t_end": float(t[end]), "wrench": w.tolist(), "displacement": dq.tolist(),
+                    "compliance_force": float(dq[:2] @ w[:2] / f2) if f2 > 0 else None,
+                    "compliance_torque": float(dq[2] / w[2]) if w[2] != 0 else None,
+                    "final_speed": float(np.hypot(v[end, 0], v[end, 1]))})
+        k = end + 1
+    return out
 
 
 def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:

@@ -291,3 +291,27 @@ def test_truncated_recording_is_reported(recording: tuple[Path, dict], tmp_path:
     assert cli(str(cut)) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "incomplete" in err
+
+
+def test_holding_under_pushes_recovers_a_known_compliance() -> None:
+    """A synthetic recording of an object that answers a force step and a later torque pulse
+    with known static compliances (and rests before each push): the analysis finds both pushes
+    and their compliances exactly."""
+    import numpy as np
+
+    from contgrasp_ros.analysis import holding_under_pushes
+
+    t = np.arange(100) * 0.01
+    wrench = np.zeros((100, 3))
+    wrench[20:50] = (0.03, -0.04, 0.0)
+    wrench[70:80] = (0.0, 0.0, 2e-4)
+    q = np.zeros((100, 3))
+    q[20:50, :2] = 0.002 * wrench[20:50, :2] / 0.05**2 * (1 - np.exp(-(t[20:50, None] - 0.2) / 0.05))
+    q[49:70, :2] = q[49, :2]
+    q[70:80, 2] = 3.0 * 2e-4
+    v = np.gradient(q, t, axis=0)
+    pushes = holding_under_pushes(t, q, v, wrench)
+    assert [p["t_start"] for p in pushes] == [t[20], t[70]]
+    expected = float(q[49, :2] @ wrench[20, :2] / (0.05**2))
+    assert abs(pushes[0]["compliance_force"] - expected) < 1e-15 and pushes[0]["compliance_torque"] is None
+    assert abs(pushes[1]["compliance_torque"] - 3.0) < 1e-12 and pushes[1]["compliance_force"] is None
