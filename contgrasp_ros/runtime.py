@@ -565,9 +565,16 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
     clean-up). Any other exception is a bug and propagates with its traceback (exit code 1).
     """
     name = getattr(factory, "__name__", "node")
-    rclpy.init(args=list(args) if args is not None else sys.argv)
+    argv = list(args) if args is not None else sys.argv
+    rclpy.init(args=argv)
     node = None
     code = 0
+    unknown = rclpy.utilities.remove_ros_args(argv)[1:]
+    if unknown:  # (e.g. a parameter given without --ros-args: it would be silently ignored)
+        print(f"{name}: error: unrecognized arguments: {' '.join(unknown)} (parameters go after --ros-args: "
+              "--ros-args -p NAME:=VALUE or --params-file FILE)", file=sys.stderr)
+        rclpy.shutdown()
+        return 2
     try:
         try:
             node = factory()

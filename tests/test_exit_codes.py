@@ -334,6 +334,10 @@ def test_node_with_bad_parameter_exits_2_and_recorder_with_failing_disk_exits_1(
     bad = _child(["--ros-args", "-p", "layout:=tape", "-p", f"output:={tmp_path / 'a'}"],
                  module="contgrasp_ros.nodes.mcap_recorder", timeout=60)
     assert bad.returncode == 2 and "McapRecorder: error: invalid parameter: layout must be one of" in bad.stderr, bad.stderr[-2000:]
+    stray = _child(["--bogus", "--ros-args", "-p", f"output:={tmp_path / 'c'}"], module="contgrasp_ros.nodes.mcap_recorder",
+                   timeout=60)
+    assert stray.returncode == 2 and "McapRecorder: error: unrecognized arguments: --bogus" in stray.stderr, stray.stderr[-2000:]
+    assert not (tmp_path / "c").exists()  # (it did not record)
     full = _child(["--ros-args", "-p", f"output:={tmp_path / 'b'}", "-p", "flush_period:=0.1"],
                   module="contgrasp_ros.nodes.mcap_recorder", fsize=100, timeout=60)
     assert full.returncode == 1, full.stderr[-2000:]
