@@ -165,11 +165,41 @@ def test_launcher_turns_unexpected_errors_into_one_line(monkeypatch, capsys, exc
     monkeypatch.setattr(contgrasp_ros.graph_run, "run_graph", broken)
     for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
         monkeypatch.setenv(var, os.environ.get(var, "0"))
+    monkeypatch.delenv("FASTRTPS_DEFAULT_PROFILES_FILE", raising=False)  # (restored afterwards; the launcher sets it)
     assert launcher.main(["--no-record", "--domain-id", str(fresh_domain_id())]) == code
     err = [line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("[launcher] ")]
     assert err == [f"contgrasp-launch: {prefix}{' | '.join(str(exc).splitlines())}"]
     with pytest.raises(type(exc)):
         launcher.main(["--no-record", "--debug"])
+
+
+def test_launcher_points_fast_dds_at_its_discovery_profile(monkeypatch, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """The graph's processes get the packaged Fast DDS profile (more initial discovery
+    announcements: processes started together meet at once) unless the user names a profile."""
+    import xml.etree.ElementTree as ET
+
+    import contgrasp_ros.graph_run
+    from contgrasp_ros import launcher
+
+    seen: list[str | None] = []
+
+    def record_env(*_a: object, **_k: object) -> tuple[dict[str, object], int]:
+        seen.append(os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE"))
+        return {}, 0
+
+    monkeypatch.setattr(contgrasp_ros.graph_run, "run_graph", record_env)
+    for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        monkeypatch.setenv(var, os.environ.get(var, "0"))
+    for var in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+        monkeypatch.delenv(var, raising=False)
+    assert launcher.main(["--no-record", "--json"]) == 0
+    own = tmp_path / "own.xml"
+    monkeypatch.setenv("FASTRTPS_DEFAULT_PROFILES_FILE", str(own))
+    assert launcher.main(["--no-record", "--json"]) == 0
+    assert seen == [str(launcher.discovery_profile()), str(own)]
+    ns = {"f": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
+    count = ET.parse(launcher.discovery_profile()).find(".//f:initialAnnouncements/f:count", ns)
+    assert count is not None and int(count.text or 0) > 5
 
 
 def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
