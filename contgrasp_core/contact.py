@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -31,7 +32,9 @@ from ._validate import float_array, instance, real
 from .arm import ArmShape, BasePose, curvature_spline
 from .boundary import Boundary
 from .errors import ContactValidityError, IntegrationError, InvalidParameterError
-from .rod.obstacle import Obstacle
+
+if TYPE_CHECKING:  # (imported in sense() when needed: the ROS boundary sensor never needs it)
+    from .rod.obstacle import Obstacle
 
 __all__ = [
     "ContactState",
@@ -144,8 +147,11 @@ def sense(
     sampled ROS loop and its core twin call this function on the same arrays and agree bitwise.
     """
     instance("shape", shape, ArmShape)
-    if not isinstance(boundary, (Boundary, Obstacle)):
-        raise InvalidParameterError(f"boundary must be a Boundary or an Obstacle, got {type(boundary).__name__}")
+    if not isinstance(boundary, Boundary):
+        from .rod.obstacle import Obstacle  # (a process that senses Boundary objects only never imports scipy.spatial)
+
+        if not isinstance(boundary, Obstacle):
+            raise InvalidParameterError(f"boundary must be a Boundary or an Obstacle, got {type(boundary).__name__}")
     tol = real("contact tolerance", tol, lo=0.0)
     r = float_array("arm shape r", shape.r)
     theta = float_array("arm shape theta", shape.theta)

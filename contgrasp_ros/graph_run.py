@@ -272,11 +272,6 @@ def run_graph(
     ``resumed`` (:mod:`contgrasp_ros.events`). ``foxglove``: serve the run live on this WebSocket
     port (:mod:`contgrasp_ros.nodes.foxglove_bridge`, in the launcher's process; 0 = any). A
     recording lost mid-run (the recorder died) fails the run (exit 1) unless ``allow_unrecorded``."""
-    from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
-    from contgrasp_ros.nodes.grasp_controller import GraspController
-    from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
-    from contgrasp_ros.nodes.rod_simulator import RodSimulator
-
     wall0 = time.perf_counter()
     sim_params = {**params["rod_simulator"], "start_paused": True}
     rclpy.init(args=[])
@@ -300,6 +295,12 @@ def run_graph(
             nodes.append(bridge)
             foxglove_url = f"ws://127.0.0.1:{bridge.port}"
         if in_process:
+            # (imported here: the node processes import their own modules, the launcher need not)
+            from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
+            from contgrasp_ros.nodes.grasp_controller import GraspController
+            from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
+            from contgrasp_ros.nodes.rod_simulator import RodSimulator
+
             for cls, name in ((RodSimulator, "rod_simulator"), (BoundarySensor, "boundary_sensor"),
                               (GraspController, "grasp_controller"), (GraspQualityNode, "grasp_quality")):
                 values = sim_params if name == "rod_simulator" else params[name]

@@ -38,10 +38,10 @@ from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.model import RodModel
-from contgrasp_core.rod.obstacle import Obstacle
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # (the obstacle imports scipy.spatial: the ROS controller process never needs it)
     from contgrasp_core.rod.closed_loop import ClosedLoopResult
+    from contgrasp_core.rod.obstacle import Obstacle
 
 Array = NDArray[np.float64]
 
