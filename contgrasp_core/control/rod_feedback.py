@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from contgrasp_core.contact import shadow_geometry
 from contgrasp_core.control.gains import FeedbackGains
-from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_gradient
+from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_and_gradient
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.model import RodModel
@@ -74,10 +74,9 @@ class StateFeedback:
         geometry = shadow_geometry(x, chain.node_angles(m, theta), self.obstacle)
         rho, alpha = geometry[0][:-1], geometry[1][:-1]
         ei = m.joint_ei
-        u = feedback_couple(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         if not jacobian:
-            return u, None
-        g_rho, g_alpha = feedback_couple_gradient(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
+            return feedback_couple(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit), None
+        u, g_rho, g_alpha = feedback_couple_and_gradient(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         b = chain.frames(theta)[1] if normals is None else normals
         return u, joint_couple_jacobian(m, g_rho, g_alpha, geometry, b)
 
@@ -139,8 +138,7 @@ def feedback_at_joints(model: RodModel, gains: FeedbackGains, rho: Array, alpha:
         raise InvalidParameterError(f"rho and alpha must be given at the {n + 1} nodes, got {rho.shape}, {alpha.shape}")
     r, a = rho[:-1], alpha[:-1]
     lu, ei = gains.length_unit, model.joint_ei
-    u = feedback_couple(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
-    g_rho, g_alpha = feedback_couple_gradient(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
+    u, g_rho, g_alpha = feedback_couple_and_gradient(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
     return FeedbackExpansion(u=u, rho_ref=r, alpha_ref=a, g_rho=g_rho, g_alpha=g_alpha)
 
 
