@@ -165,14 +165,17 @@ def sense(
     (7) (``nu_o``, ``foot_turn``) and Definition 1 with tolerance ``tol``
     (``in_contact = delta >= -tol``).
 
-    ``boundary`` selects the projection, and this is the only place sensing calls it:
+    ``boundary`` selects the projection, and this is the only place sensing calls it (with
+    :func:`shadow_geometry`, the same operations on the subset of fields the feedback's Newton
+    iterations read):
 
     * a :class:`~contgrasp_core.boundary.Boundary` - :meth:`Boundary.project`, Newton's method
       on the curve from several candidates, converged to rounding (the library, the sampled
       loop of :mod:`contgrasp_core.rod.session` and the ROS boundary sensor);
     * an :class:`~contgrasp_core.rod.obstacle.Obstacle` - its fast projection, analytic for
       circles and one osculating-circle Newton step from a table otherwise (about 1e-10 of the
-      object size; the rod's continuous loop and the law's Jacobian inside every implicit step).
+      object size; the rod's continuous loop; inside every implicit step through
+      :func:`shadow_geometry`).
 
     The two are different computations of the same closest point (they agree to rounding on
     circles and to ~1e-10 elsewhere); each caller keeps the one it has always used, so the
