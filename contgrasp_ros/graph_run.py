@@ -36,6 +36,7 @@ from contgrasp_core.errors import ContgraspError, RunFailure, exit_code
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import stamp_seconds
+from contgrasp_ros.discovery import discovery_profile_set, use_discovery_profile
 from contgrasp_ros.events import EventSink
 from contgrasp_ros.runtime import DropCounter, GuardedSpin, make_executor
 from contgrasp_ros.supervision import (
@@ -286,7 +287,8 @@ def run_graph(
     on_recorder_lost: Callable[[], None] | None = None
     foxglove_url = ""
     try:
-        mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None)
+        with discovery_profile_set():  # (this process's participant is created with the first node)
+            mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None)
         nodes.append(mon)
         if foxglove is not None:
             from contgrasp_ros.nodes.foxglove_bridge import FoxgloveBridge
@@ -322,7 +324,9 @@ def run_graph(
 
             from contgrasp_ros.processes import ProcessGroup
 
-            group = ProcessGroup(dict(os.environ, PYTHONUNBUFFERED="1"), events=events)
+            env = dict(os.environ, PYTHONUNBUFFERED="1")
+            use_discovery_profile(env)  # (the node processes', not this process's: contgrasp_ros.discovery)
+            group = ProcessGroup(env, events=events)
             # Launcher overrides go in a second parameter file: a node's own section in the user's
             # file would beat a plain ``-p name:=value`` (rcl gives node-specific entries priority).
             overrides: dict[str, Any] = {name: {"ros__parameters": {"use_sim_time": True}} for name in NODES}

@@ -39,18 +39,12 @@ from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
 from contgrasp_ros.events import EventWriter, open_events
 
 
-__all__ = ["main", "default_params_file", "discovery_profile", "load_params"]
+__all__ = ["main", "default_params_file", "load_params"]
 
 
 def default_params_file() -> Path:
     """The packaged default parameter file (paper scenario)."""
     return Path(str(resources.files("contgrasp_ros") / "config" / "default.yaml"))
-
-
-def discovery_profile() -> Path:
-    """The packaged Fast DDS profile that makes simultaneously started processes discover each
-    other at once (``config/fastdds_discovery.xml``; its comment says why)."""
-    return Path(str(resources.files("contgrasp_ros") / "config" / "fastdds_discovery.xml"))
 
 
 def load_params(path: Path) -> dict[str, dict[str, Any]]:
@@ -208,8 +202,6 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
             raise InvalidParameterError("--executor applies to --in-process runs only")
         os.environ["CONTGRASP_EXECUTOR"] = args.executor
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    if not (os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") or os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")):
-        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(discovery_profile())  # (a user's own profile wins)
     os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "contgrasp_ros_log"))
     from contgrasp_ros.graph_run import run_graph
     from contgrasp_ros.nodes.mcap_recorder import default_output
