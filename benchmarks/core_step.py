@@ -51,16 +51,16 @@ def load() -> str:
 @contextmanager
 def mode(after: bool, old_threads: bool = False) -> Iterator[None]:
     """Kernels on (after) or off (before); ``old_threads`` also lifts the one-BLAS-thread scope."""
-    saved = (_kernels.ENABLED, integrator._one_blas_thread)
+    saved = (_kernels.ENABLED, integrator.single_thread_blas)
     _kernels.ENABLED = after
     if old_threads:
         import contextlib
 
-        integrator._one_blas_thread = contextlib.nullcontext  # type: ignore[assignment]
+        integrator.single_thread_blas = contextlib.nullcontext  # type: ignore[assignment]
     try:
         yield
     finally:
-        _kernels.ENABLED, integrator._one_blas_thread = saved
+        _kernels.ENABLED, integrator.single_thread_blas = saved
 
 
 class Timed:

@@ -16,7 +16,8 @@ are the launcher's own measurement from the first state to the last. (b) and (c)
 (a)'s final state bit for bit (checked). Each way runs `--repeat` times; medians are reported.
 The load average is printed at start and end (the machine is shared: compare ratios).
 
-Usage: AMENT_PREFIX_PATH=.venv .venv/bin/python benchmarks/ros_loop.py [--repeat 3]
+Usage: AMENT_PREFIX_PATH=.venv .venv/bin/python benchmarks/ros_loop.py [--repeat 3] [--only a,c]
+(``--only`` runs just the named ways; (a) always runs, the others' "x core" ratio needs it).
 """
 
 from __future__ import annotations
@@ -68,6 +69,7 @@ def graph(params_file: Path, *extra: str) -> dict[str, Any]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeat", type=int, default=1, help="runs of each way (medians reported)")
+    ap.add_argument("--only", default="abcd", help="the ways to run, e.g. 'c' or 'a,c' ((a) always runs)")
     args = ap.parse_args()
     paper = default_params_file()
     wall_clock = Path(tempfile.mkdtemp()) / "wall_clock.yaml"
@@ -80,6 +82,7 @@ def main() -> None:
         "(c) processes, lock-step": lambda: graph(paper),
         "(d) processes, wall clock": lambda: graph(wall_clock),
     }
+    ways = {name: run for name, run in ways.items() if name[1] == "a" or name[1] in args.only}
     print(f"python {sys.version.split()[0]}, cores {os.cpu_count()}, paper scenario (N = {PAPER.rod.n_elements}, "
           f"control period {(PAPER.loop.control_period or 0.0) * 1e3:g} ms), {args.repeat} run(s) each, "
           f"load average at start {os.getloadavg()[0]:.2f}")

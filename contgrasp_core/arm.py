@@ -7,13 +7,16 @@ for ``s in [0, L]``, with the base pose ``(r(0), theta(0)) = (r0, theta0)``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import CubicSpline
 
 from ._validate import MAX_NODES, float_array, instance, integer, real
 from .errors import InvalidParameterError
+
+if TYPE_CHECKING:  # (imported where a spline is built: node processes that never build one start faster)
+    from scipy.interpolate import CubicSpline
 
 __all__ = ["BasePose", "Arm", "ArmShape", "arclength_grid", "curvature_spline", "shape_from_curvature"]
 
@@ -101,6 +104,8 @@ def _check_grid(s: NDArray[np.float64]) -> None:
 
 def curvature_spline(s: ArrayLike, kappa: ArrayLike) -> CubicSpline:
     """Cubic spline through curvature samples; the common interpolant of shape and ODE."""
+    from scipy.interpolate import CubicSpline
+
     ss = float_array("s", s)
     kk = float_array("kappa", kappa)
     _check_grid(ss)

@@ -18,14 +18,13 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Callable
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 from dataclasses import dataclass
+from functools import cached_property
 from math import comb
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import CubicSpline, splev, splprep
-from scipy.spatial import cKDTree
 
 from ._validate import float_array, integer, real
 from .errors import (
@@ -34,6 +33,10 @@ from .errors import (
     NotClosedError,
     SelfIntersectionError,
 )
+
+if TYPE_CHECKING:
+    from scipy.interpolate import CubicSpline
+    from scipy.spatial import cKDTree
 
 __all__ = [
     "Boundary",
@@ -100,6 +103,10 @@ class Boundary:
 
     Build one with :func:`circle`, :func:`ellipse`, :func:`deformed_circle`,
     :func:`fourier_polar` or :func:`from_points`; ``kind`` and ``params`` record how.
+
+    The interpolants of the arclength tables and the KD-tree of the samples are built on first
+    use (scipy.interpolate and scipy.spatial are imported then): a closed-form projection, as
+    the ROS boundary sensor's on a circle, needs neither, and a node process starts faster.
     """
 
     def __init__(
@@ -133,7 +140,7 @@ class Boundary:
                 f"boundary '{kind}' cannot be parameterised by arclength in floating point "
                 f"(length {self.length:.3g}): its size is out of range or its speed vanishes"
             )
-        self._t_of_s_guess = CubicSpline(s_tab, t_tab)
+        self._s_tab, self._t_tab = s_tab, t_tab
         d1 = curve(t_tab, 1)
         phi_tab = np.unwrap(np.arctan2(d1[:, 1], d1[:, 0]))
         turning = phi_tab[-1] - phi_tab[0]
@@ -142,10 +149,29 @@ class Boundary:
                 f"boundary '{kind}' has total tangent turning {turning / TWO_PI:.6f} x 2 pi; "
                 "a simple counter-clockwise closed curve turns exactly once (+2 pi)"
             )
-        self._phi_ref = CubicSpline(s_tab, phi_tab)
+        self._phi_tab = phi_tab
         self._tab_t = t_tab[:-1]
-        self._tab_pts = curve(self._tab_t, 0)
-        self._tree = cKDTree(self._tab_pts)
+
+    @cached_property
+    def _t_of_s_guess(self) -> CubicSpline:
+        """t(s) interpolated through the 4097-sample table (the start of :meth:`_t_of_s`'s Newton)."""
+        from scipy.interpolate import CubicSpline
+
+        return CubicSpline(self._s_tab, self._t_tab)
+
+    @cached_property
+    def _phi_ref(self) -> CubicSpline:
+        """The continuous tangent angle phi(s) interpolated through the table (branch reference)."""
+        from scipy.interpolate import CubicSpline
+
+        return CubicSpline(self._s_tab, self._phi_tab)
+
+    @cached_property
+    def _tree(self) -> cKDTree:
+        """KD-tree of the 4096 curve samples (candidates of the general closest-point search)."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self._c(self._tab_t, 0))
 
     # ------------------------------------------------------------------ arclength maps
     def _arclengths(self, s_o: ArrayLike) -> NDArray[np.float64]:
@@ -587,6 +613,8 @@ def from_points(
     u = chord / chord[-1]
     # below 1e-12 the smoothing is at rounding level (and FITPACK warns that it cannot reach it)
     s_fit = smoothing * len(p) * size**2 if smoothing >= 1e-12 else 0.0
+    from scipy.interpolate import splev, splprep
+
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         tck, _ = splprep(closed_pts.T, u=u, per=1, k=5, s=s_fit, quiet=True)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -31,12 +32,15 @@ from ._validate import float_array, instance, real
 from .arm import ArmShape, BasePose, curvature_spline
 from .boundary import Boundary
 from .errors import ContactValidityError, IntegrationError, InvalidParameterError
-from .rod.obstacle import Obstacle
+
+if TYPE_CHECKING:  # (imported in sense() when needed: the ROS boundary sensor never needs it)
+    from .rod.obstacle import Obstacle
 
 __all__ = [
     "ContactState",
     "ContactKinematics",
     "sense",
+    "shadow_geometry",
     "integrate_contact",
     "shape_from_contact",
     "initial_state",
@@ -100,18 +104,49 @@ def _radius_array(radius: float | ArrayLike, n: int) -> NDArray[np.float64]:
     r = float_array("arm radius", radius)
     if r.shape not in ((), (n,)):
         raise InvalidParameterError(f"arm radius must be a scalar or one value per arm node ({n}), got shape {r.shape}")
-    r = np.broadcast_to(r, (n,))  # (read only: delta = r - rho is a new array)
+    if r.shape != (n,):
+        r = np.broadcast_to(r, (n,))  # (read only: delta = r - rho is a new array)
     if not (r.min() >= 0.0 and r.max() < np.inf):  # (NaN fails the first)
         raise InvalidParameterError("arm radius must be finite and >= 0 along the arm")
     return r
 
 
 def _unwrap(s_o: NDArray[np.float64], length: float) -> NDArray[np.float64]:
-    """``np.unwrap(s_o, period=length)``, skipped when no step crosses the seam (the same result:
-    unwrap adds nothing then; saves most of its cost in the rod's inner loop)."""
-    if len(s_o) > 1 and np.any(np.abs(np.diff(s_o)) >= 0.5 * length):
-        return np.unwrap(s_o, period=length)
-    return s_o
+    """``np.unwrap(s_o, period=length)`` (1-D), bit for bit: numpy's operations on the steps,
+    written out so that the steps are taken once and the work is skipped when no step crosses
+    the seam (unwrap adds nothing then). The rod wraps past ``s_o = 0`` in the paper run, so
+    this runs in every sensing; numpy's general version costs twice as much."""
+    if len(s_o) < 2:
+        return s_o
+    dd = np.diff(s_o)
+    size = np.abs(dd)
+    if not np.any(size >= 0.5 * length):
+        return s_o
+    half = length / 2  # (numpy: discont = interval_high = period / 2)
+    ddmod = np.mod(dd + half, length) - half
+    np.copyto(ddmod, half, where=(ddmod == -half) & (dd > 0))  # a step of exactly +period/2 stays
+    ph_correct = ddmod - dd
+    np.copyto(ph_correct, 0, where=size < half)
+    out = s_o.copy()
+    out[1:] = s_o[1:] + ph_correct.cumsum()
+    return out
+
+
+def shadow_geometry(
+    points: NDArray[np.float64], angles: NDArray[np.float64], obstacle: Obstacle
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``rho``, ``alpha``, ``kappa_o``, ``foot_turn`` and ``normal_out`` of :func:`sense` (the
+    same operations, so the same bits) of the points (n, 2) with tangent angles (n,), and
+    nothing else: no input checks, no ``s_o``, ``delta`` or contact set. For the feedback law's
+    first-order hold inside the rod's Newton iterations
+    (:class:`~contgrasp_core.control.HeldExpansion`), which senses its own well-formed arrays
+    several times per step and reads only these."""
+    proj = obstacle.project(points)
+    rho = proj.signed_distance
+    kappa_o = proj.kappa_o
+    with np.errstate(divide="ignore", invalid="ignore"):
+        foot_turn = kappa_o / (1.0 + rho * kappa_o)
+    return rho, _wrap_pi(proj.phi + 0.5 * np.pi - angles), kappa_o, foot_turn, proj.normal_out
 
 
 def sense(
@@ -130,22 +165,28 @@ def sense(
     (7) (``nu_o``, ``foot_turn``) and Definition 1 with tolerance ``tol``
     (``in_contact = delta >= -tol``).
 
-    ``boundary`` selects the projection, and this is the only place sensing calls it:
+    ``boundary`` selects the projection, and this is the only place sensing calls it (with
+    :func:`shadow_geometry`, the same operations on the subset of fields the feedback's Newton
+    iterations read):
 
     * a :class:`~contgrasp_core.boundary.Boundary` - :meth:`Boundary.project`, Newton's method
       on the curve from several candidates, converged to rounding (the library, the sampled
       loop of :mod:`contgrasp_core.rod.session` and the ROS boundary sensor);
     * an :class:`~contgrasp_core.rod.obstacle.Obstacle` - its fast projection, analytic for
       circles and one osculating-circle Newton step from a table otherwise (about 1e-10 of the
-      object size; the rod's continuous loop and the law's Jacobian inside every implicit step).
+      object size; the rod's continuous loop; inside every implicit step through
+      :func:`shadow_geometry`).
 
     The two are different computations of the same closest point (they agree to rounding on
     circles and to ~1e-10 elsewhere); each caller keeps the one it has always used, so the
     sampled ROS loop and its core twin call this function on the same arrays and agree bitwise.
     """
     instance("shape", shape, ArmShape)
-    if not isinstance(boundary, (Boundary, Obstacle)):
-        raise InvalidParameterError(f"boundary must be a Boundary or an Obstacle, got {type(boundary).__name__}")
+    if not isinstance(boundary, Boundary):
+        from .rod.obstacle import Obstacle  # (a process that senses Boundary objects only never imports scipy.spatial)
+
+        if not isinstance(boundary, Obstacle):
+            raise InvalidParameterError(f"boundary must be a Boundary or an Obstacle, got {type(boundary).__name__}")
     tol = real("contact tolerance", tol, lo=0.0)
     r = float_array("arm shape r", shape.r)
     theta = float_array("arm shape theta", shape.theta)

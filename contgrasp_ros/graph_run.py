@@ -36,6 +36,7 @@ from contgrasp_core.errors import ContgraspError, RunFailure, exit_code
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import stamp_seconds
+from contgrasp_ros.discovery import discovery_profile_set, use_discovery_profile
 from contgrasp_ros.events import EventSink
 from contgrasp_ros.runtime import DropCounter, GuardedSpin, make_executor
 from contgrasp_ros.supervision import (
@@ -275,11 +276,6 @@ def run_graph(
     ``resumed`` (:mod:`contgrasp_ros.events`). ``foxglove``: serve the run live on this WebSocket
     port (:mod:`contgrasp_ros.nodes.foxglove_bridge`, in the launcher's process; 0 = any). A
     recording lost mid-run (the recorder died) fails the run (exit 1) unless ``allow_unrecorded``."""
-    from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
-    from contgrasp_ros.nodes.grasp_controller import GraspController
-    from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
-    from contgrasp_ros.nodes.rod_simulator import RodSimulator
-
     wall0 = time.perf_counter()
     sim_params = {**params["rod_simulator"], "start_paused": True}
     rclpy.init(args=[])
@@ -295,8 +291,9 @@ def run_graph(
     foxglove_url = ""
     try:
         moves = sim_params.get("object_mode", "fixed") != "fixed"
-        mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None,
-                      recorded_streams=RECORDED_STREAMS + (OBJECT_STREAMS if moves else ()))
+        with discovery_profile_set():  # (this process's participant is created with the first node)
+            mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None,
+                          recorded_streams=RECORDED_STREAMS + (OBJECT_STREAMS if moves else ()))
         nodes.append(mon)
         if foxglove is not None:
             from contgrasp_ros.nodes.foxglove_bridge import FoxgloveBridge
@@ -305,6 +302,12 @@ def run_graph(
             nodes.append(bridge)
             foxglove_url = f"ws://127.0.0.1:{bridge.port}"
         if in_process:
+            # (imported here: the node processes import their own modules, the launcher need not)
+            from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
+            from contgrasp_ros.nodes.grasp_controller import GraspController
+            from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
+            from contgrasp_ros.nodes.rod_simulator import RodSimulator
+
             for cls, name in ((RodSimulator, "rod_simulator"), (BoundarySensor, "boundary_sensor"),
                               (GraspController, "grasp_controller"), (GraspQualityNode, "grasp_quality")):
                 values = sim_params if name == "rod_simulator" else params[name]
@@ -326,7 +329,9 @@ def run_graph(
 
             from contgrasp_ros.processes import ProcessGroup
 
-            group = ProcessGroup(dict(os.environ, PYTHONUNBUFFERED="1"), events=events)
+            env = dict(os.environ, PYTHONUNBUFFERED="1")
+            use_discovery_profile(env)  # (the node processes', not this process's: contgrasp_ros.discovery)
+            group = ProcessGroup(env, events=events)
             # Launcher overrides go in a second parameter file: a node's own section in the user's
             # file would beat a plain ``-p name:=value`` (rcl gives node-specific entries priority).
             overrides: dict[str, Any] = {name: {"ros__parameters": {"use_sim_time": True}} for name in NODES}

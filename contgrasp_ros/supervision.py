@@ -192,7 +192,11 @@ class Supervisor:
 
     @property
     def spin_period(self) -> float:
-        """How long the driver spins between observations."""
+        """How long the driver spins between observations: 10 ms while connecting and resuming
+        (nothing else wakes it then, and each poll's delay adds to the start-up), 20 ms while
+        settling, else 50 ms."""
+        if self.phase in (Phase.CONNECTING, Phase.RESUMING):
+            return 0.01
         return 0.02 if self.phase is Phase.SETTLING else 0.05
 
     @property

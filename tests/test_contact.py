@@ -13,8 +13,10 @@ from contgrasp_core.contact import (
     integrate_contact,
     offset_curvature,
     sense,
+    shadow_geometry,
     shape_from_contact,
 )
+from contgrasp_core.contact import _unwrap
 from contgrasp_core.errors import ContactValidityError, InvalidParameterError
 from contgrasp_core.rod import Obstacle
 
@@ -126,6 +128,37 @@ def test_sense_unwraps_s_o_like_numpy(start: float, crosses: bool) -> None:
         geo = sense(shape, obj, 0.1)
         np.testing.assert_array_equal(geo.s_o, np.unwrap(wrapped, period=b.length))
         assert np.all(np.diff(geo.s_o) > 0)
+
+
+def test_unwrap_is_numpys_bit_for_bit() -> None:
+    """The written-out unwrap equals np.unwrap exactly: random walks around the seam, steps of
+    exactly half a period (numpy's boundary rule), single points, NaN."""
+    rng = np.random.default_rng(7)
+    for trial in range(3000):
+        length = float(rng.uniform(0.01, 10.0))
+        n = int(rng.integers(1, 40))
+        s_o = np.mod(np.cumsum(rng.normal(0.0, length / 4, n)), length)
+        if trial % 5 == 0 and n > 2:
+            s_o[2] = s_o[1] + (length / 2 if trial % 2 else -length / 2)
+        if trial % 97 == 0:
+            s_o[rng.integers(n)] = np.nan
+        want = np.unwrap(s_o, period=length) if np.any(np.abs(np.diff(s_o)) >= 0.5 * length) else s_o
+        np.testing.assert_array_equal(_unwrap(s_o, length), want)
+
+
+@pytest.mark.parametrize("make", [lambda: circle(0.025, (0.03, 0.05)), lambda: ellipse(0.03, 0.02, (0.03, 0.05), 0.3),
+                                  lambda: deformed_circle(0.025, 0.003, 3, 0.2, (0.03, 0.05))],
+                         ids=["circle", "ellipse", "deformed"])
+def test_shadow_geometry_is_senses_fields_bit_for_bit(make) -> None:  # type: ignore[no-untyped-def]
+    """What the feedback's Newton iterations read (shadow_geometry) is what sense() returns."""
+    obstacle = Obstacle(make())
+    s = np.linspace(0.0, 0.2, 101)
+    shape = shape_from_curvature(s, np.full_like(s, 12.0), BasePose(0.0, 0.0, 0.3))
+    geo = sense(shape, obstacle, 0.004)
+    rho, alpha, kappa_o, foot_turn, normal_out = shadow_geometry(shape.r, shape.theta, obstacle)
+    for got, want in ((rho, geo.rho), (alpha, geo.alpha), (kappa_o, geo.kappa_o), (foot_turn, geo.foot_turn),
+                      (normal_out, geo.normal_out)):
+        np.testing.assert_array_equal(got, want)
 
 
 def test_sense_rejects_what_is_not_an_object() -> None:

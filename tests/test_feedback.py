@@ -13,6 +13,8 @@ from contgrasp_core.control.law import (
     curvature_feedback,
     equilibrium_distance,
     feedback_couple,
+    feedback_couple_and_gradient,
+    feedback_couple_gradient,
     lyapunov,
     lyapunov_rate,
 )
@@ -130,6 +132,23 @@ def test_validation_of_inputs():
         closed_loop_kinematics(-1.0, 1.0, np.linspace(0, 1, 5), 1.0, 1.0, 0.0)
     with pytest.raises(InvalidParameterError):
         closed_loop_kinematics(1.0, 1.0, np.array([0.0, 0.0, 1.0]), 1.0, 1.0, 0.0)
+
+
+@pytest.mark.parametrize("mu2", [1.3, np.linspace(-0.4, 2.0, 30)], ids=["scalar", "per-joint"])
+def test_feedback_couple_and_gradient_are_the_two_functions_bit_for_bit(mu2) -> None:  # type: ignore[no-untyped-def]
+    """The controller's one-pass law returns exactly feedback_couple and feedback_couple_gradient;
+    bad inputs are rejected the same way."""
+    rng = np.random.default_rng(3)
+    rho, alpha, ei = rng.uniform(-0.01, 0.08, 30), rng.uniform(-3.0, 3.0, 30), rng.uniform(1e-4, 1e-2, 30)
+    u, g_rho, g_alpha = feedback_couple_and_gradient(rho, alpha, ei, 0.7, mu2, length_unit=CENTIMETRE)
+    np.testing.assert_array_equal(u, feedback_couple(rho, alpha, ei, 0.7, mu2, length_unit=CENTIMETRE))
+    want = feedback_couple_gradient(rho, alpha, ei, 0.7, mu2, length_unit=CENTIMETRE)
+    np.testing.assert_array_equal(g_rho, want[0])
+    np.testing.assert_array_equal(g_alpha, want[1])
+    with pytest.raises(InvalidParameterError, match="not finite"):
+        feedback_couple_and_gradient(np.full(30, np.nan), alpha, ei, 0.7, mu2)
+    with pytest.raises(InvalidParameterError, match="bending_stiffness"):
+        feedback_couple_and_gradient(rho, alpha, -ei, 0.7, mu2)
 
 
 def test_feedback_expansion_gains_are_the_law_derivatives() -> None:

@@ -9,7 +9,7 @@ import pytest
 
 from contgrasp_core.boundary import circle, ellipse
 from contgrasp_core.control import feedback_at_joints
-from contgrasp_core.contact import sense
+from contgrasp_core.contact import sense, shadow_geometry
 from contgrasp_core.control.rod_feedback import joint_couple_jacobian
 from contgrasp_core.rod import Obstacle, RodSystem, _kernels
 from contgrasp_core.rod import chain
@@ -54,7 +54,7 @@ def test_joint_couple_jacobian_kernel() -> None:
     model = PAPER.rod
     obstacle = Obstacle(PAPER.object.boundary())
     theta = np.linspace(0.0, 2.5, model.n_elements)
-    js = sense(chain.arm_shape(model, theta), obstacle, model.radius(model.s_nodes))
+    js = shadow_geometry(chain.nodes(model, theta), chain.node_angles(model, theta), obstacle)
     rng = np.random.default_rng(2)
     g_rho, g_alpha = rng.standard_normal((2, model.n_elements))
     b = np.stack([-np.sin(theta), np.cos(theta)], axis=1)

@@ -172,6 +172,56 @@ def test_launcher_turns_unexpected_errors_into_one_line(monkeypatch, capsys, exc
         launcher.main(["--no-record", "--debug"])
 
 
+def test_node_processes_get_the_discovery_profile_and_the_launcher_keeps_its_environment(monkeypatch, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """The node processes' environment names the packaged Fast DDS profile (more initial discovery
+    announcements: processes started together meet at once); the launcher's own is unchanged."""
+    import xml.etree.ElementTree as ET
+
+    import contgrasp_ros.processes
+    from contgrasp_ros.discovery import discovery_profile
+    from contgrasp_ros.graph_run import run_graph
+
+    seen: list[dict[str, str]] = []
+
+    class Started(Exception):
+        pass
+
+    def group(env: dict[str, str], **_k: object) -> None:
+        seen.append(env)
+        raise Started
+
+    monkeypatch.setattr(contgrasp_ros.processes, "ProcessGroup", group)
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(fresh_domain_id()))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    before = os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE")
+    params = small_params(tmp_path)
+    with pytest.raises(Started):
+        run_graph(load_params(params), in_process=False, params_file=params, timeout=10.0)
+    assert os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE") == before
+    if not (before or os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")):
+        assert seen[0]["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(discovery_profile())
+    ns = {"f": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
+    count = ET.parse(discovery_profile()).find(".//f:initialAnnouncements/f:count", ns)
+    assert count is not None and int(count.text or 0) > 5
+
+
+def test_the_discovery_profile_is_used_unless_one_is_named() -> None:
+    """The launcher's rule (contgrasp_ros.discovery): the packaged profile unless the environment
+    names one."""
+    from contgrasp_ros.discovery import discovery_profile, discovery_profile_set, use_discovery_profile
+
+    env: dict[str, str] = {}
+    use_discovery_profile(env)
+    assert env == {"FASTRTPS_DEFAULT_PROFILES_FILE": str(discovery_profile())} and discovery_profile().is_file()
+    for name in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+        own = {name: "/elsewhere/profile.xml"}
+        use_discovery_profile(own)
+        assert own == {name: "/elsewhere/profile.xml"}
+    with discovery_profile_set(env := {"OTHER": "1"}):
+        assert env["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(discovery_profile())
+    assert env == {"OTHER": "1"}
+
+
 def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
     assert launch("--duration", "-1").returncode == 2
     bad = tmp_path / "bad.yaml"

@@ -3,8 +3,13 @@ outputs checked against the core functions; malformed messages are dropped and c
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -292,3 +297,20 @@ def test_boundary_sensor_senses_a_state_that_arrived_before_the_object(graph) ->
     assert spin_until(ex, lambda: len(got) == 1)
     assert got[0].step == 0 and sensor.drops.total == 0
     np.testing.assert_array_equal(got[0].rho, sense(shape, obj, 0.01).rho)
+
+
+def test_the_light_nodes_and_the_launcher_import_neither_scipy_nor_the_rod_engine() -> None:
+    """Start-up (docs/design.md section 8): only the simulator needs scipy, numba and the rod
+    integrator; the sensor, controller and quality processes and the launcher import none of them
+    (each would cost those processes ~0.3 s of start-up on a shared core)."""
+    code = (
+        "import json, sys\n"
+        "import contgrasp_ros.launcher, contgrasp_ros.graph_run\n"
+        "import contgrasp_ros.nodes.boundary_sensor, contgrasp_ros.nodes.grasp_controller, contgrasp_ros.nodes.grasp_quality\n"
+        "heavy = ('scipy', 'numba', 'matplotlib')\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[0] in heavy or m == 'contgrasp_core.rod.integrator')))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                          cwd=Path(__file__).resolve().parents[1], env=dict(os.environ))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads(proc.stdout) == []

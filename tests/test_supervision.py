@@ -48,12 +48,12 @@ class Run:
 
     def start(self) -> None:
         """Connect and resume: the run is RUNNING."""
-        assert self.tick() == []
+        assert self.tick() == [] and self.sup.spin_period == 0.01  # (start-up: poll often)
         assert self.tick(connected=True) == [Resume()]
-        assert self.sup.phase is Phase.RESUMING
+        assert self.sup.phase is Phase.RESUMING and self.sup.spin_period == 0.01
         out = self.tick(resume_answered=True)
         assert out == [Log("info", "graph connected; the simulator is running"), Notify("resumed", {"restart": False})]
-        assert self.sup.phase is Phase.RUNNING and self.sup.started
+        assert self.sup.phase is Phase.RUNNING and self.sup.started and self.sup.spin_period == 0.05
 
     def kill(self, node: str, pid: int, code: int = -9) -> list[Action]:
         return self.tick(exited=(*self.obs.exited, Exit(node, pid, code)))

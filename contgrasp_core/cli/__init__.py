@@ -20,7 +20,6 @@ import numpy as np
 
 from .. import __version__
 from ..errors import ContgraspError, exit_code, one_line
-from . import grasp, hold, holding_study, kinematics, quality, simulate
 
 __all__ = ["ArgumentParser", "build_parser", "main", "report", "summary_lines"]
 
@@ -79,6 +78,10 @@ Registrar = Callable[[Any, list[argparse.ArgumentParser]], None]
 def build_parser(extra: Sequence[Registrar] = ()) -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered; ``extra`` registrars add more
     (the recording commands of :mod:`contgrasp_ros.cli`, which keeps this package free of ROS)."""
+    # (the subcommands import matplotlib and scipy: not at import time, so that the launcher,
+    # which only needs this module's parser class, starts its node processes sooner)
+    from . import grasp, hold, holding_study, kinematics, quality, simulate
+
     common = ArgumentParser(add_help=False)
     common.add_argument("--json", action="store_true", help="print one JSON object with the results on stdout")
     common.add_argument("--debug", action="store_true", help="show full tracebacks on errors")

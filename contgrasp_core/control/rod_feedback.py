@@ -17,8 +17,10 @@ instead evaluates the law inside every Newton iteration of the implicit step, at
 and supplies its derivative ``du/dtheta`` to the Newton matrix, so the continuous-time loop of
 paper Prop. 5.2 is integrated with the same unconditional stability as the elastic forces.
 
-Sensing is :func:`contgrasp_core.contact.sense` at the N+1 rod nodes
-(:func:`contgrasp_core.rod.chain.arm_shape`, the fast :class:`Obstacle` projection); the law reads
+Sensing is :func:`contgrasp_core.contact.shadow_geometry` (the fields of
+:func:`contgrasp_core.contact.sense` the law reads, computed as it does, without its input checks)
+at the N+1 rod nodes (:func:`contgrasp_core.rod.chain.nodes`, the fast :class:`Obstacle`
+projection); the law reads
 it at the joints ``s_k = k h``, k = 0..N-1 (the clamp and the internal nodes; the tip carries no
 couple): ``rho_k`` the signed distance of node ``k`` to the boundary, ``alpha_k = phi + pi/2 -
 theta_k`` with ``theta_k`` the mean angle of the adjacent elements (eq. (4)).
@@ -32,16 +34,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from contgrasp_core.contact import ContactState, sense
+from contgrasp_core.contact import shadow_geometry
 from contgrasp_core.control.gains import FeedbackGains
-from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_gradient
+from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_and_gradient
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.model import RodModel
-from contgrasp_core.rod.obstacle import Obstacle
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # (the obstacle imports scipy.spatial: the ROS controller process never needs it)
     from contgrasp_core.rod.closed_loop import ClosedLoopResult
+    from contgrasp_core.rod.obstacle import Obstacle
 
 Array = NDArray[np.float64]
 
@@ -68,22 +70,27 @@ class StateFeedback:
         """``u`` (N,) and ``du/dtheta`` (N, N) (:func:`joint_couple_jacobian`). ``nodes``
         (N+1, 2) and element ``normals`` (N, 2) may be passed when already computed."""
         m, g = self.model, self.gains
-        c = sense(chain.arm_shape(m, theta, nodes), self.obstacle, m.radius(m.s_nodes))
-        rho, alpha = c.rho[:-1], c.alpha[:-1]
+        x = chain.nodes(m, theta) if nodes is None else nodes
+        geometry = shadow_geometry(x, chain.node_angles(m, theta), self.obstacle)
+        rho, alpha = geometry[0][:-1], geometry[1][:-1]
         ei = m.joint_ei
-        u = feedback_couple(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         if not jacobian:
-            return u, None
-        g_rho, g_alpha = feedback_couple_gradient(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
+            return feedback_couple(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit), None
+        u, g_rho, g_alpha = feedback_couple_and_gradient(rho, alpha, ei, g.mu1, g.mu2, length_unit=g.length_unit)
         b = chain.frames(theta)[1] if normals is None else normals
-        return u, joint_couple_jacobian(m, g_rho, g_alpha, c, b)
+        return u, joint_couple_jacobian(m, g_rho, g_alpha, geometry, b)
 
 
-def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarray, sensing: ContactState,
+Geometry = tuple[Array, Array, Array, Array, Array]
+"""What :func:`contgrasp_core.contact.shadow_geometry` returns at the rod's N+1 nodes:
+``rho``, ``alpha``, ``kappa_o``, ``foot_turn``, ``normal_out``."""
+
+
+def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarray, geometry: Geometry,
                           b: np.ndarray) -> np.ndarray:
     """``du/dtheta`` (N, N) of a joint couple with partials ``g_rho``, ``g_alpha`` (N,), from the
-    rod's contact state ``sensing`` at its N+1 nodes (:func:`contgrasp_core.contact.sense`; the
-    joints are nodes 0..N-1).
+    rod's shadow geometry at its N+1 nodes (:func:`contgrasp_core.contact.shadow_geometry`, the
+    fields of :func:`contgrasp_core.contact.sense` it reads; the joints are nodes 0..N-1).
 
     Node k moves by ``h b_l`` per unit ``theta_l``, ``l < k``: ``d rho_k / d theta_l = h n_k . b_l``
     (``n_k`` the outward normal ``normal_out`` at the foot) and the foot's tangent angle turns by
@@ -92,9 +99,10 @@ def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarra
     safely positive: there the closest point is degenerate). The node angle is the mean of the
     adjacent elements: ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2``.
     """
-    n_out = sensing.normal_out[:-1]
-    safe = 1.0 + sensing.rho[:-1] * sensing.kappa_o[:-1] > _SAFE_ONE_PLUS
-    turn = np.where(safe, sensing.foot_turn[:-1], 0.0)
+    rho, _, kappa_o, foot_turn, normal_out = geometry
+    n_out = normal_out[:-1]
+    safe = 1.0 + rho[:-1] * kappa_o[:-1] > _SAFE_ONE_PLUS
+    turn = np.where(safe, foot_turn[:-1], 0.0)
     if _kernels.ENABLED:  # the same entries in one compiled loop (contgrasp_core.rod._kernels)
         f64 = _kernels.f64
         return _kernels.joint_couple_jacobian(model.h, f64(g_rho), f64(g_alpha), f64(n_out), f64(turn), f64(b))
@@ -130,8 +138,7 @@ def feedback_at_joints(model: RodModel, gains: FeedbackGains, rho: Array, alpha:
         raise InvalidParameterError(f"rho and alpha must be given at the {n + 1} nodes, got {rho.shape}, {alpha.shape}")
     r, a = rho[:-1], alpha[:-1]
     lu, ei = gains.length_unit, model.joint_ei
-    u = feedback_couple(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
-    g_rho, g_alpha = feedback_couple_gradient(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
+    u, g_rho, g_alpha = feedback_couple_and_gradient(r, a, ei, gains.mu1, gains.mu2, length_unit=lu)
     return FeedbackExpansion(u=u, rho_ref=r, alpha_ref=a, g_rho=g_rho, g_alpha=g_alpha)
 
 
@@ -157,13 +164,14 @@ class HeldExpansion:
     ) -> tuple[Array, Array | None]:
         """Deviation of the couple from the held value (N,) and its derivative (N, N)."""
         m, e = self.model, self.expansion
-        c = sense(chain.arm_shape(m, theta, nodes), self.obstacle, m.radius(m.s_nodes))
-        d_alpha = np.mod(c.alpha[:-1] - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
-        du = e.g_rho * (c.rho[:-1] - e.rho_ref) + e.g_alpha * d_alpha
+        x = chain.nodes(m, theta) if nodes is None else nodes
+        geometry = shadow_geometry(x, chain.node_angles(m, theta), self.obstacle)
+        d_alpha = np.mod(geometry[1][:-1] - e.alpha_ref + np.pi, 2.0 * np.pi) - np.pi
+        du = e.g_rho * (geometry[0][:-1] - e.rho_ref) + e.g_alpha * d_alpha
         if not jacobian:
             return du, None
         b = chain.frames(theta)[1] if normals is None else normals
-        return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, c, b)
+        return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, geometry, b)
 
 
 def static_solution(res: "ClosedLoopResult", obstacle_radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -41,9 +41,10 @@ def frames(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([c, s], axis=1), np.stack([-s, c], axis=1)
 
 
-def nodes(model: RodModel, theta: np.ndarray) -> np.ndarray:
-    """Node positions ``x_k``, k = 0..N (N+1, 2)."""
-    a, _ = frames(theta)
+def nodes(model: RodModel, theta: np.ndarray, tangents: np.ndarray | None = None) -> np.ndarray:
+    """Node positions ``x_k``, k = 0..N (N+1, 2); ``tangents`` (N, 2) may be passed when
+    already computed (:func:`frames`)."""
+    a = frames(theta)[0] if tangents is None else tangents
     x = np.empty((len(theta) + 1, 2))
     x[0] = model.base_position
     np.cumsum(model.h * a, axis=0, out=x[1:])

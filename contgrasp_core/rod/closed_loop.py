@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,9 +31,11 @@ from contgrasp_core.control.law import feedback_couple
 from contgrasp_core.control.rod_feedback import StateFeedback
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import chain
-from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
 from contgrasp_core.rod.model import RodModel
-from contgrasp_core.rod.obstacle import Obstacle
+
+if TYPE_CHECKING:  # (imported by the runner: the scenario's ClosedLoopConfig comes without the engine)
+    from contgrasp_core.rod.integrator import RodState, RodSystem
+    from contgrasp_core.rod.obstacle import Obstacle
 
 __all__ = ["ClosedLoopConfig", "ClosedLoopResult", "run_closed_loop"]
 
@@ -134,6 +137,8 @@ def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
 
 def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: ClosedLoopConfig,
          state: RodState | None) -> ClosedLoopResult:
+    from contgrasp_core.rod.integrator import RodLoads
+
     m = system.model
     ei = m.joint_ei
     st = system.straight_state() if state is None else state

@@ -23,7 +23,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.rod import _kernels
@@ -61,6 +60,8 @@ class Obstacle:
         if boundary.kind == "circle":
             self._circle = (float(boundary.params["R"]), np.asarray(boundary.params["center"], dtype=float))
             return
+        from scipy.spatial import cKDTree  # (only for tabulated objects: a circle's simulator starts without it)
+
         s, pts = boundary.sample(int(samples))
         self._s = s
         self._pts = pts

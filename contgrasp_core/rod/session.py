@@ -150,6 +150,8 @@ class LoopSession:
         self.iterations = 0
         self.max_penetration = 0.0
         self._observed: Observation | None = None
+        self._radius = system.model.radius(system.model.s_nodes)  # (the same every step: shared, read-only)
+        self._radius.flags.writeable = False
 
     @property
     def settled(self) -> bool:
@@ -164,15 +166,15 @@ class LoopSession:
         if self._observed is not None and self._observed.k == self.k:
             return self._observed
         m, st = self.system.model, self.state
-        x = chain.nodes(m, st.theta)
-        _, b = chain.frames(st.theta)
+        a, b = chain.frames(st.theta)
+        x = chain.nodes(m, st.theta, a)
         v = np.zeros_like(x)
         np.cumsum(m.h * b * st.omega[:, None], axis=0, out=v[1:])
         speed = float(np.hypot(v[:, 0], v[:, 1]).max())
         body = self.system.body
         if body is not None and st.body is not None:
             speed = max(speed, body.max_speed(st.body, x))
-        radius = m.radius(m.s_nodes)
+        radius = self._radius
         obstacle = self.system.obstacle_at(st)
         gap_nodes = obstacle.project(x).signed_distance - radius
         gap_c = obstacle.project(0.5 * (x[:-1] + x[1:])).signed_distance - m.r_centres  # (chain.centres)
