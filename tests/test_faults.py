@@ -196,9 +196,11 @@ def test_interrupted_launcher_stops_everything_and_finalises_the_recording(tmp_p
 
 def test_nodes_idle_without_a_simulator(tmp_path: Path) -> None:
     """With no simulator the sensing, control and quality nodes wait without burning CPU."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               PYTHONFAULTHANDLER="1")  # (a node that hangs is aborted below and shows where it hung)
+    logs = [tmp_path / f"{n}.err" for n in NODES[1:]]
     procs = [subprocess.Popen([sys.executable, "-m", f"contgrasp_ros.nodes.{n}"], env=env, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL) for n in NODES[1:]]
+                              stderr=log.open("w")) for n, log in zip(NODES[1:], logs, strict=True)]
     try:
         time.sleep(4.0)  # start-up
         cpu0 = [cpu_seconds(p.pid) for p in procs]
@@ -208,7 +210,14 @@ def test_nodes_idle_without_a_simulator(tmp_path: Path) -> None:
     finally:
         for p in procs:
             p.send_signal(signal.SIGINT)
-        codes = [p.wait(timeout=30) for p in procs]
+        codes = []
+        for p, log in zip(procs, logs, strict=True):
+            try:
+                codes.append(p.wait(timeout=30))
+            except subprocess.TimeoutExpired:
+                p.send_signal(signal.SIGABRT)  # faulthandler prints every thread's stack
+                p.wait(timeout=30)
+                raise AssertionError(f"{p.args[-1]} ignored SIGINT for 30 s; its stderr:\n{log.read_text()[-6000:]}") from None
     assert max(used) < 0.3, used  # seconds of CPU in 3 s of waiting: no busy loop
     assert codes == [0, 0, 0]
 
