@@ -19,6 +19,9 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "contgrasp_ros_log"))
 os.environ.setdefault("MPLBACKEND", "Agg")
+# every process a test starts prints its Python stacks if it crashes (a node that segfaulted on
+# shutdown once under load in CI, exit -11: the next time says where)
+os.environ.setdefault("PYTHONFAULTHANDLER", "1")
 # what sourcing a ROS 2 setup script provides: the ament index search path (this venv)
 os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 

@@ -169,7 +169,7 @@ def test_killed_simulator_stops_the_run_and_the_recording_is_complete(tmp_path: 
     assert ended[0]["node"] == "rod_simulator" and ended[0]["action"] == "run ended" and ended[0]["exit_code"] == -9
     assert ended[1]["exit_code"] == 1 and ended[1]["error"] == out["error"]
     assert out["exit_codes"]["rod_simulator"] == -9
-    assert all(out["exit_codes"][n] == 0 for n in NODES[1:]), out["exit_codes"]  # the others stopped cleanly
+    assert all(out["exit_codes"][n] == 0 for n in NODES[1:]), (out["exit_codes"], "".join(launch.lines[-80:]))  # stopped cleanly
     assert out["exit_codes"]["mcap_recorder"] == 0
     steps = recorded_steps(bag)  # finalised, readable, every state the simulator published
     assert steps and steps == list(range(len(steps)))
@@ -196,8 +196,8 @@ def test_interrupted_launcher_stops_everything_and_finalises_the_recording(tmp_p
 
 def test_nodes_idle_without_a_simulator(tmp_path: Path) -> None:
     """With no simulator the sensing, control and quality nodes wait without burning CPU."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               PYTHONFAULTHANDLER="1")  # (a node that hangs is aborted below and shows where it hung)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    # (PYTHONFAULTHANDLER is on for the tests' processes, conftest: a node that hangs is aborted below and shows where)
     logs = [tmp_path / f"{n}.err" for n in NODES[1:]]
     procs = [subprocess.Popen([sys.executable, "-m", f"contgrasp_ros.nodes.{n}"], env=env, stdout=subprocess.DEVNULL,
                               stderr=log.open("w")) for n, log in zip(NODES[1:], logs, strict=True)]
