@@ -32,7 +32,7 @@ import numpy as np
 from .errors import ContgraspError, InvalidParameterError, WriteError
 from .executors import run_tasks
 from .holding import HoldSettings, measure_holding
-from .objects import FIG2_SCALE, ObjectSpec
+from .objects import FIG2_SCALE, SHAPES, ObjectSpec
 from .quality_map import MapSpec, QualityMap, quality_map
 from .scenario import PAPER
 
@@ -79,14 +79,8 @@ class StudySpec:
         if spec.shape == "outline":
             raise InvalidParameterError("the study takes a built-in shape (its static map is in the paper's units)")
         params = tuple(p * self.scale if name in ("R", "a", "b") else p
-                       for name, p in zip(_param_names(spec.shape), spec.params, strict=True))
+                       for name, p in zip(SHAPES[spec.shape], spec.params, strict=True))
         return ObjectSpec(spec.shape, params, PAPER.object.center, spec.angle)
-
-
-def _param_names(shape: str) -> tuple[str, ...]:
-    from .objects import SHAPES
-
-    return SHAPES[shape]
 
 
 def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float],

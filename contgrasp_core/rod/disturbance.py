@@ -24,9 +24,20 @@ from numpy.typing import NDArray
 
 from contgrasp_core.errors import InvalidParameterError
 
-__all__ = ["KINDS", "Disturbance", "WrenchInput"]
+__all__ = ["KINDS", "Disturbance", "WrenchInput", "wrench_array"]
 
 KINDS = ("step", "ramp", "pulse")
+
+
+def wrench_array(name: str, value: object) -> NDArray[np.float64]:
+    """``value`` as a wrench (3,) (fx, fy, torque), or :class:`InvalidParameterError` naming ``name``."""
+    try:
+        w = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InvalidParameterError(f"{name} must be three numbers (fx, fy, torque), got {value!r}") from exc
+    if w.shape != (3,) or not np.all(np.isfinite(w)):
+        raise InvalidParameterError(f"{name} must be three finite numbers (fx, fy, torque), got {value!r}")
+    return w
 
 
 @dataclass(frozen=True)
@@ -41,12 +52,7 @@ class Disturbance:
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise InvalidParameterError(f"disturbance kind must be one of {', '.join(KINDS)}, got {self.kind!r}")
-        try:
-            w = np.asarray(self.wrench, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise InvalidParameterError(f"disturbance wrench must be three numbers (fx, fy, torque), got {self.wrench!r}") from exc
-        if w.shape != (3,) or not np.all(np.isfinite(w)):
-            raise InvalidParameterError(f"disturbance wrench must be three finite numbers (fx, fy, torque), got {self.wrench!r}")
+        w = wrench_array("disturbance wrench", self.wrench)
         object.__setattr__(self, "wrench", (float(w[0]), float(w[1]), float(w[2])))
         if not (np.isfinite(self.start) and self.start >= 0):
             raise InvalidParameterError(f"disturbance start must be a finite time >= 0 s, got {self.start!r}")
@@ -85,10 +91,7 @@ class WrenchInput:
 
     def hold(self, wrench: NDArray[np.float64]) -> None:
         """Hold ``wrench`` (3,) from the next period on, until another replaces it."""
-        w = np.asarray(wrench, dtype=float)
-        if w.shape != (3,) or not np.all(np.isfinite(w)):
-            raise InvalidParameterError(f"a held wrench must be three finite numbers (fx, fy, torque), got {wrench!r}")
-        self._pending_held = w.copy()
+        self._pending_held = wrench_array("a held wrench", wrench).copy()
 
     def apply(self, kind: str, wrench: tuple[float, float, float], duration: float = 0.0) -> None:
         """Apply a step, ramp or pulse (:class:`Disturbance`) starting with the next period; the

@@ -51,6 +51,7 @@ from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.body import BodyState, RigidBody, to_object_frame
 from contgrasp_core.rod.coupling import body_coupling
+from contgrasp_core.rod.disturbance import wrench_array
 from contgrasp_core.rod.loads import ContactFrame, contact_forces, contact_frame, contact_tensors, drag_forces
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.obstacle import Obstacle
@@ -349,12 +350,9 @@ class RodSystem:
         if not (np.isfinite(duration) and duration > 0):
             raise InvalidParameterError(f"dt/duration must be finite and > 0, got {duration!r}")
         if loads.wrench is not None:
-            w = np.asarray(loads.wrench, dtype=float)
             if self.body is None:
                 raise InvalidParameterError("a wrench on the object needs a movable object (the object is fixed)")
-            if w.shape != (3,) or not np.all(np.isfinite(w)):
-                raise InvalidParameterError(f"the object's wrench must be three finite numbers (fx, fy, torque), "
-                                            f"got {loads.wrench!r}")
+            wrench_array("the object's wrench", loads.wrench)
         with single_thread_blas():  # (contgrasp_core.blas: small solves, one thread)
             return self._advance(state, duration, loads, dt_try)
 
@@ -447,19 +445,20 @@ class RodSystem:
         else:
             c0 = chain.centres(m, th0 + 0.5 * dt * w0)
         margin = self.options.contact_margin + 2.0 * dt * np.abs(w0).max() * m.length
-        if self.body is None:
+        bs = state.body
+        if self.body is None or bs is None:
             frame = contact_frame(m, self.obstacle, c0, margin)
-            start = chain.centres(m, th0)
         else:  # a movable object: the frame in the object's start-pose frame, at its mid-step pose
-            bs = state.body
-            assert bs is not None  # (a system with a body steps states with one)
-            centroid = np.asarray(self.body.centroid)
             margin += 2.0 * dt * self.body.max_speed(bs, c0)
-            frame = contact_frame(m, self.obstacle, to_object_frame(c0, bs.q + 0.5 * dt * bs.v, centroid), margin)
-            start = to_object_frame(chain.centres(m, th0), bs.q, centroid)
+            frame = contact_frame(m, self.obstacle, to_object_frame(c0, bs.q + 0.5 * dt * bs.v,
+                                                                    np.asarray(self.body.centroid)), margin)
         if frame is None or not (m.friction > 0 and m.friction_model == "stick"):
             return frame
-        # stick-slip: the anchors the step starts from; a new contact sticks where it is
+        # stick-slip: the anchors the step starts from; a new contact sticks where it is (its
+        # centre at the start of the step, in the object's frame)
+        start = chain.centres(m, th0)
+        if self.body is not None and bs is not None:
+            start = to_object_frame(start, bs.q, np.asarray(self.body.centroid))
         anchors = np.full((m.n_elements, 2), np.nan) if state.anchors is None else state.anchors.copy()
         new = frame.rows[np.isnan(anchors[frame.rows, 0])]
         anchors[new] = start[new]
