@@ -110,7 +110,12 @@ class LaunchHandle:
         self._out_reader.join(timeout=30)
         self._reader.join(timeout=30)
         self._event_reader.join(timeout=30)
-        return self.proc.returncode, json.loads("".join(self._stdout))
+        out = "".join(self._stdout)
+        try:
+            return self.proc.returncode, json.loads(out)
+        except json.JSONDecodeError:
+            raise AssertionError(f"the launcher exited {self.proc.returncode} without a JSON summary (stdout {out[:200]!r}); "
+                                 f"its last lines:\n{''.join(self.lines[-40:])}") from None
 
     def close(self) -> None:
         """Stop the launcher if it is still running: SIGINT (it stops its nodes and finalises the
