@@ -94,27 +94,40 @@ class ProcessGroup:
         return [c for c in self.children if c.proc.poll() is not None]
 
     def stop(self, *, names: Sequence[str] | None = None, sigint_timeout: float = 10.0, sigterm_timeout: float = 5.0) -> dict[str, int]:
-        """SIGINT every running child (or only those in ``names``), then SIGTERM, then SIGKILL
-        after the timeouts. Returns each stopped child's exit code (negative: killed by that signal).
+        """SIGINT the running children (or only those in ``names``) one after another, each
+        given ``sigint_timeout`` to exit, then SIGTERM the rest together, then SIGKILL. Returns
+        each stopped child's exit code (negative: killed by that signal).
+
+        One at a time because Fast DDS 2.14 can deadlock a participant that is being destroyed
+        while it processes another participant's departure (seen: a node hung in
+        ``destroy_participant`` while its receive thread removed a peer's writer, when all the
+        graph's nodes were interrupted at once); a node that leaves alone always exits.
         """
         chosen = [c for c in self.children if names is None or c.name in names]
-        for sig, timeout in ((signal.SIGINT, sigint_timeout), (signal.SIGTERM, sigterm_timeout), (signal.SIGKILL, 5.0)):
+        for c in chosen:
+            if c.proc.poll() is None:
+                self._signal_and_wait([c], signal.SIGINT, sigint_timeout)
+        for sig, timeout in ((signal.SIGTERM, sigterm_timeout), (signal.SIGKILL, 5.0)):
             running = [c for c in chosen if c.proc.poll() is None]
             if not running:
                 break
-            for c in running:
-                try:
-                    os.kill(c.proc.pid, sig)
-                except ProcessLookupError:
-                    pass
-            end = time.monotonic() + timeout
-            while time.monotonic() < end and any(c.proc.poll() is None for c in running):
-                time.sleep(0.05)
+            self._signal_and_wait(running, sig, timeout)
         for c in chosen:
             c.proc.wait()
             c.pump.join(timeout=2.0)
         clean_shared_memory()
         return {c.name: int(c.proc.returncode) for c in chosen}
+
+    @staticmethod
+    def _signal_and_wait(children: Sequence[Child], sig: signal.Signals, timeout: float) -> None:
+        for c in children:
+            try:
+                os.kill(c.proc.pid, sig)
+            except ProcessLookupError:
+                pass
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and any(c.proc.poll() is None for c in children):
+            time.sleep(0.02)
 
 
 def _fastdds_cleaner() -> Path | None:

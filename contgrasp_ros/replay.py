@@ -109,7 +109,12 @@ def replay(
                 pause = due - time.monotonic()
                 if pause > 0:
                     time.sleep(pause)
-                pubs[m.topic].publish(m.data)
+                try:
+                    pubs[m.topic].publish(m.data)
+                except Exception:
+                    if node.context.ok():
+                        raise
+                    return _summary(path, rate, published, wall0)  # (SIGINT shut the context down mid-loop)
                 published[m.topic] += 1
             if not loop or first_ns is None:
                 break
@@ -126,5 +131,10 @@ def replay(
             node.destroy_node()
             if rclpy.ok():
                 rclpy.shutdown()
+    return _summary(path, rate, published, wall0)
+
+
+def _summary(path: str | Path, rate: float, published: dict[str, int], wall0: float) -> dict[str, Any]:
+    """The replay's counts (also of one stopped early)."""
     return {"path": str(path), "rate": rate, "published": sum(published.values()), "topics": published,
             "wall_time_s": time.monotonic() - wall0}

@@ -259,9 +259,10 @@ def test_a_push_on_the_wrench_topic_and_a_pulse_from_the_service_are_in_the_reco
     from contgrasp_ros import qos
 
     push, torque = (0.0, -0.05, 0.0), 2e-4
-    # 300 steps; the coarse arm reaches the object after ~0.45-0.75 s (when depends on the push)
-    # and its 1 mm tip sinks ~4 mm into it on impact: a penetration limit for that coarse rod
-    params = object_params(tmp_path, 0.6, object_mode="spring", object_stiffness=[10.0, 10.0, 0.01],
+    # 500 steps (the lock-step run does not wait for this test's node: on a busy machine its
+    # push can come 200 steps late); the coarse arm reaches the object after ~0.45-0.75 s (when
+    # depends on the push) and its 1 mm tip sinks ~4 mm into it on impact: a penetration limit
+    params = object_params(tmp_path, 1.0, object_mode="spring", object_stiffness=[10.0, 10.0, 0.01],
                            object_damping=[0.05, 0.05, 1e-4], max_penetration_limit=0.01)
     domain = fresh_domain_id()
     ctx = Context()
@@ -307,10 +308,10 @@ def test_a_push_on_the_wrench_topic_and_a_pulse_from_the_service_are_in_the_reco
     assert first > 20  # the period after the first push received (published once step 20 was seen)
     assert np.all(o.wrench[pushed[0]:, :2] == push[:2])  # held until the end
     assert np.all(o.q[: pushed[0] + 1] == 0.0)  # at rest until pushed (the arm reaches it later)
-    assert int(run.rod.step[pushed[0]]) < 200, "the test node reacted too late (a busy machine?)"
+    assert int(run.rod.step[pushed[0]]) < 400, "the test node reacted too late (a busy machine?)"
     assert o.q[pushed[0]:, 1].min() < -1e-3  # moved the way it was pushed (5 mm on the spring at rest)
     rows = np.flatnonzero(o.wrench[:, 2] != 0.0)
-    assert 60 < int(run.rod.step[rows[0]]) == pulse_step < 275 and len(rows) in (20, 21)  # 0.04 s: 20 control periods
+    assert 60 < int(run.rod.step[rows[0]]) == pulse_step < 475 and len(rows) in (20, 21)  # 0.04 s: 20 control periods
     assert np.all(o.wrench[rows, 2] == torque) and np.any(o.q[:, 2] > 0)
     result = analyze(tmp_path / "bag")
     w = result["object"]["wrench"]
