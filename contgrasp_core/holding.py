@@ -7,7 +7,10 @@ object as a rigid body (:mod:`contgrasp_core.rod.body`) and friction that holds 
 sampled loop, :func:`contgrasp_core.rod.session.drive`):
 
 1. **Grasp.** The scenario's closed loop with the object fixed, until settled; Q1-Q3 of that
-   contact state (:func:`contgrasp_core.quality.quality_of_state`, about the scenario's
+   contact state. A grasp that does not settle is a :class:`GraspFailure` with its ``outcome``:
+   ``no contact`` when no node has touched the object for ``contact_wait`` seconds (from the
+   start or since the last touch: the arm could not reach it or let go of it; the run stops
+   there), ``not settled`` when the arm still moved in contact at the scenario's duration (:func:`contgrasp_core.quality.quality_of_state`, about the scenario's
    reference point), and a variant weighted by the contact forces: ``W_f = sum_i f_i G_i G_i^T``
    over the element centres with the penalty force ``f_i = h k max(pen_i, 0)`` in place of the
    arclength weights (:func:`force_weighted_quality`).
@@ -52,8 +55,8 @@ from contgrasp_core.rod.integrator import RodState
 from contgrasp_core.rod.session import LoopSession, Observation, drive, run_sampled, sensed_shape
 from contgrasp_core.scenario import Scenario
 
-__all__ = ["HoldSettings", "Capacity", "HoldResult", "HoldExperiment", "measure_holding", "wrench_directions",
-           "force_weighted_quality"]
+__all__ = ["HoldSettings", "Capacity", "HoldResult", "HoldExperiment", "GraspFailure", "measure_holding",
+           "wrench_directions", "force_weighted_quality"]
 
 Array = NDArray[np.float64]
 
@@ -66,7 +69,8 @@ class HoldSettings:
     friction coefficient ``mu`` (stick-slip), the ``release_time``, the stiffness ``probe``
     wrench (fx, fy, torque) and ``hold_time``, the capacity ramp's ``rate`` (N/s in the scaled
     wrench space) and ``ramp_time``, the number of force ``directions`` (plus the two pure
-    torques), and the escape thresholds (``escape_distance`` in object radii)."""
+    torques), the escape thresholds (``escape_distance`` in object radii), and how long the
+    grasp may go without touching the object (``contact_wait``, s) before it counts as failed."""
 
     areal_density: float = 10.0
     support: float = 2.0
@@ -80,6 +84,7 @@ class HoldSettings:
     directions: int = 8
     escape_distance: float = 0.5
     escape_angle: float = 0.5
+    contact_wait: float = 0.6
 
     def dynamics(self, scale: float, area: float, polar: float) -> ObjectDynamics:
         """The released object on the support spring-damper (``scale`` the object's radius, m;
@@ -92,7 +97,7 @@ class HoldSettings:
 
     def __post_init__(self) -> None:
         for name in ("areal_density", "support", "support_damping_ratio", "mu", "release_time", "hold_time", "rate",
-                     "ramp_time", "escape_distance", "escape_angle"):
+                     "ramp_time", "escape_distance", "escape_angle", "contact_wait"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
                 raise InvalidParameterError(f"hold {name} must be a finite number > 0, got {v!r}")
@@ -189,6 +194,15 @@ def _escape(obs: Observation, q0: Array, settings: HoldSettings, in_contact: Cal
     return ""
 
 
+class GraspFailure(RunFailure):
+    """The closed loop made no settled grasp to measure; ``outcome`` says how (``no contact`` or
+    ``not settled``, :meth:`HoldExperiment.grasp`)."""
+
+    def __init__(self, outcome: str, message: str) -> None:
+        super().__init__(message)
+        self.outcome = outcome
+
+
 class HoldExperiment:
     """One grasp loaded step by step (module docstring): :meth:`grasp`, :meth:`release`, then any
     number of :meth:`load` runs from the released state (:meth:`stiffness`, :meth:`capacity`)."""
@@ -210,12 +224,26 @@ class HoldExperiment:
 
     def grasp(self) -> tuple[GraspQuality, GraspQuality]:
         """The scenario's closed loop with the object fixed, until settled; Q1-Q3 of its contact,
-        and the force-weighted variant (:func:`force_weighted_quality`)."""
-        grasp = run_sampled(self.scenario)
-        if not grasp.settled:
-            raise RunFailure(f"the grasp did not settle within {self.scenario.loop.duration:g} s; no holding to measure")
+        and the force-weighted variant (:func:`force_weighted_quality`). :class:`GraspFailure`
+        if it does not settle (module docstring)."""
+        tol, wait = self.scenario.sensing.contact_tolerance, self.settings.contact_wait
+        touched = [0.0]  # when a node last touched the object (the start counts as a touch)
+
+        def out_of_reach(o: Observation) -> bool:
+            if sense(o.shape, self.boundary, o.radius, tol=tol).in_contact.any():
+                touched[0] = o.t
+            return o.t - touched[0] >= wait
+
+        grasp = run_sampled(self.scenario, until=out_of_reach)
         obs = grasp.observe()
-        contact = sense(obs.shape, self.boundary, obs.radius, tol=self.scenario.sensing.contact_tolerance)
+        contact = sense(obs.shape, self.boundary, obs.radius, tol=tol)
+        if not grasp.settled:
+            if not contact.in_contact.any():
+                raise GraspFailure("no contact", f"no node touched the object for {wait:g} s (at t = {obs.t:.3g} s, "
+                                   f"the arm moving at up to {obs.max_speed:.3g} m/s); no holding to measure")
+            raise GraspFailure("not settled", f"the grasp did not settle within {self.scenario.loop.duration:g} s (still "
+                               f"moving at up to {obs.max_speed:.3g} m/s, {int(contact.in_contact.sum())} nodes in "
+                               "contact); no holding to measure")
         self.grasped = grasp
         return (quality_of_state(contact, self.boundary, ref=self.scenario.reference),
                 force_weighted_quality(self.scenario, grasp.state.theta))

@@ -22,6 +22,7 @@ intervals.
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -29,20 +30,23 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ContgraspError, InvalidParameterError, WriteError
+from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
 from .executors import run_tasks
-from .holding import HoldSettings, measure_holding
+from .holding import GraspFailure, HoldSettings, measure_holding
 from .objects import FIG2_SCALE, SHAPES, ObjectSpec
 from .quality_map import MapSpec, QualityMap, quality_map
-from .scenario import PAPER
+from .scenario import PAPER, Scenario
 
-__all__ = ["StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose"]
+__all__ = ["StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose",
+           "expand_symmetric", "pose_scenario"]
 
 PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "Q1", "Q2", "Q3", "Q1_force", "Q2_force", "Q3_force")
 """The quality measures: the static map's (the paper's optimal grasp), the settled grasp's, and
 the settled grasp's weighted by its contact forces (:func:`contgrasp_core.holding.force_weighted_quality`)."""
-RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min")
-"""The holding measures: lambda_min and det of K's scaled symmetric part, the worst capacity."""
+RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min", "grasped")
+"""The holding measures: lambda_min and det of K's scaled symmetric part, the worst capacity
+(over the poses that grasped), and whether the closed loop made a settled grasp that held at all
+(1 or 0, over every pose: only the static map's measures exist for the poses that did not)."""
 
 
 @dataclass(frozen=True)
@@ -72,6 +76,21 @@ class StudySpec:
         return MapSpec(object=ObjectSpec.parse(self.object, FIG2_SCALE), psi_steps=self.psi_steps,
                        d_steps=self.d_steps, d_min=self.d_min, d_max=self.d_max)
 
+    def distinct_rows(self) -> int:
+        """How many polar-angle rows of the grid differ: a rotation of the object onto itself by
+        ``2 pi k / psi_steps`` maps row ``i`` onto row ``i + k`` (the rod engine, the law, the
+        sensing and Q1-Q3's eigenvalues do not depend on the frame's orientation), so rows
+        ``0 .. distinct_rows() - 1`` are measured and the others follow
+        (:func:`expand_symmetric`): 1 for a circle, ``psi_steps / 2`` for an ellipse (its half
+        turn), ``psi_steps / gcd(lobes, psi_steps)`` for a deformed circle."""
+        spec = ObjectSpec.parse(self.object, FIG2_SCALE)
+        p = dict(zip(SHAPES[spec.shape], spec.params, strict=True))
+        if spec.shape == "circle" or (spec.shape == "ellipse" and p["a"] == p["b"]) or (
+                spec.shape == "deformed" and p["amplitude"] == 0):
+            return 1
+        order = 2 if spec.shape == "ellipse" else int(p["lobes"]) if float(p["lobes"]).is_integer() else 1
+        return self.psi_steps // math.gcd(max(order, 1), self.psi_steps)
+
     def rod_object(self) -> ObjectSpec:
         """The object in metres: the paper's shape scaled by ``scale`` about its centre, placed
         at the rod scenario's object centre."""
@@ -83,11 +102,9 @@ class StudySpec:
         return ObjectSpec(spec.shape, params, PAPER.object.center, spec.angle)
 
 
-def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float],
-               static_q: tuple[float, float, float]) -> dict[str, Any]:
-    """One pose of the study: the grasp from the base ``base_paper`` (x, y, heading in the
-    paper's units about the object frame) on the rod scenario, measured (a failed grasp is a
-    result with its ``status``)."""
+def pose_scenario(spec: StudySpec, base_paper: tuple[float, float, float]) -> Scenario:
+    """The rod scenario of one pose (module docstring, step 2): the arm of the map (length and
+    radius) at the base ``base_paper`` (x, y, heading in the paper's units about the object)."""
     x, y, heading = base_paper
     cx, cy = PAPER.object.center
     obj = spec.rod_object()
@@ -95,18 +112,28 @@ def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float]
     rod = replace(PAPER.rod, n_elements=spec.nodes - 1, length=ms.length_fraction * obj.boundary().length,
                   radius_base=ms.arm_radius * spec.scale, radius_tip=ms.arm_radius * spec.scale,
                   base_position=(cx + spec.scale * x, cy + spec.scale * y), base_angle=float(heading))
-    scenario = replace(PAPER.with_object(obj), rod=rod)
-    out: dict[str, Any] = {"key": key, "base": [float(v) for v in rod.base_position] + [float(heading)],
+    return replace(PAPER.with_object(obj), rod=rod)
+
+
+def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float],
+               static_q: tuple[float, float, float]) -> dict[str, Any]:
+    """One pose of the study: the grasp from the base ``base_paper`` (x, y, heading in the
+    paper's units about the object frame) on the rod scenario, measured (a failed grasp is a
+    result with its ``status``)."""
+    scenario = pose_scenario(spec, base_paper)
+    rod = scenario.rod
+    out: dict[str, Any] = {"key": key, "base": [float(v) for v in rod.base_position] + [float(rod.base_angle)],
                            "static_Q1": static_q[0], "static_Q2": static_q[1], "static_Q3": static_q[2]}
     t0 = time.perf_counter()
     try:
         result = measure_holding(scenario, spec.hold)
     except ContgraspError as exc:
-        out.update(status=f"{type(exc).__name__}: {exc}", seconds=time.perf_counter() - t0)
+        outcome = exc.outcome if isinstance(exc, GraspFailure) else "not held" if isinstance(exc, RunFailure) else "error"
+        out.update(status=f"{type(exc).__name__}: {exc}", outcome=outcome, seconds=time.perf_counter() - t0)
         return out
     d = result.to_dict()
     eig = np.asarray(result.stiffness_eigenvalues)
-    out.update(status="ok", seconds=time.perf_counter() - t0, Q1=result.Q1, Q2=result.Q2, Q3=result.Q3,
+    out.update(status="ok", outcome="held", seconds=time.perf_counter() - t0, Q1=result.Q1, Q2=result.Q2, Q3=result.Q3,
                Q1_force=d["Q1_force"], Q2_force=d["Q2_force"], Q3_force=d["Q3_force"],
                stiffness=d["stiffness"], stiffness_eigenvalues=d["stiffness_eigenvalues"],
                stiffness_min=float(eig[0]), stiffness_det=float(np.prod(eig)), capacity=d["capacity"],
@@ -136,12 +163,13 @@ def load_results(path: str | Path) -> list[dict[str, Any]]:
 def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes", workers: int | None = None,
               scheduler: str | None = None, progress: bool = False) -> tuple[QualityMap, list[dict[str, Any]]]:
     """The static map, then every pose not yet in ``path`` (JSON lines, appended as results
-    arrive): grid poses ``grid:i,j`` and the optima ``optimum:Q1|Q2|Q3``. Returns the map and
-    all results (earlier ones included)."""
+    arrive): the grid poses ``grid:i,j`` of the distinct rows (:meth:`StudySpec.distinct_rows`)
+    and the optima ``optimum:Q1|Q2|Q3``. Returns the map and all results (earlier ones
+    included; :func:`expand_symmetric` fills in the rest of the grid)."""
     qm = quality_map(spec.map_spec(), executor="serial" if executor == "dask" else executor, workers=workers,
                      progress=progress)
     tasks = []
-    for i in range(spec.psi_steps):
+    for i in range(spec.distinct_rows()):
         for j in range(spec.d_steps):
             if qm.valid[i, j]:
                 tasks.append((f"grid:{i},{j}", tuple(qm.base[i, j]), tuple(qm.Q[:, i, j])))
@@ -175,24 +203,64 @@ def _spec_dict(spec: StudySpec) -> dict[str, Any]:
     return d
 
 
+def expand_symmetric(spec: StudySpec, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``rows`` and, for every grid pose of a row beyond :meth:`StudySpec.distinct_rows`, the
+    measured pose it is a rotation of, turned by that rotation about the object's centre (the
+    base, K as ``R K R^T``, the capacity's directions and wrenches) and marked ``same_as``."""
+    n = spec.distinct_rows()
+    measured = {r["key"]: r for r in rows if r["key"].startswith("grid:")}
+    cx, cy = PAPER.object.center
+    out = list(rows)
+    for i in range(n, spec.psi_steps):
+        for j in range(spec.d_steps):
+            src = measured.get(f"grid:{i % n},{j}")
+            if src is None:
+                continue
+            phi = 2.0 * np.pi * (i - i % n) / spec.psi_steps
+            c, s_ = np.cos(phi), np.sin(phi)
+            rot = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+            row = {**src, "key": f"grid:{i},{j}", "same_as": src["key"]}
+            x, y, heading = src["base"]
+            row["base"] = [cx + c * (x - cx) - s_ * (y - cy), cy + s_ * (x - cx) + c * (y - cy), heading + phi]
+            if "stiffness" in src:
+                row["stiffness"] = (rot @ np.asarray(src["stiffness"]) @ rot.T).tolist()
+            if "capacity" in src:
+                row["capacity"] = [{**cap, "direction": (rot @ np.asarray(cap["direction"])).tolist(),
+                                    "wrench": (rot @ np.asarray(cap["wrench"])).tolist()} for cap in src["capacity"]]
+            out.append(row)
+    return out
+
+
+def _value(row: dict[str, Any], name: str) -> float:
+    if name == "grasped":
+        return float(row.get("status") == "ok")
+    v = row.get(name)
+    return float(v) if v is not None else float("nan")
+
+
 def correlations(rows: list[dict[str, Any]], *, boot: int = 2000, seed: int = 0,
                  grid_only: bool = True) -> dict[str, dict[str, dict[str, float]]]:
     """Spearman's rank correlation of each :data:`PREDICTORS` with each :data:`RESPONSES` over
-    the poses that grasped (``status == "ok"``; grid poses only unless ``grid_only`` is False),
-    with a percentile bootstrap 95 % interval (``boot`` resamples of the poses): ``{predictor:
-    {response: {"rho", "low", "high", "n"}}}``."""
+    the measured poses (the symmetric copies of :func:`expand_symmetric` are left out; grid
+    poses only unless ``grid_only`` is False): the holding measures over the poses that grasped
+    (``status == "ok"``), ``grasped`` over every pose that ran (not those that failed with an
+    error of the code), with a percentile bootstrap 95 % interval (``boot`` resamples of the
+    poses): ``{predictor: {response: {"rho", "low", "high", "n"}}}``; rho is NaN below 4 poses
+    or where one side does not vary."""
     from scipy.stats import spearmanr
 
-    ok = [r for r in rows if r.get("status") == "ok" and (not grid_only or r["key"].startswith("grid:"))]
+    ran = [r for r in rows if r["key"] != "spec" and "same_as" not in r and r.get("outcome") != "error"
+           and (not grid_only or r["key"].startswith("grid:"))]
     rng = np.random.default_rng(seed)
     out: dict[str, dict[str, dict[str, float]]] = {}
     for pred in PREDICTORS:
         out[pred] = {}
         for resp in RESPONSES:
-            pairs = np.array([(r[pred], r[resp]) for r in ok
-                              if np.isfinite(r.get(pred, np.nan)) and np.isfinite(r.get(resp, np.nan))])
+            pool = ran if resp == "grasped" else [r for r in ran if r.get("status") == "ok"]
+            pairs = np.array([(_value(r, pred), _value(r, resp)) for r in pool]).reshape(-1, 2)
+            pairs = pairs[np.all(np.isfinite(pairs), axis=1)]
             n = len(pairs)
-            if n < 4:
+            if n < 4 or np.ptp(pairs[:, 0]) == 0 or np.ptp(pairs[:, 1]) == 0:
                 out[pred][resp] = {"rho": float("nan"), "low": float("nan"), "high": float("nan"), "n": n}
                 continue
             rho = float(spearmanr(pairs[:, 0], pairs[:, 1]).statistic)

@@ -7,8 +7,15 @@ from pathlib import Path
 
 import numpy as np
 
-from contgrasp_core.holding import HoldSettings
-from contgrasp_core.holding_study import PREDICTORS, RESPONSES, StudySpec, correlations, load_results, run_study
+import math
+
+import pytest
+
+from contgrasp_core.holding import GraspFailure, HoldExperiment, HoldSettings
+from contgrasp_core.holding_study import (PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, load_results,
+                                          pose_scenario, run_study)
+from contgrasp_core.rod.session import run_sampled
+from contgrasp_core.scenario import PAPER
 
 
 def _rows(n: int, relation) -> list[dict]:  # type: ignore[no-untyped-def]
@@ -34,14 +41,65 @@ def test_correlations_find_monotone_relations_and_none_in_noise() -> None:
     assert c["low"] < 0 < c["high"] and abs(c["rho"]) < 0.5
 
 
+def test_grasped_is_ranked_over_every_pose_and_symmetric_copies_do_not_count() -> None:
+    """Whether a pose grasped at all is a response over every pose that ran (the failed ones
+    too, not the code's errors); only the static map's measures exist there."""
+    rows = [{"key": f"grid:{i},0", "status": "ok" if i >= 5 else "RunFailure: no", "outcome": "held" if i >= 5 else "no contact",
+             "static_Q1": float(i), **({"Q1": float(i)} if i >= 5 else {})} for i in range(10)]
+    rows.append({"key": "grid:10,0", "status": "RunFailure: bug", "outcome": "error", "static_Q1": 0.5})
+    rows.append({**rows[0], "key": "grid:11,0", "same_as": "grid:0,0"})
+    c = correlations(rows, boot=200)
+    assert c["static_Q1"]["grasped"]["n"] == 10 and c["static_Q1"]["grasped"]["rho"] == pytest.approx(math.sqrt(25 / 33))  # (ranks 1..10 against two ties of 5)
+    assert math.isnan(c["Q1"]["grasped"]["rho"])  # (every pose with a settled Q1 grasped)
+
+
+@pytest.mark.parametrize(("obj", "psi_steps", "rows"), [("circle", 24, 1), ("ellipse", 24, 12), ("ellipse", 5, 5),
+                                                       ("ellipse:5,5", 24, 1), ("deformed:5,0.5,3,0", 24, 8),
+                                                       ("deformed:5,0.5,5,0", 24, 24)])
+def test_distinct_rows_follow_the_objects_rotations(obj: str, psi_steps: int, rows: int) -> None:
+    assert StudySpec(object=obj, psi_steps=psi_steps).distinct_rows() == rows
+
+
+def test_a_rotated_base_grasps_the_same_and_expand_symmetric_turns_the_pose() -> None:
+    """The premise of measuring one row per symmetry class: a circle's grasp from a base turned
+    by any angle about the centre settles at the same time in the turned shape."""
+    spec = StudySpec(object="circle", psi_steps=4, d_steps=1, nodes=31)
+    base, phi = (0.0, -10.0, 0.0), 0.7
+    c, s = math.cos(phi), math.sin(phi)
+    turned = (-s * base[1], c * base[1], phi)
+    a, b = (run_sampled(pose_scenario(spec, p)) for p in (base, turned))
+    assert a.settled and b.settled and a.settle_time == pytest.approx(b.settle_time, abs=0.01)
+    centre = np.array(PAPER.object.center)
+    xa, xb = a.observe().x - centre, b.observe().x - centre
+    assert np.abs(xa @ np.array([[c, s], [-s, c]]) - xb).max() < 1e-6  # xa turned by phi
+    k = np.arange(9.0).reshape(3, 3)
+    row = {"key": "grid:0,0", "status": "ok", "base": [0.08, 0.03, 0.0], "stiffness": k.tolist(),
+           "capacity": [{"direction": [1.0, 0.0, 0.0], "wrench": [0.03, 0.0, 0.0]}]}
+    full = expand_symmetric(spec, [row])
+    assert [r["key"] for r in full] == ["grid:0,0", "grid:1,0", "grid:2,0", "grid:3,0"]
+    quarter = full[1]
+    assert quarter["same_as"] == "grid:0,0" and np.allclose(quarter["base"], [0.13, 0.08, math.pi / 2])
+    r = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    assert np.allclose(quarter["stiffness"], r @ k @ r.T) and np.allclose(quarter["capacity"][0]["wrench"], [0.0, 0.03, 0.0])
+
+
+def test_an_arm_that_cannot_reach_the_object_is_a_no_contact_outcome() -> None:
+    spec = StudySpec(object="circle", nodes=31)
+    with pytest.raises(GraspFailure, match="no node touched the object for 0.2 s") as info:
+        HoldExperiment(pose_scenario(spec, (0.0, -40.0, 0.0)), HoldSettings(contact_wait=0.2)).grasp()
+    assert info.value.outcome == "no contact"
+
+
 def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
     """Two base poses of the circle's map and the three optima, a coarse rod and short ramps:
     every pose gets a result line; running again computes nothing and returns the same rows."""
-    spec = StudySpec(object="circle", psi_steps=2, d_steps=1, nodes=31,
+    spec = StudySpec(object="ellipse", psi_steps=4, d_steps=1, nodes=31,
                      hold=HoldSettings(directions=1, ramp_time=0.4, hold_time=0.3, release_time=0.3))
     out = tmp_path / "study.jsonl"
     qm, rows = run_study(spec, out, executor="serial")
+    # (rows 2 and 3 are the half-turns of rows 0 and 1)
     assert sorted(r["key"] for r in rows) == ["grid:0,0", "grid:1,0", "optimum:Q1", "optimum:Q2", "optimum:Q3"]
+    assert all(r["outcome"] in ("held", "no contact", "not settled", "not held") for r in rows)
     ok = [r for r in rows if r["status"] == "ok"]
     assert ok, [r["status"] for r in rows]
     for r in ok:
@@ -52,6 +110,6 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
     assert load_results(out)[0]["key"] == "spec"
     from contgrasp_core.figures.holding import study_figure
 
-    fig = study_figure(qm, rows)
+    fig = study_figure(qm, expand_symmetric(spec, rows))
     titles = [ax.get_title() for ax in fig.axes if ax.get_title()]
     assert any("static Q1" in t for t in titles) and any("capacity" in t for t in titles)

@@ -10,12 +10,15 @@ command again resumes.
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 from typing import Any
+
+import numpy as np
 
 from ..errors import InvalidParameterError
 from ..executors import EXECUTORS
 from ..holding import HoldSettings
-from ..holding_study import PREDICTORS, RESPONSES, StudySpec, correlations, run_study
+from ..holding_study import PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
 
 __all__ = ["add_parser", "run", "format_text"]
 
@@ -41,15 +44,17 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
 
 def format_text(out: dict[str, Any]) -> str:
     """The poses' outcome and the correlation table."""
-    lines = [f"object {out['object']}: {out['poses']} poses, {out['grasped']} grasped and measured "
-             f"({out['not_grasped']} did not settle or were not held); results in {out['out']}",
+    outcomes = ", ".join(f"{k} {v}" for k, v in out["outcomes"].items())
+    lines = [f"object {out['object']}: {out['poses']} poses measured ({outcomes}), {out['grid_poses']} grid poses "
+             f"with their symmetric copies; results in {out['out']}",
              "Spearman rho [95 % bootstrap interval] (n poses):",
              f"{'':12s}" + "".join(f"{r:>28s}" for r in RESPONSES)]
     for pred in PREDICTORS:
         cells = []
         for resp in RESPONSES:
             c = out["correlations"][pred][resp]
-            cells.append(f"{c['rho']:+.2f} [{c['low']:+.2f}, {c['high']:+.2f}] ({c['n']})" if c["n"] >= 4 else "n < 4")
+            cells.append(f"{c['rho']:+.2f} [{c['low']:+.2f}, {c['high']:+.2f}] ({c['n']})" if np.isfinite(c["rho"])
+                         else f"- ({c['n']})")
         lines.append(f"{pred:12s}" + "".join(f"{c:>28s}" for c in cells))
     return "\n".join(lines)
 
@@ -63,11 +68,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,
                          progress=not args.json)
     ok = [r for r in rows if r.get("status") == "ok"]
+    full = expand_symmetric(spec, rows)
     out = {"object": args.object, "out": args.out, "poses": len(rows), "grasped": len(ok),
-           "not_grasped": len(rows) - len(ok), "correlations": correlations(rows),
-           "correlations_with_optima": correlations(rows, grid_only=False)}
+           "not_grasped": len(rows) - len(ok), "outcomes": dict(Counter(r.get("outcome", "?") for r in rows)),
+           "distinct_rows": spec.distinct_rows(), "grid_poses": sum(r["key"].startswith("grid:") for r in full),
+           "correlations": correlations(rows), "correlations_with_optima": correlations(rows, grid_only=False)}
     if args.plot:
         from ..figures.holding import plot_study
 
-        out["plot"] = str(plot_study(qm, rows, args.plot))
+        out["plot"] = str(plot_study(qm, full, args.plot))
     return out

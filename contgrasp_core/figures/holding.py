@@ -18,16 +18,20 @@ _PANELS = (("static_Q1", "static Q1\n(the paper's optimal grasp)", "Q1 [-]"),
            ("capacity_min", "measured worst-direction\nholding capacity", "N"))
 
 
+_FAILED = {"no contact": ("x", "tab:red"), "not settled": ("+", "tab:orange"), "not held": ("d", "tab:purple")}
+"""How a pose without a measured grasp is drawn, by its outcome (:mod:`contgrasp_core.holding_study`)."""
+
+
 def study_figure(qm: QualityMap, rows: list[dict[str, Any]]) -> Figure:
     """Three panels over the base poses (paper units, about the object): the static map's Q1,
     the grasp's measured lambda_min of K's scaled symmetric part and its worst-direction
-    capacity (circles; crosses: no settled grasp there), and a fourth with each quality measure
+    capacity (circles; other markers: no measured grasp there, by outcome), and a fourth with each quality measure
     ranked against the capacity."""
     fig = Figure(figsize=(18, 4.8))
     grid = {r["key"]: r for r in rows if r["key"].startswith("grid:")}
     pos: dict[str, list[np.ndarray]] = {k: [] for k, _, _ in _PANELS}
     vals: dict[str, list[float]] = {k: [] for k, _, _ in _PANELS}
-    failed: list[np.ndarray] = []
+    failed: dict[str, list[np.ndarray]] = {}
     for key, r in grid.items():
         i, j = (int(v) for v in key[5:].split(","))
         xy = qm.base[i, j, :2]
@@ -37,7 +41,7 @@ def study_figure(qm: QualityMap, rows: list[dict[str, Any]]) -> Figure:
                 pos[name].append(xy)
                 vals[name].append(value)
         if r.get("status") != "ok":
-            failed.append(xy)
+            failed.setdefault(r.get("outcome", "no settled grasp"), []).append(xy)
     for k, (name, title, unit) in enumerate(_PANELS):
         ax = fig.add_subplot(1, 4, k + 1)
         draw_boundary(ax, qm.spec.boundary(), color="0.85")
@@ -45,9 +49,11 @@ def study_figure(qm: QualityMap, rows: list[dict[str, Any]]) -> Figure:
             p = np.array(pos[name])
             sc = ax.scatter(p[:, 0], p[:, 1], c=vals[name], cmap="viridis", s=60, edgecolors="k", linewidths=0.4, zorder=3)
             fig.colorbar(sc, ax=ax, shrink=0.75, label=unit, format="%.3g")
+        for outcome, where in sorted(failed.items()):
+            f = np.array(where)
+            style = _FAILED.get(outcome, ("*", "tab:gray"))
+            ax.plot(f[:, 0], f[:, 1], style[0], color=style[1], ms=6, label=outcome, zorder=3)
         if failed:
-            f = np.array(failed)
-            ax.plot(f[:, 0], f[:, 1], "x", color="tab:red", ms=6, label="no settled grasp", zorder=3)
             ax.legend(loc="lower right", fontsize=7)
         ax.set_aspect("equal")
         ax.set_xlabel("base x [paper units]")

@@ -254,13 +254,15 @@ def sensed_shape(system: RodSystem, obs: Observation) -> ArmShape:
     return shape_in_object_frame(obs.shape, obs.body.q, np.asarray(system.body.centroid))
 
 
-def run_sampled(scenario: Scenario, system: RodSystem | None = None) -> LoopSession:
+def run_sampled(scenario: Scenario, system: RodSystem | None = None,
+                until: Callable[[Observation], bool] | None = None) -> LoopSession:
     """The scenario's sampled loop with the core functions only, stepped exactly as the ROS nodes
     step it (:func:`drive`, with the scenario's disturbance): a lock-step ROS run of the same
-    scenario ends in the same state bit for bit. Returns the finished session."""
+    scenario ends in the same state bit for bit. Returns the session, finished or stopped early
+    by ``until(observation)``."""
     system = scenario.system() if system is None else system
     session = LoopSession(system, scenario.loop)
-    drive(session, scenario, None if scenario.disturbance is None else scenario.disturbance.wrench_at)
+    drive(session, scenario, None if scenario.disturbance is None else scenario.disturbance.wrench_at, until)
     return session
 
 
