@@ -535,9 +535,10 @@ def history(run: RunData, period: float = 0.01) -> list[dict[str, Any]]:
         if i is None or t + 1e-12 < next_t:
             continue
         next_t = t + period
-        r = run.rod
+        r, o = run.rod, run.rod.object
         out.append({"t": t, "x": r.x[i].tolist(), "y": r.y[i].tolist(), "theta": r.theta[i].tolist(),
-                    "radius": r.radius[i].tolist(), "s": c.s[j].tolist(), "rho": c.rho[j].tolist(), "alpha": c.alpha[j].tolist()})
+                    "radius": r.radius[i].tolist(), "s": c.s[j].tolist(), "rho": c.rho[j].tolist(), "alpha": c.alpha[j].tolist(),
+                    "object_q": [] if o is None else o.q[i].tolist(), "object_centroid": [] if o is None else o.centroid[i].tolist()})
     return out
 
 
@@ -612,7 +613,8 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
     gaps = step_gaps(run)
     summary = build_summary(
         run.status,
-        final=FinalState.of(int(rod.step[-1]), float(rod.t[-1]), rod.s[-1], rod.x[-1], rod.y[-1], rod.theta[-1]),
+        final=FinalState.of(int(rod.step[-1]), float(rod.t[-1]), rod.s[-1], rod.x[-1], rod.y[-1], rod.theta[-1],
+                            *((None, None) if rod.object is None else (rod.object.q[-1], rod.object.v[-1]))),
         final_quality=None if q is None else FinalQuality.of(q.q1[-1], q.q2[-1], q.q3[-1], q.valid[-1], q.contact_length[-1],
                                                                      q.step[-1]),
         contact=contact_stats(None) if c is None else contact_stats(c.s[-1], c.rho[-1], c.delta[-1], c.alpha[-1], c.in_contact[-1], float(c.tol[-1])),

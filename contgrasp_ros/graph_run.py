@@ -106,6 +106,8 @@ class Monitor(Node):
                     "s": list(msg.s),
                     "rho": list(msg.rho),
                     "alpha": list(msg.alpha),
+                    "object_q": list(self.rod.object_q),
+                    "object_centroid": list(self.rod.object_centroid),
                 }
             )
 
@@ -145,7 +147,8 @@ def _summary(mon: Monitor, loop_wall_time_s: float | None = None, wall_time_s: f
     rod, q, c = mon.rod, mon.quality, mon.contact
     return build_summary(
         mon.status,
-        final=None if rod is None else FinalState.of(rod.step, stamp_seconds(rod.header), rod.s, rod.x, rod.y, rod.theta),
+        final=None if rod is None else FinalState.of(rod.step, stamp_seconds(rod.header), rod.s, rod.x, rod.y, rod.theta,
+                                                     rod.object_q, rod.object_v),
         final_quality=None if q is None else FinalQuality.of(q.q1, q.q2, q.q3, q.valid, q.contact_length, q.step),
         contact=contact_stats(None) if c is None else contact_stats(c.s, c.rho, c.delta, c.alpha, c.in_contact, c.contact_tolerance),
         wall_time_s=wall_time_s,

@@ -29,7 +29,9 @@ FloatSeq = Sequence[float] | np.ndarray
 
 @dataclass(frozen=True)
 class FinalState:
-    """The last rod state: its ``step``, stamp ``t`` (sim time, s) and per-node arrays."""
+    """The last rod state: its ``step``, stamp ``t`` (sim time, s) and per-node arrays, and a
+    movable object's displacement ``object_q`` (dx, dy m, dpsi rad, from its start pose) and
+    velocity ``object_v`` (``None`` while the object is fixed)."""
 
     step: int
     t: float
@@ -37,15 +39,22 @@ class FinalState:
     x: list[float]
     y: list[float]
     theta: list[float]
+    object_q: list[float] | None = None
+    object_v: list[float] | None = None
 
     @classmethod
-    def of(cls, step: int, t: float, s: FloatSeq, x: FloatSeq, y: FloatSeq, theta: FloatSeq) -> FinalState:
-        """From per-node arrays (numpy or message sequences), as plain floats."""
+    def of(cls, step: int, t: float, s: FloatSeq, x: FloatSeq, y: FloatSeq, theta: FloatSeq,
+           object_q: FloatSeq | None = None, object_v: FloatSeq | None = None) -> FinalState:
+        """From per-node arrays (numpy or message sequences), as plain floats (an empty or
+        missing object state: ``None``)."""
         def floats(v: FloatSeq) -> list[float]:
             out: list[float] = np.asarray(v, dtype=float).tolist()
             return out
 
-        return cls(int(step), float(t), floats(s), floats(x), floats(y), floats(theta))
+        def body(v: FloatSeq | None) -> list[float] | None:
+            return None if v is None or len(v) == 0 else floats(v)
+
+        return cls(int(step), float(t), floats(s), floats(x), floats(y), floats(theta), body(object_q), body(object_v))
 
 
 @dataclass(frozen=True)

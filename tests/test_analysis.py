@@ -251,7 +251,8 @@ def test_summary_builder_reads_the_simulator_status() -> None:
     d = s.to_dict()
     assert d["simulator_state"] == "finished" and d["settled"] is True and d["settle_time_s"] == 1.5
     assert d["steps"] == 1000 and d["missed_deadlines"] == 3 and d["max_penetration"] is None
-    assert d["final"] == {"step": 1000, "t": 2.0, "s": [0.0, 0.1], "x": [0.0, 0.1], "y": [0.0, 0.0], "theta": [0.0, 0.0]}
+    assert d["final"] == {"step": 1000, "t": 2.0, "s": [0.0, 0.1], "x": [0.0, 0.1], "y": [0.0, 0.0], "theta": [0.0, 0.0],
+                          "object_q": None, "object_v": None}  # (a fixed object)
     assert d["final_quality"] == {"Q1": 1.0, "Q2": 2.0, "Q3": 0.5, "valid": True, "contact_length": 0.1, "step": 950}
     assert d["wall_time_s"] == 4.0 and d["loop_wall_time_s"] is None and d["contact_nodes"] is None
     assert list(d) == [f.name for f in fields(RunSummary)]

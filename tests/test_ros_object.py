@@ -24,7 +24,7 @@ pytest.importorskip("contgrasp_msgs.msg")
 
 from contgrasp_core.rod.session import run_sampled  # noqa: E402
 from contgrasp_ros import topics  # noqa: E402
-from contgrasp_ros.analysis import analyze, load_run  # noqa: E402
+from contgrasp_ros.analysis import analyze, history, load_run  # noqa: E402
 from contgrasp_ros.launcher import default_params_file, load_params  # noqa: E402
 
 from conftest import fresh_domain_id  # noqa: E402
@@ -228,6 +228,7 @@ def test_a_movable_object_with_a_scripted_disturbance_runs_through_the_graph_as_
     assert summary["steps"] == obs.k
     np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
     np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
+    assert summary["final"]["object_q"] == obs.body.q.tolist() and summary["final"]["object_v"] == obs.body.v.tolist()
     run = load_run(tmp_path / "bag")
     assert run.rod.object is not None and int(run.rod.step[-1]) == obs.k
     np.testing.assert_array_equal(run.rod.object.q[-1], obs.body.q)
@@ -238,9 +239,20 @@ def test_a_movable_object_with_a_scripted_disturbance_runs_through_the_graph_as_
     result = analyze(tmp_path / "bag", csv_dir=tmp_path / "csv")
     assert result["max_recompute_error"] == 0.0  # sensed in the object's frame, as the sensor did
     assert result["object"]["mode"] == mode and result["object"]["final_q"] == obs.body.q.tolist()
+    assert result["final"]["object_q"] == obs.body.q.tolist()  # (analyze: the same summary)
     rows = np.loadtxt(result["csv"]["object"]["path"], delimiter=",", skiprows=1)
     assert rows.shape == (obs.k + 1, 11)
     np.testing.assert_array_equal(rows[-1, 2:5], obs.body.q)
+    # the run figure (launcher --plot, analyze --plot) draws the object where the last snapshot has it
+    from contgrasp_core.figures.run import build_run_figure
+    from contgrasp_core.rod.body import to_world
+
+    hist = history(run)
+    fig = build_run_figure({"history": hist}, run.params)
+    moved = [ln for ln in fig.subfigs[0].axes[0].lines if ln.get_label().startswith("object at")]
+    _, pts = scenario.object.boundary().sample(720)
+    expected = to_world(pts, np.asarray(hist[-1]["object_q"]), np.asarray(run.rod.object.centroid[0]))
+    assert len(moved) == 1 and np.allclose(moved[0].get_xydata()[:-1], expected)
 
 
 # ------------------------------------------------------------------ (b) a push by hand

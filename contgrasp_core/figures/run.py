@@ -20,6 +20,7 @@ from contgrasp_core.errors import ContgraspError
 from contgrasp_core.control.law import adaptive_mu2, closed_loop_kinematics
 from contgrasp_core.figures.closed_loop import STATIC_LABEL, finish_profile_panels
 from contgrasp_core.figures.draw import draw_arm, draw_boundary, save
+from contgrasp_core.rod.body import to_world
 from contgrasp_core.scenario import Scenario
 
 __all__ = ["TIME_LABEL", "build_run_figure", "run_figure", "quality_history_figure"]
@@ -35,7 +36,8 @@ def build_run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]])
     """The figure of ``summary['history']`` (snapshots of rod state + contact state of one step,
     each labelled by its header stamp): the arm around the object at six times (legend), and
     rho/rho_d (log scale, limits from the data) and alpha along s at those times, with the
-    targets and, for a circle, the static solution of eq. (20)."""
+    targets and, for a circle, the static solution of eq. (20). A movable object is drawn at
+    its start pose (filled) and, dashed, where it is at the last snapshot."""
     hist = summary["history"]
     ctl = params["grasp_controller"]
     boundary = Scenario.from_ros_parameters(params).object.boundary()
@@ -54,6 +56,11 @@ def build_run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]])
         h = hist[i]
         shape = ArmShape(np.asarray(h["s"]), np.stack([h["x"], h["y"]], -1), np.asarray(h["theta"]))
         draw_arm(ax, shape, np.asarray(h["radius"]), color=colour, alpha=0.45, label=f"t = {h['t']:.2f} s")
+    last = hist[picks[-1]]
+    if len(last.get("object_q") or ()):  # a movable object: where it is at the last snapshot
+        _, pts = boundary.sample(720)
+        moved = to_world(np.vstack([pts, pts[:1]]), np.asarray(last["object_q"]), np.asarray(last["object_centroid"]))
+        ax.plot(moved[:, 0], moved[:, 1], "k--", lw=1.0, zorder=2, label=f"object at t = {last['t']:.2f} s")
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
