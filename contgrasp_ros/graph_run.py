@@ -156,6 +156,22 @@ def _summary(mon: Monitor, loop_wall_time_s: float | None = None, wall_time_s: f
     )
 
 
+def _observe(mon: Monitor, sup: Supervisor, group: Any, resume_fut: Any, params_result: bool | None) -> Observation:
+    """What the supervisor decides on: the process group and the graph as the monitor sees them."""
+    return Observation(
+        now=time.monotonic(),
+        exited=tuple(Exit(c.name, c.proc.pid, c.proc.returncode) for c in group.exited()) if group is not None else (),
+        connected=sup.phase is Phase.CONNECTING and mon.connected(),
+        simulator_state=mon.status.get("state"),
+        simulator_message=mon.status.get("message", ""),
+        pause_ready=mon.pause.service_is_ready(),
+        resume_answered=resume_fut is not None and resume_fut.done(),
+        params_ready=mon.sim_params.services_are_ready(),
+        params_result=params_result,
+        rod_state_publishers=frozenset(tuple(i.endpoint_gid) for i in mon.get_publishers_info_by_topic(topics.ROD_STATE)),
+    )
+
+
 def _drive(mon: Monitor, sup: Supervisor, executor: Executor, group: Any,
            on_recorder_lost: Callable[[], None] | None = None, emit: EventSink | None = None) -> str | None:
     """Run ``sup`` (:class:`~contgrasp_ros.supervision.Supervisor`, which decides) on what the
@@ -173,42 +189,38 @@ def _drive(mon: Monitor, sup: Supervisor, executor: Executor, group: Any,
         return params_fut.exception() is None and all(r.successful for r in params_fut.result().results)
 
     while True:
-        obs = Observation(
-            now=time.monotonic(),
-            exited=tuple(Exit(c.name, c.proc.pid, c.proc.returncode) for c in group.exited()) if group is not None else (),
-            connected=sup.phase is Phase.CONNECTING and mon.connected(),
-            simulator_state=mon.status.get("state"),
-            simulator_message=mon.status.get("message", ""),
-            pause_ready=mon.pause.service_is_ready(),
-            resume_answered=resume_fut is not None and resume_fut.done(),
-            params_ready=mon.sim_params.services_are_ready(),
-            params_result=params_result(),
-            rod_state_publishers=frozenset(tuple(i.endpoint_gid) for i in mon.get_publishers_info_by_topic(topics.ROD_STATE)),
-        )
-        for action in sup.step(obs):
-            match action:
-                case Resume():
-                    resume_fut = mon.pause.call_async(SetBool.Request(data=False))
-                case Restart(node=name):
-                    group.restart(next(c for c in group.children if c.name == name))
-                case Unrecorded():
-                    mon.recording = False
-                    if on_recorder_lost is not None:
-                        on_recorder_lost()
-                case SetMinSubscribers(value=value):
-                    params_fut = mon.sim_params.set_parameters([Parameter("min_subscribers", value=value)])
-                case Log(level="info", text=text):
-                    mon.get_logger().info(text)
-                case Log(text=text):
-                    mon.get_logger().error(text)
-                case Notify(event=event, fields=fields):
-                    if emit is not None:
-                        emit(event, **fields)
-                case Finish():
-                    pass
-        if sup.done:
-            return sup.error
-        spin(sup.spin_period)
+        try:
+            obs = _observe(mon, sup, group, resume_fut, params_result())
+            for action in sup.step(obs):
+                match action:
+                    case Resume():
+                        resume_fut = mon.pause.call_async(SetBool.Request(data=False))
+                    case Restart(node=name):
+                        group.restart(next(c for c in group.children if c.name == name))
+                    case Unrecorded():
+                        mon.recording = False
+                        if on_recorder_lost is not None:
+                            on_recorder_lost()
+                    case SetMinSubscribers(value=value):
+                        params_fut = mon.sim_params.set_parameters([Parameter("min_subscribers", value=value)])
+                    case Log(level="info", text=text):
+                        mon.get_logger().info(text)
+                    case Log(text=text):
+                        mon.get_logger().error(text)
+                    case Notify(event=event, fields=fields):
+                        if emit is not None:
+                            emit(event, **fields)
+                    case Finish():
+                        pass
+            if sup.done:
+                return sup.error
+            spin(sup.spin_period)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            raise
+        except Exception as exc:  # (SIGINT shuts rclpy's context down between two calls: an interrupt)
+            if mon.context.ok():
+                raise
+            raise ExternalShutdownException() from exc
 
 
 def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
