@@ -52,8 +52,10 @@ RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min", "grasped")
 @dataclass(frozen=True)
 class StudySpec:
     """The study of one object (``object``: a built-in shape in the paper's units, e.g.
-    ``circle`` or ``ellipse``): the map grid, ``scale`` (m per paper unit), the rod's ``nodes``
-    and how each grasp is loaded (``hold``)."""
+    ``circle`` or ``ellipse``): the map grid, ``scale`` (m per paper unit), the rod's ``nodes``,
+    how long the closed loop may take to settle (``duration``, s: the rod scenario's 4 s leave
+    some close poses still creeping at just above the settle speed) and how each grasp is
+    loaded (``hold``)."""
 
     object: str = "circle"
     psi_steps: int = 24
@@ -62,6 +64,7 @@ class StudySpec:
     d_max: float = 13.0
     scale: float = 0.005
     nodes: int = 51
+    duration: float = 8.0
     hold: HoldSettings = field(default_factory=lambda: HoldSettings(directions=4))
 
     def __post_init__(self) -> None:
@@ -70,6 +73,8 @@ class StudySpec:
             raise InvalidParameterError(f"scale must be a finite number > 0 (m per paper unit), got {self.scale!r}")
         if int(self.nodes) != self.nodes or not 3 <= self.nodes <= 1001:
             raise InvalidParameterError(f"nodes must be an integer in [3, 1001], got {self.nodes!r}")
+        if not (np.isfinite(self.duration) and self.duration > 0):
+            raise InvalidParameterError(f"duration must be a finite number > 0 (s), got {self.duration!r}")
 
     def map_spec(self) -> MapSpec:
         """The static quality map's specification (paper units)."""
@@ -112,7 +117,7 @@ def pose_scenario(spec: StudySpec, base_paper: tuple[float, float, float]) -> Sc
     rod = replace(PAPER.rod, n_elements=spec.nodes - 1, length=ms.length_fraction * obj.boundary().length,
                   radius_base=ms.arm_radius * spec.scale, radius_tip=ms.arm_radius * spec.scale,
                   base_position=(cx + spec.scale * x, cy + spec.scale * y), base_angle=float(heading))
-    return replace(PAPER.with_object(obj), rod=rod)
+    return replace(PAPER.with_object(obj), rod=rod, loop=replace(PAPER.loop, duration=spec.duration))
 
 
 def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float],
@@ -180,7 +185,14 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
         static[k] = opt["value"]
         tasks.append((f"optimum:{metric}", (b["x"], b["y"], b["theta"]), tuple(static)))
     p = Path(path)
-    done = {r["key"] for r in load_results(p)}
+    earlier = load_results(p)
+    wanted = json.loads(json.dumps(_spec_dict(spec)))
+    if earlier and {k: v for k, v in earlier[0].items() if k != "key"} != wanted:
+        other = {k: v for k, v in earlier[0].items() if k != "key"}
+        differ = sorted(k for k in set(other) | set(wanted) if other.get(k) != wanted.get(k))
+        raise InvalidParameterError(f"{p} holds a study of another specification (it differs in {', '.join(differ)}); "
+                                    "give the same options to resume it, or another file")
+    done = {r["key"] for r in earlier}
     todo = [(spec, key, tuple(float(v) for v in base), tuple(float(v) for v in q))
             for key, base, q in tasks if key not in done]
     try:

@@ -8,9 +8,11 @@ from pathlib import Path
 import numpy as np
 
 import math
+from dataclasses import replace
 
 import pytest
 
+from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.holding import GraspFailure, HoldExperiment, HoldSettings
 from contgrasp_core.holding_study import (PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, load_results,
                                           pose_scenario, run_study)
@@ -108,6 +110,8 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
     qm2, rows2 = run_study(spec, out, executor="serial")
     assert out.read_text().splitlines() == lines and rows2 == rows
     assert load_results(out)[0]["key"] == "spec"
+    with pytest.raises(InvalidParameterError, match=r"another specification \(it differs in duration, nodes\)"):
+        run_study(replace(spec, nodes=41, duration=2.0), out, executor="serial")
     from contgrasp_core.figures.holding import study_figure
 
     fig = study_figure(qm, expand_symmetric(spec, rows))

@@ -32,6 +32,8 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--psi-steps", type=int, default=d.psi_steps, help=f"polar angles (default {d.psi_steps})")
     p.add_argument("--d-steps", type=int, default=d.d_steps, help=f"distances (default {d.d_steps})")
     p.add_argument("--nodes", type=int, default=d.nodes, help=f"rod nodes (default {d.nodes})")
+    p.add_argument("--duration", type=float, default=d.duration,
+                   help=f"longest closed-loop grasp before a pose counts as not settled, s (default {d.duration:g})")
     p.add_argument("--directions", type=int, default=d.hold.directions,
                    help=f"force directions of the capacity ramps, plus two torques (default {d.hold.directions})")
     p.add_argument("--out", required=True, metavar="FILE.jsonl", help="results, one pose per line (resumed if present)")
@@ -64,7 +66,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.workers is not None and args.workers < 1:
         raise InvalidParameterError(f"--workers must be >= 1, got {args.workers}")
     spec = StudySpec(object=args.object, psi_steps=args.psi_steps, d_steps=args.d_steps, nodes=args.nodes,
-                     hold=HoldSettings(directions=args.directions))
+                     duration=args.duration, hold=HoldSettings(directions=args.directions))
     qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,
                          progress=not args.json)
     ok = [r for r in rows if r.get("status") == "ok"]
