@@ -19,7 +19,9 @@ bad ones dropped and counted. A run that breaks - Newton fails, NaN/Inf in the s
 deeper inside the object than ``max_penetration_limit``, kinetic energy above
 ``max_kinetic_energy`` - stops stepping: state ``failed``, the cause and simulated time in
 the status ``message``, logged once. The status (``/diagnostics``, name ``rod_simulator``)
-goes out after every state, every second of wall time and at once on the first drop.
+goes out with the states at most every 0.2 s of wall time, and at once when its level or state
+changes (running, paused, finished, failed; the first missed deadline or drop), and every
+second of wall time.
 
 The object is fixed (the paper), or moves (``object_mode`` spring or free: a rigid body in the
 rod engine, :meth:`contgrasp_core.scenario.Scenario.system`). A movable object's displacement,
@@ -245,7 +247,7 @@ class RodSimulator(Node):
             self.next_marker_t = obs.t + period
             self.pub_markers.publish(scene_markers(self.boundary, obs, header, centroid))
         self.rule.published(time.monotonic())
-        self._publish_status()
+        self.diagnostics.update(_stamp(obs.t))  # (a change of state, a missed deadline: at once)
 
     def _publish_object_motion(self, obs: Observation, header: Header) -> None:
         """A movable object's pose (centroid, rotation from the start pose) and twist."""
