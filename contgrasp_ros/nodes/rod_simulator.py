@@ -80,6 +80,10 @@ from contgrasp_ros.runtime import (
 )
 
 FALLBACKS = ("hold", "zero")
+# Lock-step: the timer polls the start gate every START_POLL_S until step 0 is out, then looks for
+# a missed couple deadline every DEADLINE_POLL_S (at 5 ms it woke the simulator between almost
+# every two steps of the loop; benchmarks/RESULTS.md, ros_loop).
+START_POLL_S, DEADLINE_POLL_S = 0.005, 0.02
 
 
 def _stamp(t: float) -> Time:
@@ -161,8 +165,8 @@ class RodSimulator(Node):
         self.paused = bool(self.start_paused)
         control_period = self.config.control_period
         assert control_period is not None  # (LoopSession, built above, requires it)
-        period = control_period if not self.lockstep else 0.005
-        self.create_timer(period, self.on_tick, clock=self._steady)
+        period = control_period if not self.lockstep else START_POLL_S
+        self._tick = self.create_timer(period, self.on_tick, clock=self._steady)
         if not self.paused:
             self._publish_first_observation()
 
@@ -350,6 +354,10 @@ class RodSimulator(Node):
 
     @guarded("timer")
     def on_tick(self) -> None:
+        if self.lockstep:
+            poll_ns = int(1e9 * (DEADLINE_POLL_S if self.rule.started else START_POLL_S))
+            if self._tick.timer_period_ns != poll_ns:
+                self._tick.timer_period_ns = poll_ns
         if not self.rule.started and not self.paused and not self.failure:
             self._publish_first_observation()
         if not self._can_step():
