@@ -62,7 +62,7 @@ from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_msgs.srv import ApplyWrench
 from contgrasp_ros import qos, topics
-from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, object_fields, wrench_arrays
+from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, float64_field, object_fields, wrench_arrays
 from contgrasp_ros.lockstep import LockStep, Peers, StartGate
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
@@ -239,9 +239,10 @@ class RodSimulator(Node):
         self.pub_clock.publish(ClockMsg(clock=header.stamp))
         self.pub_state.publish(
             RodState(
-                header=header, step=obs.k, s=obs.s.tolist(), x=obs.x[:, 0].tolist(), y=obs.x[:, 1].tolist(),
-                theta=obs.theta.tolist(), kappa=obs.kappa.tolist(), radius=obs.radius.tolist(),
-                vx=obs.v[:, 0].tolist(), vy=obs.v[:, 1].tolist(), kinetic_energy=obs.kinetic_energy,
+                header=header, step=obs.k, s=float64_field(obs.s), x=float64_field(obs.x[:, 0]),
+                y=float64_field(obs.x[:, 1]), theta=float64_field(obs.theta), kappa=float64_field(obs.kappa),
+                radius=float64_field(obs.radius), vx=float64_field(obs.v[:, 0]), vy=float64_field(obs.v[:, 1]),
+                kinetic_energy=obs.kinetic_energy,
                 max_penetration=obs.penetration, **object_fields(centroid, obs.body, wrench),
             )
         )
