@@ -582,7 +582,9 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
     parameters (rclpy's parameter exceptions, an :class:`~contgrasp_core.errors.InputError`)
     exits with code 2; a :class:`~contgrasp_core.errors.RunFailure` (e.g. a
     :class:`FatalNodeError`) while starting or spinning with code 1 (after the node's own
-    clean-up). Any other exception is a bug and propagates with its traceback (exit code 1).
+    clean-up). SIGINT/SIGTERM while the node is being built is a stop (exit code 0), whatever
+    rclpy raised on the shut-down context. Any other exception is a bug and propagates with its
+    traceback (exit code 1).
     """
     name = getattr(factory, "__name__", "node")
     argv = list(args) if args is not None else sys.argv
@@ -606,6 +608,12 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             code = exit_code(exc) if isinstance(exc, ContgraspError) else 2
             print(f"{name}: error: {'invalid parameter: ' if code == 2 else ''}{one_line(exc)}", file=sys.stderr)
             return code
+        except Exception as exc:
+            if rclpy.ok():
+                raise
+            # SIGINT/SIGTERM shut the context down while the node was being built (a launcher
+            # stopping its graph because another node failed to start): a stop, not a failure
+            raise ExternalShutdownException() from exc
         executor = make_executor()
         executor.add_node(node)
         spin = GuardedSpin(executor, getattr(node, "drops", None) or DropCounter(node))
