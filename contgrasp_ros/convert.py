@@ -11,6 +11,7 @@ only by the ``*_to_msg`` builders. This module therefore imports without a ROS i
 
 from __future__ import annotations
 
+from array import array
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -51,6 +52,7 @@ __all__ = [
     "boundary_to_msg",
     "boundary_from_msg",
     "stamp_seconds",
+    "float64_field",
     "require_finite",
     "MAX_SAMPLES",
     "MAX_ABS",
@@ -81,6 +83,15 @@ class MessageError(InputError):
 def stamp_seconds(header: Header) -> float:
     """Header stamp as float seconds."""
     return header.stamp.sec + 1e-9 * header.stamp.nanosec
+
+
+def float64_field(values: object) -> array[float]:
+    """A float64[] message field straight from an array's bytes: the generated message classes
+    keep an ``array('d')`` as it is, whereas a list is checked value by value in Python (about
+    4 us per 100 values; benchmarks/RESULTS.md, ros_loop)."""
+    out = array("d")
+    out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+    return out
 
 
 def require_finite(what: str, *arrays: object) -> None:
@@ -157,13 +168,13 @@ class RodArrays:
 _OBJECT_FIELDS = (("object_centroid", 2), ("object_q", 3), ("object_v", 3), ("object_wrench", 3))
 
 
-def object_fields(centroid: tuple[float, float] | None, body: BodyState | None, wrench: Array | None) -> dict[str, list[float]]:
+def object_fields(centroid: tuple[float, float] | None, body: BodyState | None, wrench: Array | None) -> dict[str, array[float]]:
     """The object fields of a RodState message: empty while the object is fixed (``body`` None);
     a movable object without an external wrench (``wrench`` None) carries zeros."""
     if centroid is None or body is None:
-        return {name: [] for name, _ in _OBJECT_FIELDS}
-    return {"object_centroid": [float(c) for c in centroid], "object_q": body.q.tolist(), "object_v": body.v.tolist(),
-            "object_wrench": [0.0, 0.0, 0.0] if wrench is None else np.asarray(wrench, dtype=float).tolist()}
+        return {name: array("d") for name, _ in _OBJECT_FIELDS}
+    return {"object_centroid": float64_field(centroid), "object_q": float64_field(body.q), "object_v": float64_field(body.v),
+            "object_wrench": float64_field(np.zeros(3) if wrench is None else wrench)}
 
 
 def _object_arrays(msg: RodStateMsg) -> ObjectArrays | None:
@@ -222,14 +233,14 @@ def contact_to_msg(state: ContactState, header: Header, step: int) -> ContactSta
     return ContactStateMsg(
         header=header,
         step=int(step),
-        s=state.s.tolist(),
-        rho=state.rho.tolist(),
-        alpha=state.alpha.tolist(),
-        delta=state.delta.tolist(),
-        s_o=state.s_o.tolist(),
-        shadow_x=state.foot[:, 0].tolist(),
-        shadow_y=state.foot[:, 1].tolist(),
-        in_contact=[bool(v) for v in state.in_contact],
+        s=float64_field(state.s),
+        rho=float64_field(state.rho),
+        alpha=float64_field(state.alpha),
+        delta=float64_field(state.delta),
+        s_o=float64_field(state.s_o),
+        shadow_x=float64_field(state.foot[:, 0]),
+        shadow_y=float64_field(state.foot[:, 1]),
+        in_contact=np.asarray(state.in_contact, dtype=bool).tolist(),
         contact_tolerance=float(state.tol),
     )
 
@@ -279,13 +290,13 @@ def couple_to_msg(s: Array, couple: Array | FeedbackExpansion, header: Header, s
     first-order expansion when given a :class:`FeedbackExpansion`."""
     from contgrasp_msgs.msg import CoupleControl
 
-    msg = CoupleControl(header=header, step=int(step), s=np.asarray(s).tolist())
+    msg = CoupleControl(header=header, step=int(step), s=float64_field(s))
     if isinstance(couple, FeedbackExpansion):
-        msg.u = couple.u.tolist()
-        msg.rho_ref, msg.alpha_ref = couple.rho_ref.tolist(), couple.alpha_ref.tolist()
-        msg.du_drho, msg.du_dalpha = couple.g_rho.tolist(), couple.g_alpha.tolist()
+        msg.u = float64_field(couple.u)
+        msg.rho_ref, msg.alpha_ref = float64_field(couple.rho_ref), float64_field(couple.alpha_ref)
+        msg.du_drho, msg.du_dalpha = float64_field(couple.g_rho), float64_field(couple.g_alpha)
     else:
-        msg.u = np.asarray(couple).tolist()
+        msg.u = float64_field(couple)
     return msg
 
 
@@ -309,7 +320,7 @@ def quality_to_msg(q: GraspQuality, header: Header, step: int, tol: float) -> Gr
     return GraspQualityMsg(
         header=header,
         step=int(step),
-        w=np.asarray(q.W, dtype=float).ravel().tolist(),
+        w=float64_field(np.ravel(q.W)),
         q1=q.Q1,
         q2=q.Q2,
         q3=q.Q3,

@@ -9,7 +9,8 @@ recorder subscribes to every stream, and it is stopped last, after the other nod
 recording holds the whole run; the summary's ``bag`` entry is read back from the finished file.
 What to do when (resume, restart a dead node, go on without it, time out) is decided by
 :class:`contgrasp_ros.supervision.Supervisor`; ``_drive`` feeds it what rclpy and the process
-group show and carries out its actions. The summary is :class:`contgrasp_ros.summary.RunSummary`.
+group show (once per supervisor's spin period, and at once when the simulator's state
+changes) and carries out its actions. The summary is :class:`contgrasp_ros.summary.RunSummary`.
 """
 
 from __future__ import annotations
@@ -75,6 +76,7 @@ class Monitor(Node):
         self.contact: ContactState | None = None
         self.quality: GraspQuality | None = None
         self.status: dict[str, str] = {}
+        self.state_changed = False  # the simulator's state changed since the driver looked (see _drive)
         self.history: list[dict[str, Any]] = []
         self._period = history_period
         self._next_t = 0.0
@@ -117,7 +119,9 @@ class Monitor(Node):
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for st in msg.status:
             if st.name == "rod_simulator":
+                state = self.status.get("state")
                 self.status = {kv.key: kv.value for kv in st.values}
+                self.state_changed = self.state_changed or self.status.get("state") != state
 
     def connected(self) -> bool:
         """Every node is up and each stream has its publisher and subscribers matched."""
@@ -214,7 +218,12 @@ def _drive(mon: Monitor, sup: Supervisor, executor: Executor, group: Any,
                         pass
             if sup.done:
                 return sup.error
-            spin(sup.spin_period)
+            # every message of the period, not one (a graph query per message cost the launcher
+            # more than its callbacks); a change of the simulator's state is acted on at once
+            end = time.monotonic() + sup.spin_period
+            mon.state_changed = False
+            while not mon.state_changed and (left := end - time.monotonic()) > 0:
+                spin(left)
         except (KeyboardInterrupt, ExternalShutdownException):
             raise
         except Exception as exc:  # (SIGINT shuts rclpy's context down between two calls: an interrupt)

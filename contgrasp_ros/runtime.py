@@ -12,7 +12,7 @@ Every contgrasp node uses these, so they degrade the same way (see docs/ros.md, 
   parameter callback so that no exception leaves it (except :class:`FatalNodeError`);
 * :class:`StampGate` - the stamp rule (invalid, from the past, from the future);
 * :class:`Diagnostics` - the node's DiagnosticStatus on ``/diagnostics``: every second of wall
-  time and at once on the first drop;
+  time, at once on the first drop, and on a node's events at a few Hz at most;
 * :class:`GuardedSpin` - executor turns that survive a message rclpy fails to take;
 * :func:`sim_time_by_default` - the graph's time is the simulator's ``/clock`` unless the user
   sets ``use_sim_time``;
@@ -367,39 +367,59 @@ Status = tuple[int, str, dict[str, str]]
 class Diagnostics:
     """The node's status on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, one
     DiagnosticStatus named after the node): every ``period_s`` of wall time (steady-clock timer)
-    and at once on the first drop. ``build()`` gives (level, message, key/values); the drop
-    counts (:meth:`DropCounter.key_values`) are added. Default: OK / WARN when messages were
-    dropped."""
+    and at once on the first drop; :meth:`update` publishes a node's events (the simulator's
+    states) at most every ``min_period_s`` of wall time and at once when the level or the
+    message changes. ``build()`` gives (level, message, key/values); the drop counts
+    (:meth:`DropCounter.key_values`) are added. Default: OK / WARN when messages were dropped."""
 
-    def __init__(self, node: Node, drops: DropCounter, build: Callable[[], Status] | None = None, period_s: float = 1.0) -> None:
+    def __init__(self, node: Node, drops: DropCounter, build: Callable[[], Status] | None = None, period_s: float = 1.0,
+                 min_period_s: float = 0.2) -> None:
         from contgrasp_ros import qos
 
         self._node = node
         self._drops = drops
         self._build = build
+        self._min_period = min_period_s
+        self._last: tuple[float, int, str] | None = None  # (wall time, level, message) of the last publication
         self.pub = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, qos.STREAM)
         drops.on_first_drop = self.publish
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         node.create_timer(period_s, drops.guard("diagnostics timer", self.publish), clock=self._steady)
 
-    def status(self) -> DiagnosticStatus:
-        """The current DiagnosticStatus."""
+    def _values(self) -> Status:
         if self._build is not None:
             level, message, values = self._build()
         else:
             total = self._drops.total
             level = DiagnosticStatus.WARN if total else DiagnosticStatus.OK
             message, values = (f"{total} messages dropped" if total else "ok"), {}
-        values = {**values, **self._drops.key_values()}
         if self._drops.total and level == DiagnosticStatus.OK:
             level = DiagnosticStatus.WARN
-        return DiagnosticStatus(level=level, name=self._node.get_name(), message=message, hardware_id="contgrasp",
-                                values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        return level, message, values
 
-    def publish(self, stamp: Time | None = None) -> None:
+    def status(self, values: Status | None = None) -> DiagnosticStatus:
+        """The current DiagnosticStatus (of ``values`` when given: a :meth:`_values` result)."""
+        level, message, kv = values if values is not None else self._values()
+        kv = {**kv, **self._drops.key_values()}
+        return DiagnosticStatus(level=level, name=self._node.get_name(), message=message, hardware_id="contgrasp",
+                                values=[KeyValue(key=k, value=v) for k, v in kv.items()])
+
+    def publish(self, stamp: Time | None = None, values: Status | None = None) -> None:
         """Publish the status now (stamped with ``stamp`` or the node clock)."""
+        values = values if values is not None else self._values()
         header_stamp = stamp if stamp is not None else self._node.get_clock().now().to_msg()
-        self.pub.publish(DiagnosticArray(header=Header(stamp=header_stamp), status=[self.status()]))
+        self.pub.publish(DiagnosticArray(header=Header(stamp=header_stamp), status=[self.status(values)]))
+        self._last = (time.monotonic(), values[0], values[1])
+
+    def update(self, stamp: Time | None = None) -> None:
+        """Publish the status if its level or message changed since the last publication or
+        ``min_period_s`` wall seconds passed since then (a status per event, a few per second
+        at most: building and delivering one after every simulator state cost more than the
+        state itself, benchmarks/RESULTS.md, ros_loop)."""
+        values = self._values()
+        last = self._last
+        if last is None or (values[0], values[1]) != last[1:] or time.monotonic() - last[0] >= self._min_period:
+            self.publish(stamp, values)
 
 
 # ---------------------------------------------------------------------------- time and the end of a run
@@ -562,7 +582,9 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
     parameters (rclpy's parameter exceptions, an :class:`~contgrasp_core.errors.InputError`)
     exits with code 2; a :class:`~contgrasp_core.errors.RunFailure` (e.g. a
     :class:`FatalNodeError`) while starting or spinning with code 1 (after the node's own
-    clean-up). Any other exception is a bug and propagates with its traceback (exit code 1).
+    clean-up). SIGINT/SIGTERM while the node is being built is a stop (exit code 0), whatever
+    rclpy raised on the shut-down context. Any other exception is a bug and propagates with its
+    traceback (exit code 1).
     """
     name = getattr(factory, "__name__", "node")
     argv = list(args) if args is not None else sys.argv
@@ -586,6 +608,12 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             code = exit_code(exc) if isinstance(exc, ContgraspError) else 2
             print(f"{name}: error: {'invalid parameter: ' if code == 2 else ''}{one_line(exc)}", file=sys.stderr)
             return code
+        except Exception as exc:
+            if rclpy.ok():
+                raise
+            # SIGINT/SIGTERM shut the context down while the node was being built (a launcher
+            # stopping its graph because another node failed to start): a stop, not a failure
+            raise ExternalShutdownException() from exc
         executor = make_executor()
         executor.add_node(node)
         spin = GuardedSpin(executor, getattr(node, "drops", None) or DropCounter(node))

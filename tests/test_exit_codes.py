@@ -324,6 +324,24 @@ def test_run_node_start_up_errors(capsys: pytest.CaptureFixture[str], exc: Excep
     assert capsys.readouterr().err.splitlines() == [line]
 
 
+def test_run_node_stopped_while_the_node_is_built_exits_0(capsys: pytest.CaptureFixture[str]) -> None:
+    """SIGINT/SIGTERM during the node's construction (the launcher stopping its graph because
+    another node failed to start) shuts rclpy's context down, and the constructor's next rcl call
+    fails ('publisher's context is invalid'): a stop, exit 0, not a failure with a traceback."""
+    import rclpy
+
+    from contgrasp_ros.runtime import run_node
+
+    def interrupted_node() -> None:
+        node = rclpy.create_node("interrupted_node")
+        rclpy.shutdown()  # (what rclpy's signal handler does)
+        node.declare_parameter("p", 1.0)  # publishes a parameter event on the dead context
+
+    capsys.readouterr()
+    assert run_node(interrupted_node, args=[]) == 0  # type: ignore[arg-type]
+    assert capsys.readouterr().err == ""
+
+
 def test_node_with_bad_parameter_exits_2_and_recorder_with_failing_disk_exits_1(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Real node processes: a bad start-up parameter exits 2; a recorder whose writes fail
     (file-size limit) stops with exit 1 and one error line - the FatalNodeError must not be

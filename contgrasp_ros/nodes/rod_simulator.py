@@ -19,7 +19,9 @@ bad ones dropped and counted. A run that breaks - Newton fails, NaN/Inf in the s
 deeper inside the object than ``max_penetration_limit``, kinetic energy above
 ``max_kinetic_energy`` - stops stepping: state ``failed``, the cause and simulated time in
 the status ``message``, logged once. The status (``/diagnostics``, name ``rod_simulator``)
-goes out after every state, every second of wall time and at once on the first drop.
+goes out with the states at most every 0.2 s of wall time, and at once when its level or state
+changes (running, paused, finished, failed; the first missed deadline or drop), and every
+second of wall time.
 
 The object is fixed (the paper), or moves (``object_mode`` spring or free: a rigid body in the
 rod engine, :meth:`contgrasp_core.scenario.Scenario.system`). A movable object's displacement,
@@ -60,7 +62,7 @@ from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_msgs.srv import ApplyWrench
 from contgrasp_ros import qos, topics
-from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, object_fields, wrench_arrays
+from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, float64_field, object_fields, wrench_arrays
 from contgrasp_ros.lockstep import LockStep, Peers, StartGate
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
@@ -78,6 +80,10 @@ from contgrasp_ros.runtime import (
 )
 
 FALLBACKS = ("hold", "zero")
+# Lock-step: the timer polls the start gate every START_POLL_S until step 0 is out, then looks for
+# a missed couple deadline every DEADLINE_POLL_S (at 5 ms it woke the simulator between almost
+# every two steps of the loop; benchmarks/RESULTS.md, ros_loop).
+START_POLL_S, DEADLINE_POLL_S = 0.005, 0.02
 
 
 def _stamp(t: float) -> Time:
@@ -159,8 +165,8 @@ class RodSimulator(Node):
         self.paused = bool(self.start_paused)
         control_period = self.config.control_period
         assert control_period is not None  # (LoopSession, built above, requires it)
-        period = control_period if not self.lockstep else 0.005
-        self.create_timer(period, self.on_tick, clock=self._steady)
+        period = control_period if not self.lockstep else START_POLL_S
+        self._tick = self.create_timer(period, self.on_tick, clock=self._steady)
         if not self.paused:
             self._publish_first_observation()
 
@@ -233,9 +239,10 @@ class RodSimulator(Node):
         self.pub_clock.publish(ClockMsg(clock=header.stamp))
         self.pub_state.publish(
             RodState(
-                header=header, step=obs.k, s=obs.s.tolist(), x=obs.x[:, 0].tolist(), y=obs.x[:, 1].tolist(),
-                theta=obs.theta.tolist(), kappa=obs.kappa.tolist(), radius=obs.radius.tolist(),
-                vx=obs.v[:, 0].tolist(), vy=obs.v[:, 1].tolist(), kinetic_energy=obs.kinetic_energy,
+                header=header, step=obs.k, s=float64_field(obs.s), x=float64_field(obs.x[:, 0]),
+                y=float64_field(obs.x[:, 1]), theta=float64_field(obs.theta), kappa=float64_field(obs.kappa),
+                radius=float64_field(obs.radius), vx=float64_field(obs.v[:, 0]), vy=float64_field(obs.v[:, 1]),
+                kinetic_energy=obs.kinetic_energy,
                 max_penetration=obs.penetration, **object_fields(centroid, obs.body, wrench),
             )
         )
@@ -245,7 +252,7 @@ class RodSimulator(Node):
             self.next_marker_t = obs.t + period
             self.pub_markers.publish(scene_markers(self.boundary, obs, header, centroid))
         self.rule.published(time.monotonic())
-        self._publish_status()
+        self.diagnostics.update(_stamp(obs.t))  # (a change of state, a missed deadline: at once)
 
     def _publish_object_motion(self, obs: Observation, header: Header) -> None:
         """A movable object's pose (centroid, rotation from the start pose) and twist."""
@@ -348,6 +355,10 @@ class RodSimulator(Node):
 
     @guarded("timer")
     def on_tick(self) -> None:
+        if self.lockstep:
+            poll_ns = int(1e9 * (DEADLINE_POLL_S if self.rule.started else START_POLL_S))
+            if self._tick.timer_period_ns != poll_ns:
+                self._tick.timer_period_ns = poll_ns
         if not self.rule.started and not self.paused and not self.failure:
             self._publish_first_observation()
         if not self._can_step():
