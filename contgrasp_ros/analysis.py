@@ -26,7 +26,7 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -187,7 +187,6 @@ class RunData:
     params: dict[str, dict[str, Any]] | None
     run_info: dict[str, Any]
     status: dict[str, str]
-    sim_time: dict[int, float] = field(default_factory=dict)
     recorder: dict[str, Any] | None = None
 
 
@@ -301,7 +300,6 @@ def load_run(path: str | Path) -> RunData:
 
     by_topic: dict[str, list[Any]] = {topics.ROD_STATE: [], topics.CONTACT: [], topics.QUALITY: [], topics.OBJECT: []}
     status: dict[str, str] = {}
-    sim_time: dict[int, float] = {}
     for raw, msg in iter_decoded(rec, [*by_topic, topics.DIAGNOSTICS]):
         if raw.topic != topics.DIAGNOSTICS:
             by_topic[raw.topic].append(msg)
@@ -310,10 +308,6 @@ def load_run(path: str | Path) -> RunData:
             if st.name != SIMULATOR:
                 continue
             status = {kv.key: kv.value for kv in st.values}
-            try:  # the simulator's exact float time of each step (stamps are rounded to ns)
-                sim_time[int(status["step"])] = float(status["sim_time_s"])
-            except (KeyError, ValueError):
-                pass
     try:
         boundary = boundary_from_msg(by_topic[topics.OBJECT][-1])
     except ContgraspError as exc:
@@ -328,7 +322,6 @@ def load_run(path: str | Path) -> RunData:
         params=params,
         run_info=run_info,
         status=status,
-        sim_time=sim_time,
         recorder=recorder,
     )
 
@@ -505,18 +498,25 @@ def step_gaps(run: RunData) -> dict[str, Any]:
     }
 
 
+STAMP_RESOLUTION_S = 1e-9
+"""A header stamp's resolution (builtin_interfaces/Time: integer nanoseconds)."""
+
+
 def settle_recomputed(run: RunData) -> tuple[bool | None, float | None]:
-    """(settled, settle time) by the simulator's rule fed every recorded state from step 0, with
-    the simulator's exact times from /diagnostics (the stamps are rounded to ns); (None, None)
-    when the rod states are not complete or the run's parameters are not recorded."""
+    """(settled, settle time) by the simulator's rule fed every recorded state from step 0 at its
+    stamp, the simulated time rounded to ns (the simulator's own float times reach /diagnostics
+    only a few times per second): the rule's hold and minimum time are taken 1 ns short, so a
+    run the simulator judged settled at the last step is so judged again, and the settle time
+    agrees with the simulator's to 1 ns; (None, None) when the rod states are not complete or
+    the run's parameters are not recorded."""
     gaps = step_gaps(run)
     if run.params is None or not gaps["contiguous"] or gaps["first_step"] != 0:
         return None, None
     sim = run.params.get(SIMULATOR, {})
     speed, hold, min_time = (float(sim.get(k, _default(SIMULATOR, k))) for k in ("settle_speed", "settle_hold", "min_time"))
-    det = SettleDetector(speed, hold, min_time)
-    for k, t, v in zip(run.rod.step, run.rod.t, run.rod.max_speed, strict=True):
-        det.update(run.sim_time.get(int(k), float(t)), float(v))
+    det = SettleDetector(speed, hold - STAMP_RESOLUTION_S, min_time - STAMP_RESOLUTION_S)
+    for t, v in zip(run.rod.t, run.rod.max_speed, strict=True):
+        det.update(float(t), float(v))
     return det.settled, det.settle_time
 
 
