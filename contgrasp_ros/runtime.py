@@ -75,8 +75,10 @@ class FatalNodeError(RunFailure):
 
 
 def make_executor(context: Context | None = None) -> Executor:
-    """The executor named by ``CONTGRASP_EXECUTOR``: ``single`` (default, SingleThreadedExecutor)
-    or ``events`` (rclpy.experimental.EventsExecutor, lower latency). The multi-threaded
+    """The in-process graph's executor (``contgrasp-launch --in-process``), named by
+    ``CONTGRASP_EXECUTOR``: ``single`` (default, SingleThreadedExecutor) or ``events``
+    (rclpy.experimental.EventsExecutor, lower latency); node processes (:func:`run_node`) always
+    use the single-threaded executor (docs/ros.md). The multi-threaded
     executor is deliberately not offered: on 2 cores its tail latency is large (docs/design.md)."""
     kind = os.environ.get("CONTGRASP_EXECUTOR", "single")
     if kind == "events":
@@ -614,7 +616,9 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             # SIGINT/SIGTERM shut the context down while the node was being built (a launcher
             # stopping its graph because another node failed to start): a stop, not a failure
             raise ExternalShutdownException() from exc
-        executor = make_executor()
+        # (always single-threaded: CONTGRASP_EXECUTOR is the in-process launcher's choice only; an
+        # EventsExecutor in a node process hung the graph after resuming and ignored SIGINT/SIGTERM)
+        executor = SingleThreadedExecutor()
         executor.add_node(node)
         spin = GuardedSpin(executor, getattr(node, "drops", None) or DropCounter(node))
         while not getattr(node, "stop_requested", False):  # (FinishPolicy: on_finish exit)

@@ -20,6 +20,7 @@ import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -340,6 +341,26 @@ def test_run_node_stopped_while_the_node_is_built_exits_0(capsys: pytest.Capture
     capsys.readouterr()
     assert run_node(interrupted_node, args=[]) == 0  # type: ignore[arg-type]
     assert capsys.readouterr().err == ""
+
+
+def test_node_processes_use_the_single_threaded_executor_whatever_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/ros.md: node processes always use the single-threaded executor (an EventsExecutor in a
+    node process hung the graph after resuming and ignored SIGINT/SIGTERM); CONTGRASP_EXECUTOR
+    is the in-process launcher's choice only, so not even a bad value reaches a node."""
+    import rclpy
+
+    from contgrasp_ros.runtime import make_executor, run_node
+
+    monkeypatch.setenv("CONTGRASP_EXECUTOR", "bogus")
+    with pytest.raises(ValueError, match="CONTGRASP_EXECUTOR must be"):
+        make_executor()
+
+    def stopping_node() -> Any:
+        node: Any = rclpy.create_node("stopping_node")
+        node.stop_requested = True  # (FinishPolicy's flag: the node asks to stop at once)
+        return node
+
+    assert run_node(stopping_node, args=[]) == 0
 
 
 def test_node_with_bad_parameter_exits_2_and_recorder_with_failing_disk_exits_1(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
