@@ -47,12 +47,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from contgrasp_core.contact import sense
+from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.quality import GraspQuality, quality_of_state
 from contgrasp_core.rod.body import BodyState, ObjectDynamics, mass_properties
 from contgrasp_core.rod.integrator import RodState
-from contgrasp_core.rod.session import LoopSession, Observation, drive, run_sampled, sensed_shape
+from contgrasp_core.rod.session import LoopSession, Observation, drive, run_sampled
 from contgrasp_core.scenario import Scenario
 
 __all__ = ["HoldSettings", "Capacity", "HoldResult", "HoldExperiment", "GraspFailure", "measure_holding",
@@ -181,15 +181,15 @@ def wrench_directions(n_force: int) -> Array:
     return np.vstack([forces, [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]])
 
 
-def _escape(obs: Observation, q0: Array, settings: HoldSettings, in_contact: Callable[[Observation], bool]) -> str:
-    """Why the object counts as escaped at ``obs`` ('' while held)."""
+def _escape(obs: Observation, contact: ContactState, q0: Array, settings: HoldSettings) -> str:
+    """Why the object counts as escaped at ``obs`` with its sensed ``contact`` ('' while held)."""
     assert obs.body is not None
     dq = obs.body.q - q0
     if np.hypot(dq[0], dq[1]) > settings.escape_distance:
         return "moved"
     if abs(dq[2]) > settings.escape_angle:
         return "turned"
-    if not in_contact(obs):
+    if not contact.in_contact.any():
         return "contact lost"
     return ""
 
@@ -229,8 +229,8 @@ class HoldExperiment:
         tol, wait = self.scenario.sensing.contact_tolerance, self.settings.contact_wait
         touched = [0.0]  # when a node last touched the object (the start counts as a touch)
 
-        def out_of_reach(o: Observation) -> bool:
-            if sense(o.shape, self.boundary, o.radius, tol=tol).in_contact.any():
+        def out_of_reach(o: Observation, c: ContactState) -> bool:
+            if c.in_contact.any():
                 touched[0] = o.t
             return o.t - touched[0] >= wait
 
@@ -267,15 +267,10 @@ class HoldExperiment:
         assert self.released is not None
         return self.released
 
-    def in_contact(self, obs: Observation) -> bool:
-        """Whether any node touches the object (the scenario's contact set)."""
-        c = sense(sensed_shape(self.system, obs), self.boundary, obs.radius, tol=self.scenario.sensing.contact_tolerance)
-        return bool(c.in_contact.any())
-
     def load(self, state: RodState, duration: float, wrench: Callable[[float], Array],
-             until: Callable[[Observation], bool] | None = None) -> tuple[RodState, Observation, str]:
+             until: Callable[[Observation, ContactState], bool] | None = None) -> tuple[RodState, Observation, str]:
         """The closed loop from ``state`` (time reset to 0) with ``wrench(t)`` on the object, for
-        ``duration`` or until ``until(observation)``: the final state and observation, and why
+        ``duration`` or until ``until(observation, contact)``: the final state and observation, and why
         the simulation failed ('' if it did not: a tear-out that breaks the run is a result)."""
         loop = replace(self.held.loop, duration=duration, min_time=duration + 1.0)  # (never "settled")
         session = LoopSession(self.system, loop, replace(state, t=0.0))
@@ -315,8 +310,8 @@ class HoldExperiment:
         rate = self.settings.rate
         reason = [""]
 
-        def escaped(o: Observation) -> bool:
-            reason[0] = _escape(o, q0, self.escape, self.in_contact)
+        def escaped(o: Observation, c: ContactState) -> bool:
+            reason[0] = _escape(o, c, q0, self.escape)
             return bool(reason[0])
 
         _, last, failed = self.load(start, self.settings.ramp_time, lambda t: rate * t * unscaled, escaped)

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.arm import ArmShape
-from contgrasp_core.contact import sense
+from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.control.rod_feedback import FeedbackExpansion, HeldExpansion
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.scenario import Scenario
@@ -255,11 +255,11 @@ def sensed_shape(system: RodSystem, obs: Observation) -> ArmShape:
 
 
 def run_sampled(scenario: Scenario, system: RodSystem | None = None,
-                until: Callable[[Observation], bool] | None = None) -> LoopSession:
+                until: Callable[[Observation, ContactState], bool] | None = None) -> LoopSession:
     """The scenario's sampled loop with the core functions only, stepped exactly as the ROS nodes
     step it (:func:`drive`, with the scenario's disturbance): a lock-step ROS run of the same
     scenario ends in the same state bit for bit. Returns the session, finished or stopped early
-    by ``until(observation)``."""
+    by ``until(observation, contact)`` (:func:`drive`)."""
     system = scenario.system() if system is None else system
     session = LoopSession(system, scenario.loop)
     drive(session, scenario, None if scenario.disturbance is None else scenario.disturbance.wrench_at, until)
@@ -267,12 +267,12 @@ def run_sampled(scenario: Scenario, system: RodSystem | None = None,
 
 
 def drive(session: LoopSession, scenario: Scenario, wrench: Callable[[float], Array] | None = None,
-          until: Callable[[Observation], bool] | None = None) -> Observation:
-    """Step ``session`` as the ROS nodes do until it finishes or ``until(observation)`` holds:
-    observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
-    :class:`~contgrasp_core.boundary.Boundary` and the sensor's tolerance,
-    :func:`~contgrasp_core.control.feedback_at_joints`, advance with ``wrench(t)`` on the object
-    (t the period's start). Returns the last observation."""
+          until: Callable[[Observation, ContactState], bool] | None = None) -> Observation:
+    """Step ``session`` as the ROS nodes do until it finishes or ``until(observation, contact)``
+    holds: observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
+    :class:`~contgrasp_core.boundary.Boundary` and the sensor's tolerance (``contact``, which
+    ``until`` gets too), :func:`~contgrasp_core.control.feedback_at_joints`, advance with
+    ``wrench(t)`` on the object (t the period's start). Returns the last observation."""
     from contgrasp_core.control import feedback_at_joints
 
     boundary = scenario.object.boundary()
@@ -280,8 +280,10 @@ def drive(session: LoopSession, scenario: Scenario, wrench: Callable[[float], Ar
     system = session.system
     while True:
         obs = session.observe()
-        if session.finished or (until is not None and until(obs)):
+        if session.finished:
             return obs
         c = sense(sensed_shape(system, obs), boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
+        if until is not None and until(obs, c):
+            return obs
         session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha),
                         None if wrench is None else wrench(obs.t))
