@@ -3,11 +3,13 @@
 The implicit step evaluates, per Newton iteration, the generalised force and the exact Newton
 matrix (:meth:`contgrasp_core.rod.integrator.RodSystem._evaluate`, O(N^2) numpy expressions with
 some forty temporary arrays) and solves the dense system. :func:`newton_system` computes the
-same residual and matrix in two fused O(N^2) passes without temporaries (every term of the
-numpy path, in the same algebraic form: the Gram forms of :func:`contgrasp_core.rod.chain.gram_form`
-through their tail sums, bending, inertia, damping, drag, penalty contact and the feedback couple's
-Jacobian). The solve stays LAPACK's (``numpy.linalg.solve``, bit for bit the solve of the numpy
-path, run on one BLAS thread): a numba LU was 2.5x slower at N = 100 and 8x at N = 400.
+same residual and matrix without temporaries (every term of the numpy path: the Gram forms of
+:func:`contgrasp_core.rod.chain.gram_form` through their tail sums, bending, inertia, damping,
+drag, penalty contact and the feedback couple's Jacobian), the matrix in the structure its terms
+give it (:class:`contgrasp_core.rod.newton_matrix.ChainMatrix`: the lower triangle dense, the
+upper triangle rank 2 plus a band; the row sums by O(N) prefix and suffix sums), and
+:func:`chain_solve` solves it in O(N^2) (a dense numba LU was 2.5x slower than LAPACK at N = 100
+and 8x at N = 400; the numpy path keeps LAPACK).
 
 Results agree with the numpy path to rounding (sums are accumulated in a different order;
 tests/test_kernels.py). The numpy path stays selectable: ``CONTGRASP_KERNELS=0`` in the
@@ -43,7 +45,8 @@ def f64(x: object) -> np.ndarray:
     return np.require(x, dtype=np.float64, requirements=("C", "W"))
 
 
-_JIT_NAMES = ("frames_nodes", "kinetic_energy", "newton_system", "circle_projection", "joint_couple_jacobian")
+_JIT_NAMES = ("frames_nodes", "kinetic_energy", "newton_system", "chain_solve", "circle_projection",
+              "joint_couple_jacobian")
 
 
 def load() -> None:

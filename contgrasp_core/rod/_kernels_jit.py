@@ -8,7 +8,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["frames_nodes", "kinetic_energy", "newton_system", "circle_projection", "joint_couple_jacobian"]
+__all__ = ["frames_nodes", "kinetic_energy", "newton_system", "chain_solve", "circle_projection",
+           "joint_couple_jacobian"]
 
 
 @njit(cache=True)
@@ -70,20 +71,20 @@ def _tails(d: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
-def newton_system(theta: np.ndarray, omega: np.ndarray, delta: np.ndarray, dw: np.ndarray, dt: float, cw: float,
-                  cq: float, h: float, base: np.ndarray, weight: np.ndarray, rot_inertia: np.ndarray,
-                  mass_e: np.ndarray, zeta: float, drag_n: float, drag_t: float, r_c: np.ndarray,
-                  stiffness: np.ndarray, joint_ei: np.ndarray, joint_len: np.ndarray, base_angle: float,
-                  couple: np.ndarray, node_forces: np.ndarray, rows: np.ndarray, foot: np.ndarray,
-                  normal: np.ndarray, tangent: np.ndarray, k_c: float, d_c: float, mu: float, v_eps: float,
-                  u_fb: np.ndarray, du: np.ndarray, a: np.ndarray, b: np.ndarray,
-                  x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Residual ``mass @ dw - dt q`` and Newton matrix ``mass + dt cw jac_w + cq (dt jac_q + jac_m)``
-    at angles ``theta`` and rates ``omega`` (``delta`` the step's rate increment, ``dw`` the
-    increment the residual multiplies; both ``w1 - w0``), as
-    :meth:`~contgrasp_core.rod.integrator.RodSystem.newton_system`. Empty ``couple`` /
-    ``node_forces`` / ``rows`` / ``u_fb`` mean absent; ``a``, ``b``, ``x`` from :func:`frames_nodes`.
-    Returns (residual, matrix, penetration)."""
+def newton_system(theta: np.ndarray, omega: np.ndarray, delta: np.ndarray, dt: float, cw: float, cq: float,
+                  h: float, base: np.ndarray, rot_inertia: np.ndarray, mass_e: np.ndarray, zeta: float,
+                  drag_n: float, drag_t: float, r_c: np.ndarray, stiffness: np.ndarray, joint_ei: np.ndarray,
+                  joint_len: np.ndarray, base_angle: float, couple: np.ndarray, node_forces: np.ndarray,
+                  rows: np.ndarray, foot: np.ndarray, normal: np.ndarray, tangent: np.ndarray, k_c: float,
+                  d_c: float, mu: float, v_eps: float, u_fb: np.ndarray, du: np.ndarray, a: np.ndarray,
+                  b: np.ndarray,
+                  x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """Residual ``mass @ delta - dt q`` and Newton matrix ``mass + dt cw jac_w + cq (dt jac_q + jac_m)``
+    at angles ``theta`` and rates ``omega`` (``delta`` the step's rate increment ``w1 - w0``), as
+    :meth:`~contgrasp_core.rod.integrator.RodSystem.newton_system`, the matrix in the form of
+    :class:`~contgrasp_core.rod.newton_matrix.ChainMatrix`. Empty ``couple`` / ``node_forces`` /
+    ``rows`` / ``u_fb`` mean absent; ``a``, ``b``, ``x`` from :func:`frames_nodes`.
+    Returns (residual, lower triangle and diagonal, upper generators (N, 2), band (N,), penetration)."""
     n = theta.shape[0]
     hh = h * h
     # ---- per-element kinematics: centres, velocities, centripetal forces
@@ -258,78 +259,148 @@ def newton_system(theta: np.ndarray, omega: np.ndarray, delta: np.ndarray, dw: n
         q[k] -= mom[k]
     for k in range(n - 1):
         q[k] += mom[k + 1]
-    # ---- the matrix, row by row: the O(N^2) terms common to both triangles in one branch-free
-    # loop (with the row sums the diagonal and the residual need), then the triangle-specific
-    # rank-2 terms (Gram forms through their tail vectors, drag), the band and the diagonal
-    jac = np.empty((n, n))
-    res = np.empty(n)
-    cs = np.empty(n)
-    sn = np.empty(n)
-    om2 = np.empty(n)
-    up_q = np.empty((n, 2))  # upper triangle, column k: jq += b_j . up_q[k], jw += b_j . zdb[k]
-    for k in range(n):
-        cs[k] = a[k, 0]
-        sn[k] = a[k, 1]
-        om2[k] = omega[k] ** 2
-        up_q[k, 0] = zs[k, 0] - zda[k, 0] * omega[k]
-        up_q[k, 1] = zs[k, 1] - zda[k, 1] * omega[k]
-        if has_drag:
-            up_q[k, 0] -= h * e[k, 0]
-            up_q[k, 1] -= h * e[k, 1]
+    # ---- the matrix in the structure of its terms (contgrasp_core.rod.newton_matrix): with the
+    # weights W_jk = g_max(j,k) off the diagonal (g_k = T_k + m_k/2, W_kk = T_k + m_k/4, T_k the
+    # mass beyond element k; chain.weight_matrix), the inertia terms are h^2 W_jk a_j . gam_k with
+    # gam_k = alpha_k a_k + beta_k b_k; the upper triangle is a_j . up_k (k > j) plus the band
+    # entry band_j at (j, j+1), the lower triangle lo_j . col_k plus the bending band and the
+    # feedback's du: only the lower triangle and the diagonal are stored in jac
+    g = np.empty(n)
+    w_diag = np.empty(n)
+    beyond = 0.0
+    for k in range(n - 1, -1, -1):
+        g[k] = beyond + 0.5 * mass_e[k]
+        w_diag[k] = beyond + 0.25 * mass_e[k]
+        beyond += mass_e[k]
     cwdt = dt * cw
     cqdt = cq * dt
+    col = np.empty((n, 6))  # lower triangle column generators: gam_k, b_k, omega_k a_k
+    up = np.empty((n, 2))
+    band = np.zeros(n)
+    alpha = np.empty(n)
+    for k in range(n):
+        alpha[k] = 1.0 + cwdt * zeta - cqdt * omega[k] ** 2
+        beta = 2.0 * cwdt * omega[k] + cqdt * zeta * omega[k] + cq * delta[k]
+        gam0 = alpha[k] * a[k, 0] + beta * b[k, 0]
+        gam1 = alpha[k] * a[k, 1] + beta * b[k, 1]
+        col[k, 0] = gam0
+        col[k, 1] = gam1
+        col[k, 2] = b[k, 0]
+        col[k, 3] = b[k, 1]
+        col[k, 4] = omega[k] * a[k, 0]
+        col[k, 5] = omega[k] * a[k, 1]
+        # b_j . z = a_j . (z_1, -z_0): the damping and stiffness Gram forms and drag as a_j . up_k
+        z0 = cwdt * zdb[k, 0] + cqdt * (zs[k, 0] - zda[k, 0] * omega[k])
+        z1 = cwdt * zdb[k, 1] + cqdt * (zs[k, 1] - zda[k, 1] * omega[k])
+        if has_drag:
+            z0 -= cqdt * h * e[k, 0]
+            z1 -= cqdt * h * e[k, 1]
+        up[k, 0] = hh * g[k] * gam0 + z1
+        up[k, 1] = hh * g[k] * gam1 - z0
+        if k < n - 1:
+            band[k] = cqdt * stiffness[k, k + 1]
+            if has_fb:
+                band[k] -= cqdt * du[k + 1, k + 1]
+    # row sums of the mass matrix and of ws_jk = h^2 W_jk a_j . b_k (against omega and delta)
+    # through prefix sums (k < j, weight g_j) and suffix sums (k > j, weight g_k)
+    suf = np.zeros((n, 4))  # sum_{k>j} g_k a_k omega_k, sum_{k>j} g_k a_k delta_k
+    for k in range(n - 1, 0, -1):
+        suf[k - 1, 0] = suf[k, 0] + g[k] * a[k, 0] * omega[k]
+        suf[k - 1, 1] = suf[k, 1] + g[k] * a[k, 1] * omega[k]
+        suf[k - 1, 2] = suf[k, 2] + g[k] * a[k, 0] * delta[k]
+        suf[k - 1, 3] = suf[k, 3] + g[k] * a[k, 1] * delta[k]
+    pre_w0 = 0.0  # sum_{k<j} a_k omega_k, sum_{k<j} a_k delta_k
+    pre_w1 = 0.0
+    pre_d0 = 0.0
+    pre_d1 = 0.0
+    jac = np.empty((n, n))
+    res = np.empty(n)
     for j in range(n):
-        cj = cs[j]
-        sj = sn[j]
-        wsd = 0.0
-        wso = 0.0
-        mo = 0.0
-        md = 0.0
-        row = jac[j]
-        wrow = weight[j]
-        for k in range(n):
-            hw = hh * wrow[k]
-            trans = hw * (cj * cs[k] + sj * sn[k])
-            ws = hw * (sj * cs[k] - cj * sn[k])
-            wsd += ws * delta[k]
-            wso += ws * omega[k]
-            mo += trans * omega[k]
-            md += trans * dw[k]
-            jw = 2.0 * ws * omega[k] + zeta * trans
-            jq = -trans * om2[k] + zeta * (ws * omega[k])
-            row[k] = trans + cwdt * jw + cq * (dt * jq + ws * delta[k])
-        mo += rot_inertia[j] * omega[j]
-        md += rot_inertia[j] * dw[j]
+        cj = a[j, 0]
+        sj = a[j, 1]
+        gj = hh * g[j]
+        mjj = hh * w_diag[j] + rot_inertia[j]
+        mo = gj * (cj * pre_w0 + sj * pre_w1) + hh * (cj * suf[j, 0] + sj * suf[j, 1]) + mjj * omega[j]
+        md = gj * (cj * pre_d0 + sj * pre_d1) + hh * (cj * suf[j, 2] + sj * suf[j, 3]) + mjj * delta[j]
+        wso = gj * (sj * pre_w0 - cj * pre_w1) + hh * (sj * suf[j, 0] - cj * suf[j, 1])
+        wsd = gj * (sj * pre_d0 - cj * pre_d1) + hh * (sj * suf[j, 2] - cj * suf[j, 3])
         qj = q[j]
         if zeta > 0:
             qj -= zeta * mo
         res[j] = md - dt * qj
-        b0 = b[j, 0]
-        b1 = b[j, 1]
-        for k in range(j + 1, n):  # upper triangle
-            row[k] += cwdt * (b0 * zdb[k, 0] + b1 * zdb[k, 1]) + cqdt * (b0 * up_q[k, 0] + b1 * up_q[k, 1])
-        u0 = us[j, 0]
-        u1 = us[j, 1]
-        d0 = ud[j, 0]
-        d1 = ud[j, 1]
-        for k in range(j):  # lower triangle
-            row[k] += (cwdt * (d0 * b[k, 0] + d1 * b[k, 1])
-                       + cqdt * (u0 * b[k, 0] + u1 * b[k, 1] - (d0 * a[k, 0] + d1 * a[k, 1]) * omega[k]))
-        # diagonal: rotary inertia, the row sums, drag, Gram diagonals, force-direction rotation
+        pre_w0 += cj * omega[j]
+        pre_w1 += sj * omega[j]
+        pre_d0 += cj * delta[j]
+        pre_d1 += sj * delta[j]
+        # lower triangle: inertia h^2 g_j a_j . gam_k, the Gram forms (rows ud, us), bending, du
+        l0 = gj * cj
+        l1 = gj * sj
+        l2 = cwdt * ud[j, 0] + cqdt * us[j, 0]
+        l3 = cwdt * ud[j, 1] + cqdt * us[j, 1]
+        l4 = -cqdt * ud[j, 0]
+        l5 = -cqdt * ud[j, 1]
+        row = jac[j]
+        for k in range(j):
+            row[k] = (l0 * col[k, 0] + l1 * col[k, 1] + l2 * col[k, 2] + l3 * col[k, 3] + l4 * col[k, 4]
+                      + l5 * col[k, 5])
+        if j > 0:
+            row[j - 1] += cqdt * stiffness[j, j - 1]
+        # diagonal: inertia, rotary inertia, row sums, drag, Gram diagonals, force-direction rotation
         jq = -zeta * wso + gs[j] - gda[j] * omega[j] + tdiag[j]
         if has_drag:
-            jq -= h * 0.5 * (b0 * e[j, 0] + b1 * e[j, 1])
-        row[j] += rot_inertia[j] * (1.0 + cwdt * zeta) + cwdt * gdb[j] + cq * (dt * jq - wsd)
-        # bending (tridiagonal)
-        for k in range(max(j - 1, 0), min(j + 2, n)):
-            row[k] += cqdt * stiffness[j, k]
+            jq -= h * 0.5 * (b[j, 0] * e[j, 0] + b[j, 1] * e[j, 1])
+        row[j] = (hh * w_diag[j] * alpha[j] + rot_inertia[j] * (1.0 + cwdt * zeta) + cwdt * gdb[j]
+                  + cq * (dt * jq - wsd) + cqdt * stiffness[j, j])
         if has_fb:  # du (lower triangle and diagonal) minus the next joint's row
             for k in range(j + 1):
                 row[k] += cqdt * du[j, k]
             if j < n - 1:
-                for k in range(j + 2):
+                for k in range(j + 1):
                     row[k] -= cqdt * du[j + 1, k]
-    return res, jac, pen_max
+    return res, jac, up, band, pen_max
+
+
+@njit(cache=True, error_model="numpy")  # (a zero pivot gives inf/NaN, not an exception)
+def chain_solve(lower: np.ndarray, left: np.ndarray, up: np.ndarray, band: np.ndarray,
+                rhs: np.ndarray) -> np.ndarray:
+    """``A^-1 rhs`` for ``A`` with the given lower triangle and diagonal (``lower``, its upper
+    triangle unused) and the upper triangle ``A_jk = left_j . up_k + [k = j+1] band_j``, by
+    Gaussian elimination without pivoting in O(N^2) (:class:`contgrasp_core.rod.newton_matrix.ChainMatrix`)."""
+    n = rhs.shape[0]
+    acc = np.zeros((n, 2))  # W_i: the Schur complement's upper triangle is (left_i - W_i) . up_k
+    carry = np.zeros(n)  # the band entry's share in the next pivot column
+    y = rhs.copy()
+    piv = np.empty(n)
+    z = np.empty((n, 2))
+    for j in range(n):
+        u0 = up[j, 0]
+        u1 = up[j, 1]
+        d = lower[j, j] - acc[j, 0] * u0 - acc[j, 1] * u1 - carry[j]
+        z0 = left[j, 0] - acc[j, 0]
+        z1 = left[j, 1] - acc[j, 1]
+        piv[j] = d
+        z[j, 0] = z0
+        z[j, 1] = z1
+        inv = 1.0 / d
+        yj = y[j]
+        ej = band[j]
+        for i in range(j + 1, n):
+            f = (lower[i, j] - acc[i, 0] * u0 - acc[i, 1] * u1 - carry[i]) * inv
+            acc[i, 0] += f * z0
+            acc[i, 1] += f * z1
+            carry[i] = f * ej
+            y[i] -= f * yj
+    x = np.empty(n)
+    t0 = 0.0  # sum_{k>j} up_k x_k
+    t1 = 0.0
+    nxt = 0.0
+    for j in range(n - 1, -1, -1):
+        xj = (y[j] - z[j, 0] * t0 - z[j, 1] * t1 - band[j] * nxt) / piv[j]
+        x[j] = xj
+        t0 += up[j, 0] * xj
+        t1 += up[j, 1] * xj
+        nxt = xj
+    return x
 
 
 @njit(cache=True)

@@ -33,8 +33,10 @@ most ``max_iter / 2`` iterations (never beyond 0.9 ``max_angle_step`` of rotatio
 Newton iterate is extrapolated from the previous step's rate change.
 
 Compiled kernels: by default the residual, the Newton matrix and the solve run in numba kernels
-(:mod:`contgrasp_core.rod._kernels`, the same terms fused into two O(N^2) passes; equal to the
-numpy path :meth:`RodSystem._evaluate` to rounding). ``CONTGRASP_KERNELS=0`` in the environment,
+(:mod:`contgrasp_core.rod._kernels`, the same terms fused, equal to the numpy path
+:meth:`RodSystem._evaluate` to rounding); the matrix keeps the structure its terms give it
+(:class:`.newton_matrix.ChainMatrix`, the upper triangle rank 2 plus a band) and is solved in
+O(N^2) instead of LAPACK's O(N^3). ``CONTGRASP_KERNELS=0`` in the environment,
 or ``contgrasp_core.rod._kernels.ENABLED = False``, selects the numpy path (kept as the readable reference and
 for the comparison tests and benchmarks).
 """
@@ -54,6 +56,7 @@ from contgrasp_core.rod.coupling import body_coupling
 from contgrasp_core.rod.disturbance import wrench_array
 from contgrasp_core.rod.loads import ContactFrame, contact_forces, contact_frame, contact_tensors, drag_forces
 from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.newton_matrix import ChainMatrix, dense, solve
 from contgrasp_core.rod.obstacle import Obstacle
 
 __all__ = ["RodState", "RodLoads", "StepOptions", "RodSystem", "StepFailedError"]
@@ -301,7 +304,7 @@ class RodSystem:
 
     def _newton_system_compiled(self, theta: np.ndarray, omega: np.ndarray, delta: np.ndarray, dt: float,
                                 cw: float, cq: float, loads: RodLoads,
-                                frame: ContactFrame | None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
+                                frame: ContactFrame | None) -> tuple[np.ndarray, ChainMatrix, _StepEval]:
         """:meth:`newton_system` by :func:`._kernels.newton_system` (same terms as :meth:`_evaluate`)."""
         m = self.model
         f64 = _kernels.f64
@@ -320,18 +323,13 @@ class RodSystem:
         else:
             rows = np.require(frame.rows, dtype=np.int64, requirements=("C", "W"))
             foot, normal, tangent = f64(frame.foot), f64(frame.normal), f64(frame.tangent)
-        res, jac, pen = _kernels.newton_system(
-            theta, f64(omega), f64(delta), f64(delta), float(dt), float(cw), float(cq), m.h, base,
-            m.weight_matrix, m.rot_inertia, m.mass, float(m.damping), float(m.drag_normal), float(m.drag_tangential),
-            m.r_centres, m.stiffness_matrix, m.joint_ei, m.joint_len, float(m.base_angle), couple, nf, rows, foot,
-            normal, tangent, float(m.contact_stiffness), float(m.contact_damping), float(m.friction),
-            float(m.friction_velocity), u_fb, du, a, b, x)
-        return res, jac, _StepEval(penetration=float(pen))
-
-    @staticmethod
-    def _solve(jac: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        """The Newton increment ``jac^-1 rhs`` (LAPACK, as before the kernels)."""
-        return np.linalg.solve(jac, rhs)
+        res, lower, up, band, pen = _kernels.newton_system(
+            theta, f64(omega), f64(delta), float(dt), float(cw), float(cq), m.h, base, m.rot_inertia, m.mass,
+            float(m.damping), float(m.drag_normal), float(m.drag_tangential), m.r_centres, m.stiffness_matrix,
+            m.joint_ei, m.joint_len, float(m.base_angle), couple, nf, rows, foot, normal, tangent,
+            float(m.contact_stiffness), float(m.contact_damping), float(m.friction), float(m.friction_velocity),
+            u_fb, du, a, b, x)
+        return res, ChainMatrix(lower, a, up, band), _StepEval(penetration=float(pen))
 
     # ---------------------------------------------------------------- stepping
     def step(self, state: RodState, dt: float, loads: RodLoads = RodLoads()) -> tuple[RodState, dict]:
@@ -384,6 +382,12 @@ class RodSystem:
 
     def newton_system(self, state: RodState, w1: np.ndarray, dt: float, loads: RodLoads = RodLoads(),
                       frame: ContactFrame | None = None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
+        """Residual, Newton matrix (N, N) and what the iteration reports of :meth:`_newton_system`."""
+        res, jac, ev = self._newton_system(state, w1, dt, loads, frame)
+        return res, dense(jac), ev
+
+    def _newton_system(self, state: RodState, w1: np.ndarray, dt: float, loads: RodLoads,
+                       frame: ContactFrame | None) -> tuple[np.ndarray, np.ndarray | ChainMatrix, _StepEval]:
         """Residual and Newton matrix of the implicit step from ``state`` over ``dt`` at the
         iterate ``w1`` (the new rates): backward Euler ``R = M(theta_1)(w1 - w0) - dt q(theta_1,
         w1)`` with ``theta_1 = theta_0 + dt w1``, or the implicit midpoint rule with both evaluated
@@ -401,13 +405,16 @@ class RodSystem:
         th_ = th0 + (0.5 if midpoint else 1.0) * dt * w_
         if not self._coupled_contact:
             return self._rod_newton_system(th_, w_, wr1 - w0, dt, cw, cq, loads, frame)
-        res, jac, _ = self._rod_newton_system(th_, w_, wr1 - w0, dt, cw, cq, loads, None)
+        res, rod_jac, _ = self._rod_newton_system(th_, w_, wr1 - w0, dt, cw, cq, loads, None)
         anchors = None if frame is None else frame.anchors
         if self.body is None:  # a fixed object with stick-slip friction
             zero = np.zeros(3)
             cp = body_coupling(self.model, None, frame, th_, w_, zero, zero, anchors=anchors)
-            return (res - dt * cp.rod, jac - dt * (cw * cp.rod_omega + cq * cp.rod_theta),
-                    _StepEval(penetration=cp.penetration, anchors=cp.anchors))
+            ev = _StepEval(penetration=cp.penetration, anchors=cp.anchors)
+            if frame is None:  # no centre near the object: the frictionless rod's system, solved as it is
+                return res, rod_jac, ev
+            return res - dt * cp.rod, dense(rod_jac) - dt * (cw * cp.rod_omega + cq * cp.rod_theta), ev
+        jac = dense(rod_jac)
         body, bs = self.body, state.body
         assert bs is not None  # (a system with a body steps states with one)
         vb1 = w1[n:]
@@ -424,7 +431,7 @@ class RodSystem:
 
     def _rod_newton_system(self, th_: np.ndarray, w_: np.ndarray, delta: np.ndarray, dt: float, cw: float,
                            cq: float, loads: RodLoads,
-                           frame: ContactFrame | None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
+                           frame: ContactFrame | None) -> tuple[np.ndarray, np.ndarray | ChainMatrix, _StepEval]:
         """The rod's residual and Newton matrix, forces evaluated at (``th_``, ``w_``), with
         ``delta`` the rate increment of the step (compiled kernels or the numpy reference)."""
         if _kernels.ENABLED:
@@ -506,8 +513,8 @@ class RodSystem:
         element by more than ``max_angle_step``. Counted in ``info["linearised_steps"]``."""
         frame = self.contact_frame(state, dt)
         z0 = self.rates(state)
-        res, jac, ev = self.newton_system(state, z0, dt, loads, frame)
-        w1 = z0 + self._solve(jac, -res)
+        res, jac, ev = self._newton_system(state, z0, dt, loads, frame)
+        w1 = z0 + solve(jac, -res)
         new = self._new_state(state, w1, dt, ev.anchors)
         info["iterations"] += 1
         if not (np.all(np.isfinite(w1)) and np.abs(new.theta - state.theta).max() <= self.options.max_angle_step):
@@ -528,8 +535,8 @@ class RodSystem:
         w1 = w0.copy() if rate_change is None else w0 + dt * rate_change
         prev = np.inf
         for it in range(1, opt.max_iter + 1):
-            res, jac, ev = self.newton_system(state, w1, dt, loads, frame)
-            dw = self._solve(jac, -res)
+            res, jac, ev = self._newton_system(state, w1, dt, loads, frame)
+            dw = solve(jac, -res)
             if self.body is not None:  # the object's translation in rod lengths, beside the angles
                 dw_scaled = dw.copy()
                 dw_scaled[n:n + 2] /= self.model.length
