@@ -100,12 +100,13 @@ def joint_couple_jacobian(model: RodModel, g_rho: np.ndarray, g_alpha: np.ndarra
     adjacent elements: ``d alpha_k / d theta_{k-1} = d alpha_k / d theta_k = -1/2``.
     """
     rho, _, kappa_o, foot_turn, normal_out = geometry
+    if _kernels.ENABLED:  # the same entries in one compiled loop (contgrasp_core.rod._kernels)
+        f64 = _kernels.f64
+        return _kernels.joint_couple_jacobian(model.h, f64(g_rho), f64(g_alpha), f64(rho), f64(kappa_o),
+                                              f64(foot_turn), f64(normal_out), f64(b), _SAFE_ONE_PLUS)
     n_out = normal_out[:-1]
     safe = 1.0 + rho[:-1] * kappa_o[:-1] > _SAFE_ONE_PLUS
     turn = np.where(safe, foot_turn[:-1], 0.0)
-    if _kernels.ENABLED:  # the same entries in one compiled loop (contgrasp_core.rod._kernels)
-        f64 = _kernels.f64
-        return _kernels.joint_couple_jacobian(model.h, f64(g_rho), f64(g_alpha), f64(n_out), f64(turn), f64(b))
     tangent = np.stack([-n_out[:, 1], n_out[:, 0]], axis=1)
     direction = g_rho[:, None] * n_out + (g_alpha * turn)[:, None] * tangent
     du = model.h * np.tril(direction @ b.T, -1)

@@ -38,24 +38,22 @@ def frames_nodes(theta: np.ndarray, h: float, base: np.ndarray) -> tuple[np.ndar
 
 
 @njit(cache=True)
-def kinetic_energy(theta: np.ndarray, omega: np.ndarray, h: float, weight: np.ndarray,
+def kinetic_energy(theta: np.ndarray, omega: np.ndarray, h: float, mass_e: np.ndarray,
                    rot_inertia: np.ndarray) -> float:
-    """``1/2 omega^T M omega`` with ``M = h^2 W * cos(theta_j - theta_k) + diag(J)`` (as
-    :func:`contgrasp_core.rod.chain.mass_matrix`), without forming ``M``."""
-    n = theta.shape[0]
-    cs = np.empty(n)
-    sn = np.empty(n)
-    for k in range(n):
-        cs[k] = math.cos(theta[k])
-        sn[k] = math.sin(theta[k])
-    hh = h * h
+    """``1/2 omega^T M omega`` (:func:`contgrasp_core.rod.chain.mass_matrix`) in O(N), as its
+    definition ``1/2 sum m_i |v_i|^2 + 1/2 sum J_i omega_i^2`` with the centre velocities
+    ``v_i = h sum_j w_ij b_j omega_j`` (:func:`contgrasp_core.rod.chain.centre_velocities`)."""
+    p0 = 0.0  # h sum_{j<i} b_j omega_j
+    p1 = 0.0
     total = 0.0
-    for j in range(n):
-        row = 0.0
-        for k in range(n):
-            row += hh * weight[j, k] * (cs[j] * cs[k] + sn[j] * sn[k]) * omega[k]
-        row += rot_inertia[j] * omega[j]
-        total += omega[j] * row
+    for i in range(theta.shape[0]):
+        bw0 = -h * math.sin(theta[i]) * omega[i]
+        bw1 = h * math.cos(theta[i]) * omega[i]
+        v0 = p0 + 0.5 * bw0
+        v1 = p1 + 0.5 * bw1
+        total += mass_e[i] * (v0 * v0 + v1 * v1) + rot_inertia[i] * omega[i] ** 2
+        p0 += bw0
+        p1 += bw1
     return 0.5 * total
 
 
@@ -405,20 +403,25 @@ def chain_solve(lower: np.ndarray, left: np.ndarray, up: np.ndarray, band: np.nd
 
 @njit(cache=True)
 def circle_projection(q: np.ndarray, radius: float, cx: float,
-                      cy: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                      cy: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Closest points on the circle ``|p - c| = radius`` (as ``Obstacle.project``): foot (n, 2),
-    polar angle of the query (n,), signed distance (n,), outward normal (n, 2); a query at the
-    centre gets the normal (1, 0)."""
+    arclength ``s_o = mod(t, 2 pi) radius`` (n,), tangent angle ``t + pi/2`` (n,), curvature
+    (n,), signed distance (n,), outward normal (n, 2), ``t`` the query's polar angle; a query at
+    the centre gets the normal (1, 0)."""
     n = q.shape[0]
     foot = np.empty((n, 2))
-    ang = np.empty(n)
+    s_o = np.empty(n)
+    phi = np.empty(n)
+    kappa = np.full(n, 1.0 / radius)
     sd = np.empty(n)
     nrm = np.empty((n, 2))
     for i in range(n):
         d0 = q[i, 0] - cx
         d1 = q[i, 1] - cy
         dist = math.hypot(d0, d1)
-        ang[i] = math.atan2(d1, d0)
+        ang = math.atan2(d1, d0)
+        s_o[i] = (ang % (2 * np.pi)) * radius  # (Python's float mod: numpy's np.mod)
+        phi[i] = ang + 0.5 * np.pi
         if dist > 0:
             n0 = d0 / dist
             n1 = d1 / dist
@@ -430,21 +433,23 @@ def circle_projection(q: np.ndarray, radius: float, cx: float,
         foot[i, 0] = cx + radius * n0
         foot[i, 1] = cy + radius * n1
         sd[i] = dist - radius
-    return foot, ang, sd, nrm
+    return foot, s_o, phi, kappa, sd, nrm
 
 
 @njit(cache=True)
-def joint_couple_jacobian(h: float, g_rho: np.ndarray, g_alpha: np.ndarray, normal_out: np.ndarray,
-                          foot_turn: np.ndarray, b: np.ndarray) -> np.ndarray:
+def joint_couple_jacobian(h: float, g_rho: np.ndarray, g_alpha: np.ndarray, rho: np.ndarray, kappa_o: np.ndarray,
+                          foot_turn: np.ndarray, normal_out: np.ndarray, b: np.ndarray,
+                          safe_one_plus: float) -> np.ndarray:
     """``du/dtheta`` (N, N) of :func:`contgrasp_core.control.rod_feedback.joint_couple_jacobian`:
-    ``h (g_rho n_k + g_alpha foot_turn_k t_k) . b_l`` for ``l < k`` and ``-g_alpha_k / 2`` at
-    ``(k, k)`` and ``(k, k-1)``, ``k >= 1``."""
+    ``h (g_rho n_k + g_alpha turn_k t_k) . b_l`` for ``l < k`` and ``-g_alpha_k / 2`` at
+    ``(k, k)`` and ``(k, k-1)``, ``k >= 1``; ``turn_k = foot_turn_k`` where ``1 + rho_k kappa_o_k >
+    safe_one_plus``, else 0 (the shadow geometry at the N+1 nodes; the joints are the first N)."""
     n = g_rho.shape[0]
     du = np.zeros((n, b.shape[0]))
     for k in range(n):
         n0 = normal_out[k, 0]
         n1 = normal_out[k, 1]
-        ga = g_alpha[k] * foot_turn[k]
+        ga = g_alpha[k] * (foot_turn[k] if 1.0 + rho[k] * kappa_o[k] > safe_one_plus else 0.0)
         d0 = g_rho[k] * n0 + ga * (-n1)
         d1 = g_rho[k] * n1 + ga * n0
         for j in range(k):

@@ -187,8 +187,8 @@ class RodSystem:
             extra = 0.5 * float(np.sum(self.body.mass_matrix * state.body.v**2))
         if _kernels.ENABLED:
             m = self.model
-            return float(_kernels.kinetic_energy(_kernels.f64(state.theta), _kernels.f64(state.omega), m.h,
-                                                 m.weight_matrix, m.rot_inertia)) + extra
+            return float(_kernels.kinetic_energy(_kernels.f64(state.theta), _kernels.f64(state.omega), m.h, m.mass,
+                                                 m.rot_inertia)) + extra
         return float(0.5 * state.omega @ chain.mass_matrix(self.model, state.theta) @ state.omega) + extra
 
     def elastic_energy(self, state: RodState, loads: RodLoads | None = None) -> float:
@@ -309,7 +309,7 @@ class RodSystem:
         m = self.model
         f64 = _kernels.f64
         theta = f64(theta)
-        base = f64(m.base_position)
+        base = m.base
         a, b, x = _kernels.frames_nodes(theta, m.h, base)
         u_fb, du = _EMPTY, _EMPTY22
         if loads.feedback is not None:
@@ -351,7 +351,9 @@ class RodSystem:
             if self.body is None:
                 raise InvalidParameterError("a wrench on the object needs a movable object (the object is fixed)")
             wrench_array("the object's wrench", loads.wrench)
-        with single_thread_blas():  # (contgrasp_core.blas: small solves, one thread)
+        if _kernels.ENABLED and not self._coupled_contact:  # the structured solve calls no BLAS
+            return self._advance(state, duration, loads, dt_try)
+        with single_thread_blas():  # (contgrasp_core.blas: small dense solves, one thread)
             return self._advance(state, duration, loads, dt_try)
 
     def _advance(self, state: RodState, duration: float, loads: RodLoads,
@@ -447,7 +449,7 @@ class RodSystem:
             return None
         m, th0, w0 = self.model, state.theta, state.omega
         if _kernels.ENABLED:
-            x = _kernels.frames_nodes(_kernels.f64(th0 + 0.5 * dt * w0), m.h, _kernels.f64(m.base_position))[2]
+            x = _kernels.frames_nodes(_kernels.f64(th0 + 0.5 * dt * w0), m.h, m.base)[2]
             c0 = 0.5 * (x[:-1] + x[1:])
         else:
             c0 = chain.centres(m, th0 + 0.5 * dt * w0)
@@ -534,6 +536,7 @@ class RodSystem:
         frame = self.contact_frame(state, dt)
         w1 = w0.copy() if rate_change is None else w0 + dt * rate_change
         prev = np.inf
+        scale = 1.0 + np.abs(th0).max()
         for it in range(1, opt.max_iter + 1):
             res, jac, ev = self._newton_system(state, w1, dt, loads, frame)
             dw = solve(jac, -res)
@@ -548,7 +551,7 @@ class RodSystem:
                 return None, 0.5
             prev = size
             w1 = w1 + dw
-            if size <= opt.tol * (1.0 + np.abs(th0).max() + dt * np.abs(w1[:n]).max()):
+            if size <= opt.tol * (scale + dt * np.abs(w1[:n]).max()):
                 info["iterations"] += it
                 new = self._new_state(state, w1, dt, ev.anchors)
                 turn = np.abs(new.theta - th0).max() / opt.max_angle_step

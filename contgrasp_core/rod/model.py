@@ -101,6 +101,11 @@ class RodModel:
         return self.length / self.n_elements
 
     @cached_property
+    def base(self) -> np.ndarray:
+        """``base_position`` as an array (2,), for the compiled kernels."""
+        return np.array(self.base_position, dtype=float)
+
+    @cached_property
     def s_nodes(self) -> np.ndarray:
         """Node arclengths ``k h``, ``k = 0..N`` (N+1,)."""
         return np.linspace(0.0, self.length, self.n_elements + 1)

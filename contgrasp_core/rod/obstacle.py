@@ -74,9 +74,7 @@ class Obstacle:
         q = np.asarray(points, dtype=float)
         if self._circle is not None and _kernels.ENABLED:
             R, c = self._circle
-            foot, ang, sd, n_out = _kernels.circle_projection(_kernels.f64(q), R, float(c[0]), float(c[1]))
-            return ObstacleProjection(foot=foot, s_o=np.mod(ang, 2 * np.pi) * R, phi=ang + 0.5 * np.pi,
-                                      kappa_o=np.full(len(q), 1.0 / R), signed_distance=sd, normal_out=n_out)
+            return ObstacleProjection(*_kernels.circle_projection(_kernels.f64(q), R, float(c[0]), float(c[1])))
         if self._circle is not None:
             R, c = self._circle
             d = q - c
