@@ -32,6 +32,7 @@ from ._validate import float_array, instance, real
 from .arm import ArmShape, BasePose, curvature_spline
 from .boundary import Boundary
 from .errors import ContactValidityError, IntegrationError, InvalidParameterError
+from .rod import _kernels
 
 if TYPE_CHECKING:  # (imported in sense() when needed: the ROS boundary sensor never needs it)
     from .rod.obstacle import Obstacle
@@ -140,7 +141,11 @@ def shadow_geometry(
     nothing else: no input checks, no ``s_o``, ``delta`` or contact set. For the feedback law's
     first-order hold inside the rod's Newton iterations
     (:class:`~contgrasp_core.control.HeldExpansion`), which senses its own well-formed arrays
-    several times per step and reads only these."""
+    several times per step and reads only these. Against a circle (kernels enabled) the same
+    operations run in one compiled loop (:func:`contgrasp_core.rod._kernels.circle_shadow_geometry`)."""
+    circle = obstacle.compiled_circle
+    if circle is not None:
+        return _kernels.circle_shadow_geometry(_kernels.f64(points), _kernels.f64(angles), *circle)
     proj = obstacle.project(points)
     rho = proj.signed_distance
     kappa_o = proj.kappa_o

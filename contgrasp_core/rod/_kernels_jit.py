@@ -9,7 +9,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["frames_nodes", "kinetic_energy", "newton_system", "chain_solve", "circle_projection",
-           "joint_couple_jacobian"]
+           "circle_shadow_geometry", "joint_couple_jacobian"]
 
 
 @njit(cache=True)
@@ -434,6 +434,36 @@ def circle_projection(q: np.ndarray, radius: float, cx: float,
         foot[i, 1] = cy + radius * n1
         sd[i] = dist - radius
     return foot, s_o, phi, kappa, sd, nrm
+
+
+@njit(cache=True, error_model="numpy")  # (1 + rho kappa_o = 0 gives inf, as numpy's division)
+def circle_shadow_geometry(q: np.ndarray, angles: np.ndarray, radius: float, cx: float,
+                           cy: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`contgrasp_core.contact.shadow_geometry` against a circle: ``rho``, ``alpha``,
+    ``kappa_o``, ``foot_turn``, ``normal_out`` of the points ``q`` (n, 2) with tangent angles (n,),
+    by the operations of :func:`circle_projection` and of ``shadow_geometry`` on its result, in
+    the same order (the same bits)."""
+    n = q.shape[0]
+    rho = np.empty(n)
+    alpha = np.empty(n)
+    kappa = np.full(n, 1.0 / radius)
+    turn = np.empty(n)
+    nrm = np.empty((n, 2))
+    for i in range(n):
+        d0 = q[i, 0] - cx
+        d1 = q[i, 1] - cy
+        dist = math.hypot(d0, d1)
+        phi = math.atan2(d1, d0) + 0.5 * np.pi
+        rho[i] = dist - radius
+        alpha[i] = (phi + 0.5 * np.pi - angles[i] + np.pi) % (2.0 * np.pi) - np.pi
+        turn[i] = kappa[i] / (1.0 + rho[i] * kappa[i])
+        if dist > 0:
+            nrm[i, 0] = d0 / dist
+            nrm[i, 1] = d1 / dist
+        else:
+            nrm[i, 0] = 1.0
+            nrm[i, 1] = 0.0
+    return rho, alpha, kappa, turn, nrm
 
 
 @njit(cache=True)

@@ -15,11 +15,13 @@ from functools import lru_cache
 import numpy as np
 
 from contgrasp_core.arm import ArmShape
+from contgrasp_core.rod import _kernels
 from contgrasp_core.rod.model import RodModel
 
 __all__ = [
     "frames",
     "nodes",
+    "frames_and_nodes",
     "centres",
     "node_angles",
     "arm_shape",
@@ -50,6 +52,16 @@ def nodes(model: RodModel, theta: np.ndarray, tangents: np.ndarray | None = None
     np.cumsum(model.h * a, axis=0, out=x[1:])
     x[1:] += x[0]
     return x
+
+
+def frames_and_nodes(model: RodModel, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`frames` and :func:`nodes` (``a``, ``b``, ``x``) in one compiled loop
+    (:func:`contgrasp_core.rod._kernels.frames_nodes`, the same values to the bit) unless the
+    kernels are disabled. For the rod engine (a process that imports numba anyway)."""
+    if _kernels.ENABLED:
+        return _kernels.frames_nodes(_kernels.f64(theta), model.h, model.base)
+    a, b = frames(theta)
+    return a, b, nodes(model, theta, a)
 
 
 def centres(model: RodModel, theta: np.ndarray) -> np.ndarray:

@@ -448,11 +448,8 @@ class RodSystem:
         if self.obstacle is None:
             return None
         m, th0, w0 = self.model, state.theta, state.omega
-        if _kernels.ENABLED:
-            x = _kernels.frames_nodes(_kernels.f64(th0 + 0.5 * dt * w0), m.h, m.base)[2]
-            c0 = 0.5 * (x[:-1] + x[1:])
-        else:
-            c0 = chain.centres(m, th0 + 0.5 * dt * w0)
+        x = chain.frames_and_nodes(m, th0 + 0.5 * dt * w0)[2]
+        c0 = 0.5 * (x[:-1] + x[1:])  # (chain.centres)
         margin = self.options.contact_margin + 2.0 * dt * np.abs(w0).max() * m.length
         bs = state.body
         if self.body is None or bs is None:

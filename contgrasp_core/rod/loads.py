@@ -28,6 +28,8 @@ from contgrasp_core.rod.obstacle import Obstacle
 
 __all__ = ["ContactFrame", "ContactLoad", "contact_frame", "drag_forces", "contact_forces", "contact_tensors"]
 
+_TURN = np.array([-1.0, 1.0])  # (n_y, n_x) * _TURN = (-n_y, n_x): the normal turned by +90 degrees
+
 
 @dataclass(frozen=True)
 class ContactFrame:
@@ -54,7 +56,7 @@ def contact_frame(model: RodModel, obstacle: Obstacle | None, c: np.ndarray, mar
     if rows.size == 0:
         return None
     n = pr.normal_out[rows]
-    return ContactFrame(rows=rows, foot=pr.foot[rows], normal=n, tangent=np.stack([-n[:, 1], n[:, 0]], axis=1))
+    return ContactFrame(rows=rows, foot=pr.foot[rows], normal=n, tangent=n[:, ::-1] * _TURN)
 
 
 def drag_forces(model: RodModel, a: np.ndarray, b: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

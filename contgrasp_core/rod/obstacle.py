@@ -69,6 +69,15 @@ class Obstacle:
         self._kap = boundary.curvature(s)
         self._tree = cKDTree(pts)
 
+    @property
+    def compiled_circle(self) -> tuple[float, float, float] | None:
+        """``(R, cx, cy)`` when the projection is the compiled closed form of a circle (a fixed
+        circle, kernels enabled), else None."""
+        if self._circle is None or not _kernels.ENABLED:
+            return None
+        R, c = self._circle
+        return R, float(c[0]), float(c[1])
+
     def project(self, points: np.ndarray) -> ObstacleProjection:
         """Closest boundary point of each of ``points`` (n, 2) (vectorised)."""
         q = np.asarray(points, dtype=float)
@@ -114,6 +123,7 @@ class _MovedObstacle(Obstacle):
     def __init__(self, base: Obstacle, q: np.ndarray, centroid: np.ndarray) -> None:  # (no table to build)
         self.boundary, self.length = base.boundary, base.length
         self._base = base
+        self._circle = None  # (its projection is the start pose's, moved)
         self._q = np.array(q, dtype=float)
         self._centroid = np.array(centroid, dtype=float)
 

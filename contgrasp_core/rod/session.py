@@ -166,8 +166,7 @@ class LoopSession:
         if self._observed is not None and self._observed.k == self.k:
             return self._observed
         m, st = self.system.model, self.state
-        a, b = chain.frames(st.theta)
-        x = chain.nodes(m, st.theta, a)
+        _, b, x = chain.frames_and_nodes(m, st.theta)
         v = np.zeros_like(x)
         np.cumsum(m.h * b * st.omega[:, None], axis=0, out=v[1:])
         speed = float(np.hypot(v[:, 0], v[:, 1]).max())
@@ -227,11 +226,11 @@ class LoopSession:
         expansion = couple if isinstance(couple, FeedbackExpansion) else None
         u = np.asarray(expansion.u if expansion is not None else couple, dtype=float)
         n = self.system.model.n_elements
-        if u.shape != (n,) or not np.all(np.isfinite(u)):
+        if u.shape != (n,) or not np.isfinite(u).all():
             raise InvalidParameterError(f"couple must be {n} finite values, got {u.shape}")
         if expansion is not None:
             parts = (expansion.rho_ref, expansion.alpha_ref, expansion.g_rho, expansion.g_alpha)
-            if any(np.shape(p) != (n,) or not np.all(np.isfinite(p)) for p in parts):
+            if any(np.shape(p) != (n,) for p in parts) or not np.isfinite(parts).all():
                 raise InvalidParameterError(f"the feedback expansion needs {n} finite values per field")
         if self.finished:
             raise InvalidParameterError("the run is finished; reset to start again")
