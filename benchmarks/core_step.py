@@ -3,7 +3,7 @@
 ``contgrasp_core.rod.session.run_sampled(PAPER)``: N = 100 elements, 2 ms control period; each
 step is observe, sense (``contact.sense``: ``Boundary.project``), the law
 (``feedback_at_joints``) and ``LoopSession.advance`` (the implicit step: ~3 Newton iterations,
-each a residual + exact Newton matrix and a dense solve).
+each a residual + exact Newton matrix and a solve).
 
 Compares, in ONE process, interleaved, medians over ``--repeats`` (the machine is shared, so
 only ratios within a run mean much; the load average is printed at start and end):
@@ -13,11 +13,12 @@ only ratios within a run mean much; the load average is printed at start and end
   closest-point search for the sensing (the circle as a ``fourier_polar`` curve without
   harmonics: the path ``Boundary.project`` took for circles before its closed form). Solves on one BLAS thread for both (the old code
   ran them on OpenBLAS's default threads: ``--old-threads`` measures that too);
-* ``after``: the kernels and the circle's closed-form projection.
+* ``after``: the kernels (the Newton matrix in its structured form, solved in O(N^2):
+  ``contgrasp_core.rod.newton_matrix``) and the circle's closed-form projection.
 
 Both runs must end in the same state (checked: same step count and settle time, states within
 1e-9). Then the breakdown per step (observe / sense / law / advance, the advance split into
-Newton matrix + residual, LAPACK solve and the rest), the scaling with N (time per step, the
+Newton matrix + residual, the solve (LAPACK before, the structured solve after) and the rest), the scaling with N (time per step, the
 first ``--scaling-steps`` control steps: the approach and first contact) and the floor.
 
     python benchmarks/core_step.py                 # full paper run, 3 repeats, N-scaling
@@ -89,11 +90,11 @@ def run(scenario: Scenario, after: bool, steps: int | None = None, *, breakdown:
     system = RodSystem(scenario.rod, Obstacle(obj))
     gains = scenario.feedback_gains
     phases = dict.fromkeys(("observe", "sense", "law", "advance"), 0.0)
-    saved = (np.linalg.solve, system.newton_system)
-    solve_t, nsys_t = Timed(np.linalg.solve), Timed(system.newton_system)
-    if breakdown:  # (the solve is looked up as np.linalg.solve in the integrator)
-        np.linalg.solve = solve_t
-        object.__setattr__(system, "newton_system", nsys_t)
+    saved_solve = integrator.solve
+    solve_t, nsys_t = Timed(integrator.solve), Timed(system._newton_system)
+    if breakdown:  # (the integrator looks the solve up as its module's ``solve``)
+        integrator.solve = solve_t  # type: ignore[assignment]
+        object.__setattr__(system, "_newton_system", nsys_t)
     try:
         with mode(after, old_threads):
             session = LoopSession(system, scenario.loop)
@@ -116,19 +117,19 @@ def run(scenario: Scenario, after: bool, steps: int | None = None, *, breakdown:
                 phases["advance"] += t4 - t3
             wall = time.perf_counter() - t_all
     finally:
-        np.linalg.solve = saved[0]
+        integrator.solve = saved_solve
         if breakdown:
-            object.__delattr__(system, "newton_system")
+            object.__delattr__(system, "_newton_system")
     k = max(session.k, 1)
     out = {"k": session.k, "wall": wall, "per_step_ms": 1e3 * wall / k, "iterations": session.iterations,
            "settle_time": session.settle_time, "theta": session.state.theta.copy(),
            "phases_ms": {p: 1e3 * v / k for p, v in phases.items()}}
     if breakdown:
         matrix = nsys_t.total
-        out["advance_split_ms"] = {"newton matrix + residual": 1e3 * matrix / k, "LAPACK solve": 1e3 * solve_t.total / k,
+        out["advance_split_ms"] = {"newton matrix + residual": 1e3 * matrix / k, "solve": 1e3 * solve_t.total / k,
                                    "rest of advance": 1e3 * (phases["advance"] - matrix - solve_t.total) / k}
         out["per_iteration_us"] = {"newton matrix + residual": 1e6 * matrix / max(nsys_t.calls, 1),
-                                   "LAPACK solve": 1e6 * solve_t.total / max(solve_t.calls, 1)}
+                                   "solve": 1e6 * solve_t.total / max(solve_t.calls, 1)}
     return out
 
 
@@ -176,12 +177,12 @@ def main() -> None:
     for p in bb["advance_split_ms"]:
         print(f"    {p:26s} {bb['advance_split_ms'][p]:8.3f} {ba['advance_split_ms'][p]:8.3f}")
     print(f"  per Newton iteration (us): matrix + residual {bb['per_iteration_us']['newton matrix + residual']:.0f} -> "
-          f"{ba['per_iteration_us']['newton matrix + residual']:.0f}, LAPACK solve "
-          f"{bb['per_iteration_us']['LAPACK solve']:.0f} -> {ba['per_iteration_us']['LAPACK solve']:.0f}; "
+          f"{ba['per_iteration_us']['newton matrix + residual']:.0f}, solve (LAPACK -> structured) "
+          f"{bb['per_iteration_us']['solve']:.0f} -> {ba['per_iteration_us']['solve']:.0f}; "
           f"{ba['iterations'] / max(ba['k'], 1):.2f} iterations per step")
 
     print(f"\nscaling (first {args.scaling_steps} control steps, time per step in ms, median of {args.repeats}; ratio = "
-          "median of the paired ratios; solve / matrix = ms per step in the LAPACK solve / in the Newton matrix + "
+          "median of the paired ratios; solve / matrix = ms per step in the structured solve / in the Newton matrix + "
           "residual incl. the feedback's sensing, after):")
     print(f"  {'N':>5s} {'before':>9s} {'after':>9s} {'ratio':>6s} {'solve':>7s} {'matrix':>7s}  iterations/step")
     for n in (int(v) for v in args.scaling.split(",")):
@@ -193,7 +194,7 @@ def main() -> None:
         br = run(sc, True, args.scaling_steps, breakdown=True)
         mb_, ma_ = float(np.median(bs)), float(np.median(as_))
         pr = float(np.median([b / a for b, a in zip(bs, as_, strict=True)]))
-        print(f"  {n:5d} {mb_:9.3f} {ma_:9.3f} {pr:6.2f} {br['advance_split_ms']['LAPACK solve']:7.3f} "
+        print(f"  {n:5d} {mb_:9.3f} {ma_:9.3f} {pr:6.2f} {br['advance_split_ms']['solve']:7.3f} "
               f"{br['advance_split_ms']['newton matrix + residual']:7.3f}  {br['iterations'] / max(br['k'], 1):.2f}",
               flush=True)
     print(f"load average at end {load()}")
