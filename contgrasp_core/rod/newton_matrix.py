@@ -16,12 +16,15 @@ feedback's ``du`` is a general lower triangle), the upper triangle as ``(a, up, 
 Gaussian elimination then keeps the Schur complements' upper triangles in the same form,
 ``(a_i - W_i) . up_k`` with one 2-vector ``W_i`` per row (plus the band entry's share in the
 next column), so the factorisation and both triangular solves cost O(N^2) instead of LAPACK's
-O(N^3) (:func:`contgrasp_core.rod._kernels_jit.chain_solve`; 13 us instead of 80 us at N = 100). The
-elimination does not pivot: the matrix is the mass matrix (symmetric positive definite) plus
-``dt``-scaled stiffness, damping and feedback terms, whose leading minors stay well away from
-zero; a non-finite result (a vanishing pivot) falls back to LAPACK with pivoting. Tested equal
-to LAPACK's solve of the dense matrix to ~1e-13 on the paper run's Newton matrices and on random
-states (tests/test_newton_matrix.py).
+O(N^3) (:func:`contgrasp_core.rod._kernels_jit.chain_solve`; 13 us instead of 80 us at
+N = 100). The elimination does not pivot: the matrix is the mass matrix (symmetric positive
+definite) plus ``dt``-scaled stiffness, damping and feedback terms, close to diagonally dominant
+(on the paper run's Newton matrices the multipliers stay below 78, median 0.3, and LAPACK's
+partial pivoting itself keeps the diagonal in 428 of 431 sampled matrices); a non-finite result
+(a vanishing pivot) falls back to LAPACK with pivoting. Backward stable in practice (backward
+error <= 1.6e-16 on the paper run's sampled matrices, LAPACK's 2.2e-16); tests/test_newton_matrix.py
+checks the solve against LAPACK's solve of the dense matrix on the paper run's Newton matrices
+and on random states.
 """
 
 from __future__ import annotations

@@ -152,6 +152,7 @@ class LoopSession:
         self._observed: Observation | None = None
         self._radius = system.model.radius(system.model.s_nodes)  # (the same every step: shared, read-only)
         self._radius.flags.writeable = False
+        self._surface_radius = np.concatenate((self._radius, system.model.r_centres))  # at the nodes and centres
 
     @property
     def settled(self) -> bool:
@@ -175,9 +176,8 @@ class LoopSession:
             speed = max(speed, body.max_speed(st.body, x))
         radius = self._radius
         obstacle = self.system.obstacle_at(st)
-        gap_nodes = obstacle.project(x).signed_distance - radius
-        gap_c = obstacle.project(0.5 * (x[:-1] + x[1:])).signed_distance - m.r_centres  # (chain.centres)
-        pen = max(float(-gap_nodes.min()), float(-gap_c.min()), 0.0)
+        points = np.concatenate((x, 0.5 * (x[:-1] + x[1:])))  # the nodes and the centres (chain.centres)
+        pen = max(float(-(obstacle.project(points).signed_distance - self._surface_radius).min()), 0.0)
         self.max_penetration = max(self.max_penetration, pen)
         obs = Observation(
             k=self.k,
