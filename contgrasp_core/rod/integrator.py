@@ -384,7 +384,8 @@ class RodSystem:
 
     def newton_system(self, state: RodState, w1: np.ndarray, dt: float, loads: RodLoads = RodLoads(),
                       frame: ContactFrame | None = None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
-        """Residual, Newton matrix (N, N) and what the iteration reports of :meth:`_newton_system`."""
+        """:meth:`_newton_system` with the Newton matrix as an (N, N) array (the step itself solves
+        the structured :class:`.newton_matrix.ChainMatrix` where it has one)."""
         res, jac, ev = self._newton_system(state, w1, dt, loads, frame)
         return res, dense(jac), ev
 
