@@ -138,7 +138,9 @@ def test_simulate_settles_when_it_says() -> None:
 def test_the_shipped_sample_matches_the_code(paper_run: dict[str, Any]) -> None:
     """bags/paper_grasp.mcap is what the code makes today: the core loop run for the scenario
     the sample carries (its contgrasp_run record) ends at the recorded step and settle time in
-    the recorded final state, bit for bit. Regenerate it as bags/README.md says when not."""
+    the recorded final state (to 1e-12: numba compiles the kernels for the host CPU, and another
+    CPU's fused multiply-adds change the last bits; a 1e-17 m difference was seen between two
+    machines of this kind). Regenerate it as bags/README.md says when not."""
     from contgrasp_core.rod.session import run_sampled
     from contgrasp_ros.analysis import load_run
 
@@ -153,6 +155,6 @@ def test_the_shipped_sample_matches_the_code(paper_run: dict[str, Any]) -> None:
     assert int(run.status["step"]) == session.k == int(run.rod.step[-1]), "steps: regenerate the sample (bags/README.md)"
     assert float(run.status["settle_time_s"]) == session.settle_time, "settle time: regenerate the sample (bags/README.md)"
     assert float(run.status["sim_time_s"]) == obs.t
-    np.testing.assert_array_equal(run.rod.x[-1], obs.x[:, 0])
-    np.testing.assert_array_equal(run.rod.y[-1], obs.x[:, 1])
-    np.testing.assert_array_equal(run.rod.theta[-1], obs.theta)
+    np.testing.assert_allclose(run.rod.x[-1], obs.x[:, 0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(run.rod.y[-1], obs.x[:, 1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(run.rod.theta[-1], obs.theta, rtol=0, atol=1e-12)
