@@ -402,6 +402,18 @@ def chain_solve(lower: np.ndarray, left: np.ndarray, up: np.ndarray, band: np.nd
 
 
 @njit(cache=True)
+def _circle_polar(qx: float, qy: float, cx: float, cy: float) -> tuple[float, float, float, float]:
+    """Distance of ``(qx, qy)`` from the circle's centre, its polar angle, and the outward unit
+    normal ``(n0, n1)`` there ((1, 0) at the centre): the per-point part of the circle kernels."""
+    d0 = qx - cx
+    d1 = qy - cy
+    dist = math.hypot(d0, d1)
+    if dist > 0:
+        return dist, math.atan2(d1, d0), d0 / dist, d1 / dist
+    return dist, math.atan2(d1, d0), 1.0, 0.0
+
+
+@njit(cache=True)
 def circle_projection(q: np.ndarray, radius: float, cx: float,
                       cy: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Closest points on the circle ``|p - c| = radius`` (as ``Obstacle.project``): foot (n, 2),
@@ -416,18 +428,9 @@ def circle_projection(q: np.ndarray, radius: float, cx: float,
     sd = np.empty(n)
     nrm = np.empty((n, 2))
     for i in range(n):
-        d0 = q[i, 0] - cx
-        d1 = q[i, 1] - cy
-        dist = math.hypot(d0, d1)
-        ang = math.atan2(d1, d0)
+        dist, ang, n0, n1 = _circle_polar(q[i, 0], q[i, 1], cx, cy)
         s_o[i] = (ang % (2 * np.pi)) * radius  # (Python's float mod: numpy's np.mod)
         phi[i] = ang + 0.5 * np.pi
-        if dist > 0:
-            n0 = d0 / dist
-            n1 = d1 / dist
-        else:
-            n0 = 1.0
-            n1 = 0.0
         nrm[i, 0] = n0
         nrm[i, 1] = n1
         foot[i, 0] = cx + radius * n0
@@ -450,19 +453,11 @@ def circle_shadow_geometry(q: np.ndarray, angles: np.ndarray, radius: float, cx:
     turn = np.empty(n)
     nrm = np.empty((n, 2))
     for i in range(n):
-        d0 = q[i, 0] - cx
-        d1 = q[i, 1] - cy
-        dist = math.hypot(d0, d1)
-        phi = math.atan2(d1, d0) + 0.5 * np.pi
+        dist, ang, nrm[i, 0], nrm[i, 1] = _circle_polar(q[i, 0], q[i, 1], cx, cy)
+        phi = ang + 0.5 * np.pi
         rho[i] = dist - radius
         alpha[i] = (phi + 0.5 * np.pi - angles[i] + np.pi) % (2.0 * np.pi) - np.pi
         turn[i] = kappa[i] / (1.0 + rho[i] * kappa[i])
-        if dist > 0:
-            nrm[i, 0] = d0 / dist
-            nrm[i, 1] = d1 / dist
-        else:
-            nrm[i, 0] = 1.0
-            nrm[i, 1] = 0.0
     return rho, alpha, kappa, turn, nrm
 
 
