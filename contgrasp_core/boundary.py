@@ -173,6 +173,15 @@ class Boundary:
 
         return cKDTree(self._c(self._tab_t, 0))
 
+    def prepare(self) -> Boundary:
+        """Build the lazily made interpolants and search tree now (importing scipy.interpolate
+        and scipy.spatial, ~0.3-0.6 s the first time in a process) rather than on the first
+        geometric query; a node does this when an object arrives so that the first state it
+        processes is not late. Returns the boundary."""
+        for table in ("_t_of_s_guess", "_phi_ref", "_tree"):
+            getattr(self, table)
+        return self
+
     # ------------------------------------------------------------------ arclength maps
     def _arclengths(self, s_o: ArrayLike) -> NDArray[np.float64]:
         """``s_o`` as a float array; every value finite with ``|s_o| <= 1e15 L_o``."""

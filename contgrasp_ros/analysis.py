@@ -280,8 +280,9 @@ def _quality_series(msgs: list[Any]) -> QualitySeries | None:
 
 
 def load_run(path: str | Path) -> RunData:
-    """Decode a recording (bag folder or ``.mcap``) into arrays; :class:`BagError` for a
-    missing/corrupt file or one without rod states or object boundary."""
+    """Decode a recording (bag folder or ``.mcap``) into arrays, each topic's messages in the
+    order they were published; :class:`BagError` for a missing/corrupt file or one without rod
+    states or object boundary."""
     rec = open_recording(path)
     meta = info(rec)
     recorded = [{"name": t["name"], "type": t["type"], "count": t["count"]} for t in meta["topics"]]
@@ -300,7 +301,9 @@ def load_run(path: str | Path) -> RunData:
 
     by_topic: dict[str, list[Any]] = {topics.ROD_STATE: [], topics.CONTACT: [], topics.QUALITY: [], topics.OBJECT: []}
     status: dict[str, str] = {}
-    for raw, msg in iter_decoded(rec, [*by_topic, topics.DIAGNOSTICS]):
+    # in the order they were published, not by log time: a simulated-time log time is the header
+    # stamp, and a late message stamped t = 0 (unset) is logged at the recorder's clock instead
+    for raw, msg in sorted(iter_decoded(rec, [*by_topic, topics.DIAGNOSTICS]), key=lambda rm: rm[0].publish_time_ns):
         if raw.topic != topics.DIAGNOSTICS:
             by_topic[raw.topic].append(msg)
             continue

@@ -537,7 +537,7 @@ class ObjectTracker:
         except ContgraspError as exc:
             self.drops.drop_error(self._topic, exc)
             return
-        self.boundary = boundary
+        self.boundary = boundary.prepare()  # (its tables now, not at the first state it serves)
         if self._on_change is not None:
             self._on_change()
 

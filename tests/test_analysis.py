@@ -207,6 +207,26 @@ def test_decimated_recording_pairs_by_step(recording: tuple[Path, dict], tmp_pat
     assert r["max_recompute_error"] <= 1e-9
 
 
+def test_streams_are_read_in_publish_order(recording: tuple[Path, dict], tmp_path: Path) -> None:
+    """A message logged out of its publish order (a late quality of step 0 is stamped t = 0,
+    which the recorder logs at its clock on arrival) does not become the run's last one."""
+    bag, summary = recording
+    rec = open_recording(bag)
+    first_quality = min(iter_raw(rec, [QUALITY]), key=lambda m: m.publish_time_ns)
+    end_ns = max(m.log_time_ns for m in iter_raw(rec))
+    out = BagWriter(tmp_path / "late")
+    for m in iter_raw(rec):
+        out.add_topic(m.topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""), m.channel.metadata.get("topic_type_hash", ""),
+                      definition=m.schema.data.decode())
+        late = m.topic == QUALITY and m.publish_time_ns == first_quality.publish_time_ns
+        out.write(m.topic, m.data, end_ns + 1 if late else m.log_time_ns, m.publish_time_ns, m.sequence)
+    out.records.update({k: v for k, v in rec.metadata_records().items() if k != "rosbag2"})
+    out.close()
+    last_logged = list(iter_raw(open_recording(tmp_path / "late"), [QUALITY]))[-1]
+    assert last_logged.publish_time_ns == first_quality.publish_time_ns  # (the copy does reorder)
+    assert analyze(tmp_path / "late")["final_quality"] == analyze(bag)["final_quality"] == summary["final_quality"]
+
+
 def test_recomputation_is_not_vacuous(recording: tuple[Path, dict]) -> None:
     """A perturbed rod state, a wrong sensor tolerance or a wrong quality tolerance shows up."""
     bag, _ = recording

@@ -157,6 +157,17 @@ def test_from_points_circle_samples() -> None:
     assert np.all(bcw.curvature(s * bcw.length / b.length) > 0)
 
 
+def test_prepare_builds_the_lazy_tables_and_changes_no_answer() -> None:
+    """``prepare`` (a node's call on an arriving object) builds what the first query would."""
+    s = np.linspace(-0.3, 0.9, 17)
+    q = np.array([[0.31, 0.02], [-0.1, 0.45], [0.0, -0.2]])
+    lazy, ready = deformed_circle(0.2, 0.2, 3), deformed_circle(0.2, 0.2, 3)
+    assert ready.prepare() is ready and {"_t_of_s_guess", "_phi_ref", "_tree"} <= set(vars(ready))
+    assert not {"_t_of_s_guess", "_phi_ref", "_tree"} & set(vars(lazy))
+    np.testing.assert_array_equal(lazy.tangent_angle(s), ready.tangent_angle(s))
+    np.testing.assert_array_equal(lazy.project(q).s_o, ready.project(q).s_o)
+
+
 def test_from_points_rejects_bad_outlines(tmp_path) -> None:  # type: ignore[no-untyped-def]
     th = np.linspace(0, 2 * np.pi, 40, endpoint=False)
     ring = np.stack([np.cos(th), np.sin(th)], -1)
