@@ -113,12 +113,15 @@ def _arrays(msg: object, names: tuple[str, ...], *, min_len: int = 2, max_abs: f
     for name, m in lengths.items():
         if m != n:
             raise MessageError(f"{kind}: field '{name}' has {m} samples, '{names[0]}' has {n}", reason="length mismatch")
-    out = {name: np.asarray(getattr(msg, name), dtype=float) for name in names}
-    for name, arr in out.items():
-        if not np.all(np.isfinite(arr)):
-            raise MessageError(f"{kind}: field '{name}' contains NaN or Inf", reason="NaN/Inf")
-        if max_abs is not None and np.any(np.abs(arr) > max_abs):
-            raise MessageError(f"{kind}: field '{name}' has values beyond +-{max_abs:g}", reason="out of range")
+    # one block and one comparison for all fields (NaN and Inf fail it too); the first bad field is named
+    block = np.array([getattr(msg, name) for name in names], dtype=float).reshape(len(names), n)
+    ok = np.isfinite(block) if max_abs is None else np.abs(block) <= max_abs
+    if not ok.all():
+        i = int(np.flatnonzero(~ok.all(axis=1))[0])
+        if not np.all(np.isfinite(block[i])):
+            raise MessageError(f"{kind}: field '{names[i]}' contains NaN or Inf", reason="NaN/Inf")
+        raise MessageError(f"{kind}: field '{names[i]}' has values beyond +-{max_abs:g}", reason="out of range")
+    out = dict(zip(names, block, strict=True))
     if "s" in out and np.any(np.diff(out["s"]) <= 0.0):
         raise MessageError(f"{kind}: arclength 's' must increase strictly", reason="bad arclength grid")
     return out

@@ -118,9 +118,10 @@ def _parser() -> argparse.ArgumentParser:
     add_object_arguments(p, ROD_SCALE)
     p.add_argument("--duration", type=float, default=None, help="simulated seconds to run at most (overrides the parameter file)")
     p.add_argument("--in-process", action="store_true", help="run all nodes in this process on one executor")
-    p.add_argument("--executor", choices=("single", "events"), default=None,
-                   help="with --in-process: single-threaded (default) or rclpy's experimental events executor "
-                        "(separate node processes always use the single-threaded executor, see docs/ros.md)")
+    p.add_argument("--executor", choices=("lean", "single", "events"), default=None,
+                   help="with --in-process: contgrasp's lean single-threaded executor (default), rclpy's "
+                        "SingleThreadedExecutor or rclpy's experimental events executor "
+                        "(separate node processes always use the lean executor, see docs/ros.md)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
     p.add_argument("--plot", type=Path, default=None, help="write a Fig. 4-style figure of the run from the received topics")
     p.add_argument("--summary-file", type=Path, default=None, help="also write the JSON summary to this file")

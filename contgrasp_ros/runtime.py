@@ -43,6 +43,7 @@ from std_msgs.msg import Header
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code, one_line
 from contgrasp_ros import topics
+from contgrasp_ros.executor import LeanExecutor
 
 __all__ = [
     "declare",
@@ -75,19 +76,22 @@ class FatalNodeError(RunFailure):
 
 
 def make_executor(context: Context | None = None) -> Executor:
-    """The in-process graph's executor (``contgrasp-launch --in-process``), named by
-    ``CONTGRASP_EXECUTOR``: ``single`` (default, SingleThreadedExecutor) or ``events``
-    (rclpy.experimental.EventsExecutor, lower latency); node processes (:func:`run_node`) always
-    use the single-threaded executor (docs/ros.md). The multi-threaded
-    executor is deliberately not offered: on 2 cores its tail latency is large (docs/design.md)."""
-    kind = os.environ.get("CONTGRASP_EXECUTOR", "single")
+    """The launcher's executor (its monitor, and every node with ``--in-process``), named by
+    ``CONTGRASP_EXECUTOR``: ``lean`` (default, :class:`~contgrasp_ros.executor.LeanExecutor`),
+    ``single`` (rclpy's SingleThreadedExecutor) or ``events`` (rclpy.experimental.EventsExecutor).
+    Node processes (:func:`run_node`) always use the lean executor (docs/ros.md). The
+    multi-threaded executor is deliberately not offered: on 2 cores its tail latency is large
+    (docs/design.md)."""
+    kind = os.environ.get("CONTGRASP_EXECUTOR", "lean")
     if kind == "events":
         from rclpy.experimental import EventsExecutor
 
         return EventsExecutor(context=context)
-    if kind != "single":
-        raise ValueError(f"CONTGRASP_EXECUTOR must be 'single' or 'events', got {kind!r}")
-    return SingleThreadedExecutor(context=context)
+    if kind == "single":
+        return SingleThreadedExecutor(context=context)
+    if kind != "lean":
+        raise ValueError(f"CONTGRASP_EXECUTOR must be 'lean', 'single' or 'events', got {kind!r}")
+    return LeanExecutor(context=context)
 
 
 # ---------------------------------------------------------------------------- parameters
@@ -512,10 +516,14 @@ class ObjectTracker:
 
     The object carries no step: its stamp must be valid and not from the future, but an older
     stamp is accepted (a restarted simulator republishes the object; the newest publication wins).
+    ``prepare``: build the boundary's interpolation tables on arrival
+    (:meth:`~contgrasp_core.boundary.Boundary.prepare`, ~0.3 s the first time in a process) rather
+    than at the first state that needs them: for a node off the lock-step path (the quality
+    node), not for the sensor, whose circle or ellipse never needs them.
     """
 
     def __init__(self, node: Node, drops: DropCounter, stamps: StampGate,
-                 on_change: Callable[[], None] | None = None) -> None:
+                 on_change: Callable[[], None] | None = None, prepare: bool = False) -> None:
         from contgrasp_msgs.msg import ObjectBoundary
         from contgrasp_ros import qos
 
@@ -524,6 +532,7 @@ class ObjectTracker:
         self._stamps = stamps
         self._topic = topics.OBJECT
         self._on_change = on_change
+        self._prepare = prepare
         node.create_subscription(ObjectBoundary, topics.OBJECT, self.on_object, qos.LATCHED)
 
     @guarded(topics.OBJECT)
@@ -537,7 +546,7 @@ class ObjectTracker:
         except ContgraspError as exc:
             self.drops.drop_error(self._topic, exc)
             return
-        self.boundary = boundary.prepare()  # (its tables now, not at the first state it serves)
+        self.boundary = boundary.prepare() if self._prepare else boundary
         if self._on_change is not None:
             self._on_change()
 
@@ -616,9 +625,9 @@ def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             # SIGINT/SIGTERM shut the context down while the node was being built (a launcher
             # stopping its graph because another node failed to start): a stop, not a failure
             raise ExternalShutdownException() from exc
-        # (always single-threaded: CONTGRASP_EXECUTOR is the in-process launcher's choice only; an
+        # (always the lean executor: CONTGRASP_EXECUTOR is the launcher's choice only; an
         # EventsExecutor in a node process hung the graph after resuming and ignored SIGINT/SIGTERM)
-        executor = SingleThreadedExecutor()
+        executor = LeanExecutor()
         executor.add_node(node)
         spin = GuardedSpin(executor, getattr(node, "drops", None) or DropCounter(node))
         while not getattr(node, "stop_requested", False):  # (FinishPolicy: on_finish exit)

@@ -343,10 +343,10 @@ def test_run_node_stopped_while_the_node_is_built_exits_0(capsys: pytest.Capture
     assert capsys.readouterr().err == ""
 
 
-def test_node_processes_use_the_single_threaded_executor_whatever_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
-    """docs/ros.md: node processes always use the single-threaded executor (an EventsExecutor in a
-    node process hung the graph after resuming and ignored SIGINT/SIGTERM); CONTGRASP_EXECUTOR
-    is the in-process launcher's choice only, so not even a bad value reaches a node."""
+def test_node_processes_use_the_lean_executor_whatever_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/ros.md: node processes always use the lean single-threaded executor (an EventsExecutor
+    in a node process hung the graph after resuming and ignored SIGINT/SIGTERM); CONTGRASP_EXECUTOR
+    is the launcher's choice only, so not even a bad value reaches a node."""
     import rclpy
 
     from contgrasp_ros.runtime import make_executor, run_node

@@ -11,7 +11,8 @@ step k arrives; after ``couple_timeout`` wall seconds the configured fallback (`
 couple or apply ``zero``) is used, the miss is counted and a warning logged. Free-running mode
 advances every ``control_period`` of wall time with the latest couple. Services: ``~/pause``
 (std_srvs/SetBool: true pauses, false resumes) and ``~/reset`` (std_srvs/Trigger). The node runs
-in simulated time (``use_sim_time`` defaults to true: the ``/clock`` it publishes) and, when the
+in simulated time (``use_sim_time`` defaults to true: the ``/clock`` it publishes every
+``clock_period`` of simulated time, before the state of that time) and, when the
 run is over, stays up or exits as ``on_finish`` says (:class:`~contgrasp_ros.runtime.FinishPolicy`).
 
 Couples are validated (lengths, NaN/Inf, joints, the stamp rule, the step in lock-step) and
@@ -122,6 +123,8 @@ class RodSimulator(Node):
         declare(self, "timeout_fallback", "hold", "lock-step timeout: 'hold' the last couple or apply 'zero'", choices=FALLBACKS)
         self.start_paused = declare(self, "start_paused", False, "wait for ~/pause(false) before the first step", read_only=True)
         declare(self, "marker_period", 0.05, "simulated seconds between RViz marker updates (0 = off)", lo=0.0, hi=1e6)
+        declare(self, "clock_period", 0.01, "simulated seconds between /clock publications (0 = with every state; "
+                "the first and the last state's always go out)", lo=0.0, hi=1e6)
         self.lockstep = declare(self, "lockstep", True, "advance only when the couple for the current step arrived", read_only=True)
         declare(self, "min_subscribers", 0, "publish the first state only once this many subscribers matched the "
                 "rod state (a restarted simulator: its first state is not lost while they reconnect)", lo=0, hi=1000)
@@ -208,6 +211,7 @@ class RodSimulator(Node):
         self.last_couple: np.ndarray | FeedbackExpansion = np.zeros(self.model.n_elements)
         self.rule.reset()
         self.next_marker_t = 0.0
+        self.next_clock_t = 0.0
         self.failure = ""
         self.stamps.reset()
         self.wrenches.reset()
@@ -236,7 +240,9 @@ class RodSimulator(Node):
         header = Header(stamp=_stamp(obs.t), frame_id="world")
         wrench = self.wrenches.freeze(obs.k, obs.t)  # held over the period from this state
         centroid = None if self.system.body is None else self.system.body.centroid
-        self.pub_clock.publish(ClockMsg(clock=header.stamp))
+        if obs.t + 1e-12 >= self.next_clock_t or self.session.finished:
+            self.next_clock_t = obs.t + self.get_parameter("clock_period").value
+            self.pub_clock.publish(ClockMsg(clock=header.stamp))
         self.pub_state.publish(
             RodState(
                 header=header, step=obs.k, s=float64_field(obs.s), x=float64_field(obs.x[:, 0]),
