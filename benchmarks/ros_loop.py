@@ -9,7 +9,8 @@ N = 100, 2 ms control period, until settled) run four ways in one process, one a
   (d) the graph as separate processes in wall-clock mode (`lockstep: false`: the simulator steps
       every control period of wall time with the latest couple).
 
-For each: per-step wall milliseconds, the real-time factor (simulated / wall seconds of the
+(a) is timed after one untimed run (its compiled kernels loaded, as the simulator node loads them
+while the graph connects). For each: per-step wall milliseconds, the real-time factor (simulated / wall seconds of the
 loop), the ratio to (a), missed deadlines, and for (b)-(d) the start-up time (launcher start to
 the simulator's first step, from the launcher's `resumed` event). Loop wall times of (b)-(d)
 are the launcher's own measurement from the first state to the last. (b) and (c) must end in
@@ -86,6 +87,7 @@ def main() -> None:
     print(f"python {sys.version.split()[0]}, cores {os.cpu_count()}, paper scenario (N = {PAPER.rod.n_elements}, "
           f"control period {(PAPER.loop.control_period or 0.0) * 1e3:g} ms), {args.repeat} run(s) each, "
           f"load average at start {os.getloadavg()[0]:.2f}")
+    core_only()  # (untimed: numba's cache loaded, as the simulator does before its first step)
     results: dict[str, list[dict[str, Any]]] = {name: [] for name in ways}
     for _ in range(args.repeat):
         for name, run in ways.items():

@@ -6,6 +6,8 @@ or the lock-step loop stalls for a whole couple timeout at step 0 and the run di
 launcher's. :class:`LockStep` is the lock-step rule itself: state k out, wait for the couple
 answering step k; a couple that arrives while paused is kept; after the couple timeout the
 configured fallback is applied and the miss counted, once per outage in the log.
+:class:`WallClock` is the free-running rule (``lockstep: false``): every whole control period
+the simulation falls behind the wall clock is a missed deadline.
 
 The node (:mod:`contgrasp_ros.nodes.rod_simulator`) feeds them wall-clock times (``now``, s,
 monotonic) and what it sees of the graph, and performs what they return.
@@ -16,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Peers", "StartGate", "LockStep"]
+__all__ = ["Peers", "StartGate", "LockStep", "WallClock"]
 
 
 @dataclass(frozen=True)
@@ -155,3 +157,39 @@ class LockStep:
     def first_of_outage(self) -> bool:
         """The last miss began an outage (log it once; its length is logged when couples return)."""
         return self.outage == 1
+
+
+class WallClock:
+    """The free-running rule: step k of a schedule is due ``k`` control periods of wall time
+    after the schedule's origin. ``step(now)`` when a step begins returns how many whole periods
+    the simulation has fallen behind that schedule (0: on time) and counts them as missed
+    deadlines; the schedule then moves on by as much, so each lost period counts once. Timer
+    ticks are late, never early: a step that begins earlier against the schedule than any
+    before moves its origin back (the first step's own delay must not hide a later lost tick).
+    ``restart()`` after a pause (the pause is not lost time); ``reset()`` for a new run."""
+
+    def __init__(self, period: float) -> None:
+        self.period = period
+        self.reset()
+
+    def reset(self) -> None:
+        """A new run: no schedule, no misses."""
+        self.missed = 0
+        self.restart()
+
+    def restart(self) -> None:
+        """The next step starts a new schedule."""
+        self.origin: float | None = None
+        self.k = 0
+
+    def step(self, now: float) -> int:
+        """A step begins at ``now`` (wall seconds, monotonic): the periods lost before it."""
+        if self.origin is None:
+            self.origin, self.k = now, 0
+        self.origin = min(self.origin, now - self.k * self.period)
+        behind = max(int((now - self.origin - self.k * self.period) // self.period), 0)  # (>= 0 but for rounding)
+        if behind > 0:
+            self.missed += behind
+            self.origin += behind * self.period
+        self.k += 1
+        return behind

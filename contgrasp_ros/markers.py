@@ -3,6 +3,8 @@ the object is, when it moves) and the nodes in contact."""
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA, Header
@@ -19,6 +21,19 @@ def _points(xy: np.ndarray) -> list[Point]:
     return [Point(x=float(x), y=float(y), z=0.0) for x, y in xy]
 
 
+@lru_cache(maxsize=4)
+def _outline(boundary: Boundary) -> np.ndarray:
+    """The closed outline in the object's frame (257 samples): once per boundary."""
+    _, pts = boundary.sample(256)
+    return np.vstack([pts, pts[:1]])
+
+
+@lru_cache(maxsize=4)
+def _fixed_outline_points(boundary: Boundary) -> list[Point]:
+    """The outline's points where a fixed object stays (shared by every marker array: read only)."""
+    return _points(_outline(boundary))
+
+
 def scene_markers(boundary: Boundary, obs: Observation, header: Header, centroid: tuple[float, float] | None = None,
                   contact_tol: float = 1e-4) -> MarkerArray:
     """Markers for one rod observation (contact = rod surface within ``contact_tol`` of the object).
@@ -28,16 +43,16 @@ def scene_markers(boundary: Boundary, obs: Observation, header: Header, centroid
     arm.color = ColorRGBA(r=0.55, g=0.35, b=0.75, a=0.8)
     arm.points = _points(obs.x)
     arm.pose.orientation.w = 1.0
-    _, pts = boundary.sample(256)
     arm_in_object = obs.x
+    outline = Marker(header=header, ns="object", id=1, type=Marker.LINE_STRIP, action=Marker.ADD)
     if obs.body is not None and centroid is not None:
         c = np.asarray(centroid, dtype=float)
-        pts = to_world(pts, obs.body.q, c)
+        outline.points = _points(to_world(_outline(boundary), obs.body.q, c))
         arm_in_object = to_object_frame(obs.x, obs.body.q, c)
-    outline = Marker(header=header, ns="object", id=1, type=Marker.LINE_STRIP, action=Marker.ADD)
+    else:
+        outline.points = _fixed_outline_points(boundary)
     outline.scale.x = float(0.005 * boundary.length)
     outline.color = ColorRGBA(r=0.2, g=0.2, b=0.2, a=1.0)
-    outline.points = _points(np.vstack([pts, pts[:1]]))
     outline.pose.orientation.w = 1.0
     gap = boundary.project(arm_in_object).signed_distance - obs.radius
     contact = Marker(header=header, ns="contact", id=2, type=Marker.POINTS, action=Marker.ADD)

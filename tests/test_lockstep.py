@@ -1,9 +1,9 @@
 """The simulator's stepping rules without ROS (contgrasp_ros.lockstep): when step 0 goes out,
-and the lock-step deadline, fallback and outage counting."""
+the lock-step deadline, fallback and outage counting, and the free-running deadlines."""
 
 from __future__ import annotations
 
-from contgrasp_ros.lockstep import LockStep, Peers, StartGate
+from contgrasp_ros.lockstep import LockStep, Peers, StartGate, WallClock
 
 LOOP = Peers(rod_state_subscribers=1, couple_publishers=1, contact_links=1)
 
@@ -98,3 +98,19 @@ def test_stop_and_reset() -> None:
     rule.couple("u", can_step=False)
     rule.reset()
     assert (rule.started, rule.missed, rule.outage, rule.pending, rule.waiting_since) == (False, 0, 0, None, None)
+
+
+def test_wall_clock_counts_every_period_lost_once() -> None:
+    """Free-running: jitter inside a period is on time; each whole period lost is one miss and
+    the schedule moves on by it; the first step's own delay does not hide a later lost tick; a
+    pause is not lost time; reset clears the count."""
+    w = WallClock(0.002)
+    assert [w.step(t) for t in (10.0, 10.0021, 10.0049, 10.0061)] == [0, 0, 0, 0]  # due 10, .002, .004, .006
+    assert w.step(10.0111) == 1 and w.missed == 1  # due 10.008: one period and 1.1 ms behind
+    assert [w.step(t) for t in (10.0121, 10.0141)] == [0, 0]  # the schedule moved on by one period
+    assert w.step(10.0221) == 3 and w.missed == 4  # due 10.0141 + 2 ms: three more periods lost
+    w.restart()  # paused for a second
+    assert [w.step(t) for t in (11.5, 11.502)] == [0, 0] and w.missed == 4
+    w.reset()
+    # the first step began 0.5 ms late, the next on its tick, then one tick was skipped
+    assert [w.step(t) for t in (20.0005, 20.002, 20.006)] == [0, 0, 1] and w.missed == 1

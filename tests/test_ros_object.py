@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,7 @@ pytest.importorskip("contgrasp_msgs.msg")
 from contgrasp_core.rod.session import run_sampled  # noqa: E402
 from contgrasp_ros import topics  # noqa: E402
 from contgrasp_ros.analysis import analyze, history, load_run  # noqa: E402
+from contgrasp_ros.discovery import use_discovery_profile  # noqa: E402
 from contgrasp_ros.launcher import default_params_file, load_params  # noqa: E402
 
 from conftest import fresh_domain_id  # noqa: E402
@@ -255,61 +256,77 @@ def test_a_movable_object_with_a_scripted_disturbance_runs_through_the_graph_as_
     assert len(moved) == 1 and np.allclose(moved[0].get_xydata()[:-1], expected)
 
 
+PUSHER = """
+import json, sys
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from geometry_msgs.msg import WrenchStamped
+from contgrasp_msgs.msg import RodState
+from contgrasp_msgs.srv import ApplyWrench
+from contgrasp_ros import qos, topics
+from contgrasp_ros.executor import LeanExecutor
+
+args = json.loads(sys.argv[1])
+rclpy.init()
+node = rclpy.create_node("pusher")
+latest = {"step": -1}
+node.create_subscription(RodState, topics.ROD_STATE, lambda m: latest.update(step=int(m.step)), qos.STREAM)
+pub = node.create_publisher(WrenchStamped, topics.OBJECT_WRENCH, qos.STREAM)
+client = node.create_client(ApplyWrench, topics.APPLY_WRENCH)
+msg = WrenchStamped()
+msg.header.frame_id = "world"
+msg.wrench.force.x, msg.wrench.force.y = args["push"][0], args["push"][1]
+ex = LeanExecutor()
+ex.add_node(node)
+future = None
+try:
+    while rclpy.ok():
+        ex.spin_once(timeout_sec=0.02)
+        if latest["step"] >= 20:
+            pub.publish(msg)  # (from step 20 on, with every turn: held until the end)
+        if latest["step"] >= 60 and future is None:
+            future = client.call_async(ApplyWrench.Request(kind="pulse", wrench=[0.0, 0.0, args["torque"]], duration=0.04))
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+done = future is not None and future.done()
+print(json.dumps({"success": done and future.result().success, "step": future.result().step if done else None}))
+"""
+
+
 # ------------------------------------------------------------------ (b) a push by hand
 def test_a_push_on_the_wrench_topic_and_a_pulse_from_the_service_are_in_the_recording(tmp_path: Path) -> None:
     """While a spring-held object is grasped, a node of the test pushes it on the wrench topic
     from step 20 on and applies a torque pulse through ~/apply_wrench: the recording holds the
     push, the wrench of every period (from the period after each input), and the object's
     motion in the direction of the push; ``contgrasp analyze`` reports both."""
-    import rclpy
-    from geometry_msgs.msg import WrenchStamped
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-
-    from contgrasp_msgs.msg import RodState
-    from contgrasp_msgs.srv import ApplyWrench
-    from contgrasp_ros import qos
-
     push, torque = (0.0, -0.05, 0.0), 2e-4
-    # 500 steps (the lock-step run does not wait for this test's node: on a busy machine its
-    # push can come 200 steps late); the coarse arm reaches the object after ~0.45-0.75 s (when
-    # depends on the push) and its 1 mm tip sinks ~4 mm into it on impact: a penetration limit
+    # 500 steps; the coarse arm reaches the object after ~0.45-0.75 s (when depends on the push)
+    # and its 1 mm tip sinks ~4 mm into it on impact: a penetration limit
     params = object_params(tmp_path, 1.0, object_mode="spring", object_stiffness=[10.0, 10.0, 0.01],
                            object_damping=[0.05, 0.05, 1e-4], max_penetration_limit=0.01)
     domain = fresh_domain_id()
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = rclpy.create_node("pusher", context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(node)
-    latest = {"step": -1}
-    node.create_subscription(RodState, topics.ROD_STATE, lambda m: latest.update(step=int(m.step)), qos.STREAM)
-    pub = node.create_publisher(WrenchStamped, topics.OBJECT_WRENCH, qos.STREAM)
-    client = node.create_client(ApplyWrench, topics.APPLY_WRENCH)
-    msg = WrenchStamped()
-    msg.header.frame_id = "world"
-    msg.wrench.force.x, msg.wrench.force.y = push[0], push[1]
+    # the pusher is a process of its own started with the graph and, like the launcher's nodes,
+    # with contgrasp's discovery profile: a participant that was up before the graph is found
+    # only at its next periodic announcement (~3 s; the run would be half over)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    use_discovery_profile(env)
+    pusher = subprocess.Popen([sys.executable, "-c", PUSHER, json.dumps({"push": push, "torque": torque})],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     proc = launch("--json", "--params", str(params), "--bag", str(tmp_path / "bag"), domain=domain)
-    future = None
     try:
-        deadline = time.monotonic() + 300
-        while proc.poll() is None and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.02)
-            if latest["step"] >= 20:
-                pub.publish(msg)
-            if latest["step"] >= 60 and future is None:
-                future = client.call_async(ApplyWrench.Request(kind="pulse", wrench=[0.0, 0.0, torque], duration=0.04))
-        out, err = proc.communicate(timeout=60)
+        out, err = proc.communicate(timeout=300)
+        pusher.send_signal(signal.SIGINT)
+        pushed_out, pushed_err = pusher.communicate(timeout=60)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=ctx)
+        for p in (proc, pusher):
+            if p.poll() is None:
+                p.kill()
     assert proc.returncode == 0, err[-3000:]
     assert json.loads(out)["missed_deadlines"] == 0
-    assert future is not None and future.done() and future.result().success, future
-    pulse_step = int(future.result().step)
+    assert pusher.returncode == 0, pushed_err[-3000:]
+    pulse = json.loads(pushed_out)
+    assert pulse["success"], pulse
+    pulse_step = int(pulse["step"])
 
     run = load_run(tmp_path / "bag")
     o = run.rod.object

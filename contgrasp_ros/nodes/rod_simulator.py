@@ -9,7 +9,8 @@ after ``peer_timeout`` wall seconds it goes out anyway), so a graph started by h
 mode (default): state k is published and the rod advances only when the couple stamped with
 step k arrives; after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
 couple or apply ``zero``) is used, the miss is counted and a warning logged. Free-running mode
-advances every ``control_period`` of wall time with the latest couple. Services: ``~/pause``
+advances every ``control_period`` of wall time with the latest couple; each whole period it falls
+behind the wall clock is a missed deadline (:class:`~contgrasp_ros.lockstep.WallClock`). Services: ``~/pause``
 (std_srvs/SetBool: true pauses, false resumes) and ``~/reset`` (std_srvs/Trigger). The node runs
 in simulated time (``use_sim_time`` defaults to true: the ``/clock`` it publishes every
 ``clock_period`` of simulated time, before the state of that time) and, when the
@@ -64,7 +65,7 @@ from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_msgs.srv import ApplyWrench
 from contgrasp_ros import qos, topics
 from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, float64_field, object_fields, wrench_arrays
-from contgrasp_ros.lockstep import LockStep, Peers, StartGate
+from contgrasp_ros.lockstep import LockStep, Peers, StartGate, WallClock
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import (
@@ -136,6 +137,8 @@ class RodSimulator(Node):
                             "anyway (0 = wait forever)", lo=0.0, hi=1e6, read_only=True),
         )
         self.rule = LockStep()
+        assert self.config.control_period is not None  # (declared above with lo > 0)
+        self.wall = WallClock(self.config.control_period)  # (free-running mode's deadlines)
         self.finish = FinishPolicy(self, watch_simulator=False)
         declare(self, "max_penetration_limit", 0.0,
                 "the run fails when the rod surface is deeper inside the object than this [m]; 0 = the tip radius",
@@ -164,6 +167,9 @@ class RodSimulator(Node):
         self.create_service(ApplyWrench, "~/apply_wrench", self.on_apply_wrench)
         self.pub_object.publish(boundary_to_msg(self.boundary, Header(frame_id="world")))
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        # a throwaway first observation loads the compiled kernels (numba's cache, ~0.3 s) now,
+        # while the graph connects, instead of in the run's first step
+        LoopSession(self.system, self.config).observe()
         self._reset_session()
         self.paused = bool(self.start_paused)
         control_period = self.config.control_period
@@ -202,14 +208,16 @@ class RodSimulator(Node):
 
     @property
     def missed(self) -> int:
-        """Deadlines missed in this run (lock-step)."""
-        return self.rule.missed
+        """Deadlines missed in this run: couples that did not come in time (lock-step) or control
+        periods the simulation fell behind the wall clock (free-running)."""
+        return self.rule.missed if self.lockstep else self.wall.missed
 
     # ------------------------------------------------------------------ loop
     def _reset_session(self) -> None:
         self.session = LoopSession(self.system, self.config)
         self.last_couple: np.ndarray | FeedbackExpansion = np.zeros(self.model.n_elements)
         self.rule.reset()
+        self.wall.reset()
         self.next_marker_t = 0.0
         self.next_clock_t = 0.0
         self.failure = ""
@@ -370,6 +378,10 @@ class RodSimulator(Node):
         if not self._can_step():
             return
         if not self.lockstep:
+            lost = self.wall.step(time.monotonic())
+            if lost and self.wall.missed == lost:  # (the first time; the status says so at once: WARN)
+                self.get_logger().warn(f"step {self.session.k} began {lost} control period(s) late: the simulation "
+                                       "fell behind real time (each lost period is a missed deadline; not logged again)")
             self._advance(self.last_couple)
             return
         if self.rule.tick(time.monotonic(), self.get_parameter("couple_timeout").value):
@@ -421,6 +433,7 @@ class RodSimulator(Node):
                 self._publish_first_observation()
             elif (u := self.rule.resume(time.monotonic())) is not None and self._can_step():
                 self._advance(u)
+            self.wall.restart()  # (free-running: the pause is not an overrun)
         self._publish_status()
         resp.success, resp.message = True, self._status()
         return resp
