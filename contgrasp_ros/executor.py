@@ -25,7 +25,11 @@ control period (docs/ros.md, "Executors") that bookkeeping is most of the per-me
   :class:`~rclpy.executors.ExternalShutdownException`, as in rclpy.
 
 It is single-threaded by design: callback groups are respected trivially (one callback at a
-time) and it must be spun from one thread only.
+time) and it must be spun from one thread only. Entities are created and destroyed from that
+thread (in callbacks) or while it does not spin: rclpy's executors also guard a wait against an
+entity destroyed by another thread (each handle entered for the wait), which this one leaves
+out to keep a wait cheap. contgrasp's nodes build their entities at construction and destroy
+them after spinning.
 """
 
 from __future__ import annotations
@@ -51,7 +55,9 @@ EVENTS_PERIOD_S = 0.1  # wall seconds between two waits that include the QoS eve
 
 @dataclass
 class _Entities:
-    """The entities of the executor's nodes, as last gathered, and the wait set sized for them."""
+    """The entities of the executor's nodes, as last gathered, and the wait set sized for them.
+    ``by_pointer`` maps each kind's rcl pointers (taken when gathered: an entity destroyed since
+    has none to read) to its entity."""
 
     subscriptions: list[Any] = field(default_factory=list)
     timers: list[Any] = field(default_factory=list)
@@ -59,6 +65,7 @@ class _Entities:
     services: list[Any] = field(default_factory=list)
     guards: list[Any] = field(default_factory=list)  # the nodes' own guard conditions
     waitables: list[Any] = field(default_factory=list)
+    by_pointer: dict[str, dict[int, Any]] = field(default_factory=dict)
     wait_set: Any = None
 
 
@@ -95,6 +102,9 @@ class LeanExecutor(Executor):
             e.services.extend(node.services)
             e.guards.extend(node.guards)
             e.waitables.extend(node.waitables)
+        kinds = {"timer": e.timers, "subscription": e.subscriptions, "guard_condition": e.guards,
+                 "client": e.clients, "service": e.services}
+        e.by_pointer = {kind: {x.handle.pointer: x for x in entities} for kind, entities in kinds.items()}
         count = NumberOfEntities(len(e.subscriptions), len(e.guards) + 2, len(e.timers), len(e.clients), len(e.services))
         for w in e.waitables:
             count += w.get_num_entities()
@@ -158,31 +168,32 @@ class LeanExecutor(Executor):
         self._run_tasks()
 
     def _dispatch(self, e: _Entities, ws: Any, waitables: list[Any]) -> None:
-        """Run the callbacks of what the wait found ready (timers, subscriptions, guard
-        conditions, clients, services, then QoS events)."""
-        ready_timers = set(ws.get_ready_entities("timer"))
-        ready_subs = set(ws.get_ready_entities("subscription"))
-        ready_guards = set(ws.get_ready_entities("guard_condition"))
-        ready_clients = set(ws.get_ready_entities("client"))
-        ready_services = set(ws.get_ready_entities("service"))
+        """Run the callbacks of what the wait found ready: timers, subscriptions, guard
+        conditions, clients, services (each kind in the order added), then QoS events."""
         ready_waitables = [w for w in waitables if w.is_ready(ws)]
-        for tmr in e.timers:
-            if tmr.handle.pointer in ready_timers and tmr.handle.is_timer_ready():
-                self._call(self._take_timer(tmr))
-        for sub in e.subscriptions:
-            if sub.handle.pointer in ready_subs:
-                self._call(self._take_subscription(sub))
-        for gc in e.guards:
-            if gc.handle.pointer in ready_guards and gc.callback is not None:
-                self._call(self._take_guard_condition(gc))
-        for cli in e.clients:
-            if cli.handle.pointer in ready_clients:
-                self._call(self._take_client(cli))
-        for srv in e.services:
-            if srv.handle.pointer in ready_services:
-                self._call(self._take_service(srv))
+        takes = (("timer", self._take_timer), ("subscription", self._take_subscription),
+                 ("guard_condition", self._take_guard_condition), ("client", self._take_client),
+                 ("service", self._take_service))
+        for kind, take in takes:
+            entities = e.by_pointer[kind]
+            for pointer in ws.get_ready_entities(kind):
+                entity = entities.get(pointer)  # (None: the executor's own guard conditions)
+                if entity is None or not self._ready(kind, entity):
+                    continue
+                self._call(take(entity))
         for w in ready_waitables:
             self._call(self._take_waitable(w))
+
+    @staticmethod
+    def _ready(kind: str, entity: Any) -> bool:
+        """Whether a ready entity has work: a timer that was not cancelled meanwhile (rcl reports
+        cancelled timers ready), a guard condition with a callback; anything destroyed has none."""
+        try:
+            if kind == "timer":
+                return bool(entity.handle.is_timer_ready())
+            return kind != "guard_condition" or entity.callback is not None
+        except InvalidHandle:
+            return False
 
     def _call(self, execute: Callable[[], Coroutine[Any, Any, Any]] | None) -> None:
         """Run one taken callback to its end, or, if it awaits a future, as a task from here on."""
