@@ -7,7 +7,8 @@
 #   bash contgrasp.sh setup  # only set up
 #
 # Set-up creates .venv/ inside the checkout with Python 3.11, installs the project with its
-# dependencies (numpy, scipy, numba, matplotlib, pinned ros-jazzy-* wheels) and test extras,
+# dependencies (numpy, scipy, numba, matplotlib, pinned ros-jazzy-* wheels), the test extras and
+# the benchmarks' reference simulator (pyelastica, extra "bench"),
 # re-installs only when pyproject.toml changed, and warms numba's cache of the compiled kernels.
 # Everything talks over loopback only.
 set -euo pipefail
@@ -58,7 +59,7 @@ setup() {
         echo "== installing contgrasp and its dependencies into .venv"
         # (pip's warnings about this machine's unused local index folders are filtered out)
         "$py" -m pip install --quiet --upgrade pip 2> >(grep -v "is ignored" >&2)
-        "$py" -m pip install --quiet -e ".[test,msgs]" 2> >(grep -v "is ignored\|!!\|wheel_obj" >&2)
+        "$py" -m pip install --quiet -e ".[test,msgs,bench]" 2> >(grep -v "is ignored\|!!\|wheel_obj" >&2)
         echo "$want" >"$stamp"
     fi
     # The interface package is compiled with the machine's cmake and C/C++ compilers.
