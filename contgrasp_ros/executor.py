@@ -122,8 +122,7 @@ class LeanExecutor(Executor):
         """As :meth:`spin_once` (the future's completion wakes the wait)."""
         self._spin_once_impl(timeout_sec)
 
-    def _spin_once_impl(self, timeout_sec: float | TimeoutObject | None = None,
-                        wait_condition: Callable[[], bool] = lambda: False) -> None:
+    def _spin_once_impl(self, timeout_sec: float | TimeoutObject | None = None) -> None:
         if self._is_shutdown:
             return
         if self._run_tasks():  # (work already there: do not block)
