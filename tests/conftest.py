@@ -7,6 +7,9 @@ import os
 import random
 import sys
 import tempfile
+import time
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 from hypothesis import settings
@@ -34,6 +37,16 @@ _BASE = random.SystemRandom().randint(0, 100)
 def fresh_domain_id() -> int:
     """A ROS_DOMAIN_ID in 1..101 for one test: distinct within this run."""
     return (_BASE + next(_domains)) % 101 + 1
+
+
+def spin_until(executor: Any, cond: Callable[[], bool], timeout: float = 10.0) -> bool:
+    """Spin ``executor`` (20 ms turns) until ``cond()`` holds; False after ``timeout`` seconds."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.02)
+        if cond():
+            return True
+    return False
 
 
 @pytest.fixture

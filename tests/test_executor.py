@@ -5,7 +5,6 @@ entities created and destroyed while spinning, exceptions out of callbacks, shut
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -16,16 +15,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from std_msgs.msg import Int32  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
 
+from conftest import spin_until  # noqa: E402
+
 from contgrasp_ros.executor import EVENTS_PERIOD_S, LeanExecutor  # noqa: E402
-
-
-def spin_until(ex: LeanExecutor, cond: Callable[[], bool], timeout: float = 10.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        ex.spin_once(timeout_sec=0.05)
-        if cond():
-            return True
-    return False
 
 
 @pytest.fixture

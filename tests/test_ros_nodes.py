@@ -7,8 +7,6 @@ import json
 import os
 import subprocess
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -31,14 +29,7 @@ from contgrasp_ros.convert import boundary_to_msg, contact_to_msg  # noqa: E402
 from contgrasp_ros.nodes.boundary_sensor import BoundarySensor  # noqa: E402
 from contgrasp_ros.nodes.grasp_quality import GraspQualityNode  # noqa: E402
 
-
-def spin_until(executor: SingleThreadedExecutor, cond: Callable[[], bool], timeout: float = 10.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        executor.spin_once(timeout_sec=0.02)
-        if cond():
-            return True
-    return False
+from conftest import spin_until  # noqa: E402
 
 
 def rod_msg(step: int, shape, radius, t: float) -> RodState:  # type: ignore[no-untyped-def]
