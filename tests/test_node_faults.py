@@ -675,6 +675,7 @@ BAD_AT_RUN_TIME = {
                   ("couple_timeout", 0.0, "out of range"), ("duration", 5.0, "read-only"), ("object", "ellipse", "read-only"),
                   ("lockstep", False, "read-only"), ("start_paused", True, "read-only"), ("max_kinetic_energy", 0.0, "out of range"),
                   ("max_penetration_limit", -1.0, "out of range"), ("marker_period", math.nan, "out of range"),
+                  ("clock_period", -0.01, "out of range"), ("clock_period", math.nan, "out of range"),
                   ("settle_speed", 1.0, "read-only")],
 }
 
