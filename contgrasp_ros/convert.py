@@ -97,24 +97,28 @@ def float64_field(values: object) -> array[float]:
 def require_finite(what: str, *arrays: object) -> None:
     """Raise :class:`MessageError` (reason ``"non-finite result"``) unless every value is finite:
     a node checks what it computed from a valid but extreme message before publishing it."""
-    for a in arrays:
-        if not np.all(np.isfinite(np.asarray(a, dtype=float))):
-            raise MessageError(f"{what} is not finite (NaN/Inf)", reason="non-finite result")
+    values = np.concatenate([np.ravel(np.asarray(a, dtype=float)) for a in arrays])  # (one check for all)
+    if not np.isfinite(values).all():
+        raise MessageError(f"{what} is not finite (NaN/Inf)", reason="non-finite result")
 
 
 def _arrays(msg: object, names: tuple[str, ...], *, min_len: int = 2, max_abs: float | None = MAX_ABS) -> dict[str, Array]:
     kind = type(msg).__name__
-    lengths = {name: len(getattr(msg, name)) for name in names}
-    n = lengths[names[0]]
+    fields = [getattr(msg, name) for name in names]
+    n = len(fields[0])
     if n < min_len:
         raise MessageError(f"{kind}: needs at least {min_len} samples, got {n}", reason="too few samples")
     if n > MAX_SAMPLES:
         raise MessageError(f"{kind}: {n} samples, at most {MAX_SAMPLES} accepted", reason="too many samples")
-    for name, m in lengths.items():
-        if m != n:
-            raise MessageError(f"{kind}: field '{name}' has {m} samples, '{names[0]}' has {n}", reason="length mismatch")
-    # one block and one comparison for all fields (NaN and Inf fail it too); the first bad field is named
-    block = np.array([getattr(msg, name) for name in names], dtype=float).reshape(len(names), n)
+    for name, field in zip(names, fields, strict=True):
+        if len(field) != n:
+            raise MessageError(f"{kind}: field '{name}' has {len(field)} samples, '{names[0]}' has {n}",
+                               reason="length mismatch")
+    # the fields' bytes as one block (a float64[] field is an array('d'): see float64_field; a
+    # bytearray, so the arrays are writable like any others: numba compiles read-only arrays
+    # separately) and one comparison for all of them (NaN and Inf fail it too); the first bad
+    # field is named
+    block = np.frombuffer(bytearray(b"".join(fields)), dtype=np.float64).reshape(len(names), n)
     ok = np.isfinite(block) if max_abs is None else np.abs(block) <= max_abs
     if not ok.all():
         i = int(np.flatnonzero(~ok.all(axis=1))[0])

@@ -249,6 +249,7 @@ def test_couple(outcomes: Counter[str]) -> Callable[[], None]:
             return
         k, s, couple = out
         assert k == step and _equal(s, f["s"])
+        assert s.flags.writeable  # (numba compiles read-only arrays separately: the simulator's kernels see these)
         if any(len(f[e]) for e in EXPANSION):
             assert isinstance(couple, FeedbackExpansion)
             assert _equal(couple.u, f["u"])

@@ -181,3 +181,20 @@ def test_held_expansion_is_the_law_to_first_order() -> None:
         errs.append(np.max(np.abs(law(th).u - (e.u + du))))
     ratios = np.array(errs[:-1]) / np.array(errs[1:])
     assert np.all(ratios > 3.5), ratios
+
+
+def test_preload_leaves_the_system_as_it_was() -> None:
+    """The simulator loads its kernels by stepping throwaway sessions on the run's own system
+    (:func:`~contgrasp_core.rod.session.preload`): the run that follows on that system must be
+    the run without the preload, bit for bit (a step must not keep anything of the states it saw)."""
+    from contgrasp_core.rod.session import preload, run_sampled
+    from contgrasp_core.scenario import PAPER
+
+    scenario = replace(PAPER, loop=replace(PAPER.loop, duration=0.02))
+    fresh = run_sampled(scenario).observe()
+    system = scenario.system()
+    preload(system, scenario.loop)
+    preloaded = run_sampled(scenario, system).observe()
+    assert fresh.k == preloaded.k == 10
+    np.testing.assert_array_equal(preloaded.x, fresh.x)
+    np.testing.assert_array_equal(preloaded.v, fresh.v)

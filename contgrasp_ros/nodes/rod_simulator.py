@@ -58,7 +58,7 @@ from contgrasp_core.errors import ContgraspError
 from contgrasp_core.rod.body import MODES
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.disturbance import KINDS, WrenchInput
-from contgrasp_core.rod.session import DivergenceLimits, LoopSession, Observation
+from contgrasp_core.rod.session import DivergenceLimits, LoopSession, Observation, preload
 from contgrasp_core.scenario import PAPER, motion_from_parameters, object_from_parameters, rod_system
 from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
@@ -167,9 +167,8 @@ class RodSimulator(Node):
         self.create_service(ApplyWrench, "~/apply_wrench", self.on_apply_wrench)
         self.pub_object.publish(boundary_to_msg(self.boundary, Header(frame_id="world")))
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        # a throwaway first observation loads the compiled kernels (numba's cache, ~0.3 s) now,
-        # while the graph connects, instead of in the run's first step
-        LoopSession(self.system, self.config).observe()
+        # the compiled kernels (numba's cache) load now, while the graph connects, not in the run's first steps
+        preload(self.system, self.config)
         self._reset_session()
         self.paused = bool(self.start_paused)
         control_period = self.config.control_period
@@ -347,7 +346,7 @@ class RodSimulator(Node):
         try:
             step, s, u = couple_arrays(msg)
             n = len(u.u) if isinstance(u, FeedbackExpansion) else len(u)
-            if n != self.model.n_elements or not np.allclose(s, self.model.joint_s, rtol=0, atol=1e-12):
+            if n != self.model.n_elements or len(s) != n or np.max(np.abs(s - self.model.joint_s)) > 1e-12:
                 raise MessageError(f"couple must be given at the {self.model.n_elements} joints s = k h", reason="wrong joints")
             if self.session.finished or self.failure:
                 return  # the answer to the final state (or a failed run): nothing to do with it
