@@ -12,7 +12,8 @@ control period (docs/ros.md, "Executors") that bookkeeping is most of the per-me
 * the entities are gathered once and again only when they change: a node creating or destroying
   an entity wakes its executor (:meth:`wake`), as do :meth:`add_node` and :meth:`remove_node`;
 * one ``_rclpy.WaitSet`` sized for them is cleared and refilled before each wait;
-* every callback ready after a wait runs in that one :meth:`spin_once`, called directly
+* every callback ready after a wait runs in that one :meth:`spin_once` (messages before
+  timers: :meth:`_dispatch`), called directly
   through rclpy's own ``_take_*`` functions (so services answer, clients complete their futures
   and QoS events reach their handlers exactly as with rclpy's executors); a coroutine callback
   that has to wait for a future becomes a Task and is resumed by later spins, as are tasks from
@@ -167,10 +168,13 @@ class LeanExecutor(Executor):
         self._run_tasks()
 
     def _dispatch(self, e: _Entities, ws: Any, waitables: list[Any]) -> None:
-        """Run the callbacks of what the wait found ready: timers, subscriptions, guard
-        conditions, clients, services (each kind in the order added), then QoS events."""
+        """Run the callbacks of what the wait found ready: subscriptions, timers, guard
+        conditions, clients, services (each kind in the order added), then QoS events.
+        Messages before timers: a periodic callback that is due when a message arrives sees it
+        (the free-running simulator's step uses the couple that answered the state before it,
+        not the one before that; docs/ros.md, "Executors")."""
         ready_waitables = [w for w in waitables if w.is_ready(ws)]
-        takes = (("timer", self._take_timer), ("subscription", self._take_subscription),
+        takes = (("subscription", self._take_subscription), ("timer", self._take_timer),
                  ("guard_condition", self._take_guard_condition), ("client", self._take_client),
                  ("service", self._take_service))
         for kind, take in takes:
@@ -189,7 +193,8 @@ class LeanExecutor(Executor):
         cancelled timers ready), a guard condition with a callback; anything destroyed has none."""
         try:
             if kind == "timer":
-                return bool(entity.handle.is_timer_ready())
+                with entity.handle:  # (InvalidHandle once destroyed, e.g. by a callback earlier in this turn)
+                    return bool(entity.handle.is_timer_ready())
             return kind != "guard_condition" or entity.callback is not None
         except InvalidHandle:
             return False
