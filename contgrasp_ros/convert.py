@@ -114,11 +114,10 @@ def _arrays(msg: object, names: tuple[str, ...], *, min_len: int = 2, max_abs: f
         if len(field) != n:
             raise MessageError(f"{kind}: field '{name}' has {len(field)} samples, '{names[0]}' has {n}",
                                reason="length mismatch")
-    # the fields' bytes as one block (a float64[] field is an array('d'): see float64_field; a
-    # bytearray, so the arrays are writable like any others: numba compiles read-only arrays
-    # separately) and one comparison for all of them (NaN and Inf fail it too); the first bad
-    # field is named
-    block = np.frombuffer(bytearray(b"".join(fields)), dtype=np.float64).reshape(len(names), n)
+    # one block (a copy: writable whatever the fields are - numba compiles read-only arrays as
+    # another signature) and one comparison for all fields (NaN and Inf fail it too); the first
+    # bad field is named
+    block = np.array(fields, dtype=float).reshape(len(names), n)
     ok = np.isfinite(block) if max_abs is None else np.abs(block) <= max_abs
     if not ok.all():
         i = int(np.flatnonzero(~ok.all(axis=1))[0])

@@ -52,6 +52,7 @@ from contgrasp_ros.supervision import (
     Resume,
     SetMinSubscribers,
     Supervisor,
+    UNRECORDED_MIN_SUBSCRIBERS,
     Unrecorded,
 )
 from contgrasp_ros.summary import FinalQuality, FinalState, RunSummary, build_summary, contact_stats
@@ -80,8 +81,10 @@ class Monitor(Node):
         self.history: list[dict[str, Any]] = []
         self._period = history_period
         self._next_t = 0.0
-        self.create_subscription(RodState, topics.ROD_STATE, self._on_rod, qos.STREAM)
-        self.create_subscription(ContactState, topics.CONTACT, self._on_contact, qos.STREAM)
+        # the sampled streams (the first and the final state among them): a per-step reader would
+        # cost the loop a wake-up every step
+        self.create_subscription(RodState, topics.ROD_STATE_SAMPLED, self._on_rod, qos.STREAM)
+        self.create_subscription(ContactState, topics.CONTACT_SAMPLED, self._on_contact, qos.STREAM)
         self.create_subscription(GraspQuality, topics.QUALITY, self._on_quality, qos.STREAM)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diag, qos.STREAM)
         self.pause = self.create_client(SetBool, "/rod_simulator/pause")
@@ -133,9 +136,12 @@ class Monitor(Node):
         ):
             return False
         return (
-            self.count_subscribers(topics.ROD_STATE) >= 2
+            self.count_subscribers(topics.ROD_STATE) >= 1
+            and self.count_subscribers(topics.ROD_STATE_SAMPLED) >= 2
             and self.count_publishers(topics.CONTACT) >= 1
-            and self.count_subscribers(topics.CONTACT) >= 3
+            and self.count_subscribers(topics.CONTACT) >= 1
+            and self.count_publishers(topics.CONTACT_SAMPLED) >= 1
+            and self.count_subscribers(topics.CONTACT_SAMPLED) >= 2
             and self.count_publishers(topics.COUPLE) >= 1
             and self.count_subscribers(topics.COUPLE) >= 1
             and self.count_publishers(topics.QUALITY) >= 1
@@ -362,8 +368,9 @@ def run_graph(
             # the sensor, the launcher's monitor and the recorder must hear the first state, also
             # from a restarted simulator; once the recorder has died it no longer counts
             # (``_drive`` rewrites this file before restarting the simulator)
-            overrides["rod_simulator"]["ros__parameters"].update(start_paused=True, duration=float(sim_params["duration"]),
-                                                                min_subscribers=2 + (record is not None))
+            overrides["rod_simulator"]["ros__parameters"].update(
+                start_paused=True, duration=float(sim_params["duration"]),
+                min_subscribers=UNRECORDED_MIN_SUBSCRIBERS + (record is not None))
             if record is not None:
                 overrides[RECORDER] = {"ros__parameters": recorder_params(record)}
             tmp = Path(tempfile.mkdtemp(prefix="contgrasp_launch_"))
@@ -371,7 +378,7 @@ def run_graph(
             override_file.write_text(yaml.safe_dump(overrides))
 
             def unrecorded() -> None:  # for a restarted simulator, and the running one (_drive)
-                overrides["rod_simulator"]["ros__parameters"]["min_subscribers"] = 2
+                overrides["rod_simulator"]["ros__parameters"]["min_subscribers"] = UNRECORDED_MIN_SUBSCRIBERS
                 override_file.write_text(yaml.safe_dump(overrides))
 
             on_recorder_lost = unrecorded if record is not None else None

@@ -56,7 +56,7 @@ RECORDER = "mcap_recorder"
 RESUME_GRACE_S = 1.0  # after a restarted simulator's publisher is discovered, before resuming it
 RESUME_RETRY_S = 2.0  # resend the resume call when no answer came within this time
 SETTLE_S = 1.0  # after the end, for the last contact and quality to arrive
-UNRECORDED_MIN_SUBSCRIBERS = 2  # the sensor and the launcher's monitor
+UNRECORDED_MIN_SUBSCRIBERS = 3  # rod-state subscribers: the sensor (per step and sampled), the launcher's monitor (sampled)
 
 
 class Phase(enum.Enum):

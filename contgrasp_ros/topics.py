@@ -4,7 +4,7 @@ The quality-of-service profiles are in :mod:`contgrasp_ros.qos`."""
 
 from __future__ import annotations
 
-__all__ = ["OBJECT", "ROD_STATE", "CONTACT", "COUPLE", "QUALITY", "MARKERS", "DIAGNOSTICS", "CLOCK", "OBJECT_POSE",
+__all__ = ["OBJECT", "ROD_STATE", "CONTACT", "COUPLE", "ROD_STATE_SAMPLED", "CONTACT_SAMPLED", "QUALITY", "MARKERS", "DIAGNOSTICS", "CLOCK", "OBJECT_POSE",
            "OBJECT_TWIST", "OBJECT_WRENCH", "APPLY_WRENCH"]
 
 OBJECT = "/contgrasp/object"
@@ -15,6 +15,14 @@ CONTACT = "/contgrasp/contact"
 """contgrasp_msgs/ContactState: sensed (rho, alpha, delta, s_o) and the contact set."""
 COUPLE = "/contgrasp/couple"
 """contgrasp_msgs/CoupleControl: the feedback couple at the joints, answering one rod state."""
+ROD_STATE_SAMPLED = "/contgrasp/rod_state/sampled"
+"""contgrasp_msgs/RodState: the rod state every ``sample_period`` of simulated time (the
+simulator's parameter), the first and the final state always. For observers (the quality node,
+the launcher's monitor, Foxglove): every reader of a per-step topic costs the loop a wake-up
+each step (docs/ros.md, "How fast"), so only the loop and the recorder read those."""
+CONTACT_SAMPLED = "/contgrasp/contact/sampled"
+"""contgrasp_msgs/ContactState: the sensor's contact state of each sampled rod state (the same
+steps as :data:`ROD_STATE_SAMPLED`)."""
 QUALITY = "/contgrasp/quality"
 """contgrasp_msgs/GraspQuality: the Gramian W and Q1..Q3."""
 OBJECT_POSE = "/contgrasp/object_pose"

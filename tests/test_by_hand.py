@@ -131,9 +131,10 @@ def test_four_nodes_by_hand_without_parameters_give_the_paper_grasp_bitwise(grap
     """No parameter file, no launcher, nodes started one after the other in any order, the
     default on_finish (idle): the run waits for its peers, settles as the paper's run does, bit
     for bit, and every node stays up afterwards and says so."""
-    # (min_subscribers 2: the sensor and this test's probe, a participant older than the graph
-    # that Fast DDS may announce only after a few seconds; step 0 waits until it hears the run)
-    graph.start("rod_simulator", "--ros-args", "-p", "min_subscribers:=2")
+    # (min_subscribers 3: the sensor's two rod-state subscriptions, per step and sampled, and
+    # this test's probe, a participant older than the graph that Fast DDS may announce only
+    # after a few seconds; step 0 waits until it hears the run)
+    graph.start("rod_simulator", "--ros-args", "-p", "min_subscribers:=3")
     time.sleep(1.0)  # a person starting the next terminal
     for node in ("grasp_quality", "grasp_controller", "boundary_sensor"):
         graph.start(node)
@@ -162,7 +163,7 @@ def test_by_hand_with_the_parameter_file_exits_when_finished_and_equals_the_laun
     launcher's run of the same file bit for bit."""
     params = str(default_params_file())
     for node in NODES:  # (the simulator waits for this test's probe too: min_subscribers, as above)
-        extra = ("-p", "min_subscribers:=2") if node == "rod_simulator" else ()
+        extra = ("-p", "min_subscribers:=3") if node == "rod_simulator" else ()
         graph.start(node, "--ros-args", "--params-file", params, "-p", "on_finish:=exit", *extra)
     assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=240), graph.status
     assert graph.status.get("state") == "finished" and graph.status["missed_deadlines"] == "0"

@@ -270,8 +270,8 @@ def test_grasp_quality_survives_hostile_contact_states(make) -> None:  # type: i
     def prop(n, curv, pose, how, stamp, frac, step) -> None:  # type: ignore[no-untyped-def]
         fields, bad = hostile_contact(n, curv, pose, how)
         clock[0] += 10_000_000
-        sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(topics.CONTACT), frac, clock[0])
-        step = max(step, node.stamps.newest_step.get(topics.CONTACT, 0))  # (a lower step starts a new run)
+        sec, nsec, stamp_reason, reset = make_stamp(stamp, node.stamps.newest_ns.get(topics.CONTACT_SAMPLED), frac, clock[0])
+        step = max(step, node.stamps.newest_step.get(topics.CONTACT_SAMPLED, 0))  # (a lower step starts a new run)
         msg = ContactState(step=0 if reset else step, **fields)
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
         ok, reason = expect.deliver(node.on_contact, msg)
@@ -572,7 +572,7 @@ def test_internal_errors_in_every_handler_are_contained(make, monkeypatch, which
         node.object.on_object(boundary_to_msg(OBJ, Header()))
         monkeypatch.setattr(grasp_quality, "contact_quality", _boom)
         node.on_contact(ContactState(step=1, **arrays, in_contact=flags, contact_tolerance=tol))
-        key = "/contgrasp/contact: internal error: RuntimeError"
+        key = "/contgrasp/contact/sampled: internal error: RuntimeError"
     elif which == "tracker":
         node = make(grasp_quality.GraspQualityNode)
         monkeypatch.setattr(convert, "boundary_from_msg", _boom)

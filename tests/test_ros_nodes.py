@@ -121,7 +121,7 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
     node.set_parameters([Parameter("rate_hz", value=2.0)])
     probe = add(rclpy.create_node("probe", context=ctx))
     obj_pub = probe.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
-    c_pub = probe.create_publisher(ContactState, topics.CONTACT, qos.STREAM)
+    c_pub = probe.create_publisher(ContactState, topics.CONTACT_SAMPLED, qos.STREAM)  # (the observers' stream)
     got: list[GraspQuality] = []
     probe.create_subscription(GraspQuality, topics.QUALITY, got.append, qos.STREAM)
     obj = ellipse(0.04, 0.02, (0.08, 0.06))
@@ -146,7 +146,7 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
     bad.in_contact = bad.in_contact[:3]
     c_pub.publish(bad)
     assert spin_until(ex, lambda: node.drops.total == 1)
-    assert node.drops.counts == {f"{topics.CONTACT}: length mismatch": 1}
+    assert node.drops.counts == {f"{topics.CONTACT_SAMPLED}: length mismatch": 1}
 
 
 def _paper_model(n: int = 12):  # type: ignore[no-untyped-def]

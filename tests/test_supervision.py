@@ -21,6 +21,7 @@ from contgrasp_ros.supervision import (
     Resume,
     SetMinSubscribers,
     Supervisor,
+    UNRECORDED_MIN_SUBSCRIBERS,
     Unrecorded,
 )
 
@@ -157,11 +158,11 @@ def test_recorder_death_continues_unrecorded_and_lowers_min_subscribers() -> Non
     out = run.kill(REC, 20, 1)
     assert out == [Notify("exited", {"node": REC, "pid": 20, "exit_code": 1, "action": "continued unrecorded"}),
                    Log("error", "the recorder exited with code 1; the run continues unrecorded"),
-                   Unrecorded(), SetMinSubscribers(2)]
+                   Unrecorded(), SetMinSubscribers(UNRECORDED_MIN_SUBSCRIBERS)]
     assert not run.sup.recording and REC not in run.sup.restarts  # never restarted
     assert run.tick() == []  # waiting for the parameter service's answer
     assert run.tick(params_result=False) == []  # refused: try again
-    assert run.tick() == [SetMinSubscribers(2)]
+    assert run.tick() == [SetMinSubscribers(UNRECORDED_MIN_SUBSCRIBERS)]
     assert run.tick(params_result=True) == []
     assert run.tick() == [] and run.finish() == [Finish(None)]
     assert run.sup.faults == [{"node": REC, "exit_code": 1, "action": "continued unrecorded"}]
@@ -193,9 +194,9 @@ def test_recorder_death_while_connecting_lowers_once_the_parameter_service_is_re
     run = Run(recording=True)
     run.obs = replace(run.obs, params_ready=False)
     out = run.kill(REC, 20, 1)
-    assert Unrecorded() in out and SetMinSubscribers(2) not in out and not run.sup.done
+    assert Unrecorded() in out and SetMinSubscribers(UNRECORDED_MIN_SUBSCRIBERS) not in out and not run.sup.done
     assert run.tick() == []
-    assert run.tick(params_ready=True) == [SetMinSubscribers(2)]
+    assert run.tick(params_ready=True) == [SetMinSubscribers(UNRECORDED_MIN_SUBSCRIBERS)]
     assert run.tick(params_result=True) == []
     assert run.tick(connected=True) == [Resume()]  # the graph connects without the recorder
 

@@ -1,5 +1,10 @@
 """boundary_sensor: rod state + object boundary -> contact state (rho, alpha, delta, s_o, contact set).
 
+Every rod state is sensed and its contact state published for the loop (``/contgrasp/contact``);
+the contact states of the simulator's sampled rod states (``/contgrasp/rod_state/sampled``: the
+same steps, whichever of the two arrives first) go out again on ``/contgrasp/contact/sampled``,
+the observers' stream.
+
 Thin wrapper of :func:`contgrasp_core.contact.sense` of the rod state's arm shape (paper eqs.
 (4), (5), Definition 1; the object's ``Boundary.project``). When the object moves, the rod state
 carries the object's displacement of the same step and the arm is sensed in the object's
@@ -51,8 +56,12 @@ class BoundarySensor(Node):
         self.waiting: tuple[RodState, RodArrays] | None = None
         self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._sense_waiting)
         self.sensed = 0
+        self.last: ContactState | None = None  # the last contact state published
+        self.sampled_step: int | None = None  # a sampled step announced before its state was sensed
         self.pub = self.create_publisher(ContactState, topics.CONTACT, qos.STREAM)
+        self.pub_sampled = self.create_publisher(ContactState, topics.CONTACT_SAMPLED, qos.STREAM)
         self.create_subscription(RodState, topics.ROD_STATE, self.on_rod_state, qos.STREAM)
+        self.create_subscription(RodState, topics.ROD_STATE_SAMPLED, self.on_sampled, qos.STREAM)
 
     @guarded(topics.ROD_STATE)
     def on_rod_state(self, msg: RodState) -> None:
@@ -79,8 +88,29 @@ class BoundarySensor(Node):
         except ContgraspError as exc:
             self.drops.drop_error(topics.ROD_STATE, exc)
             return
-        self.pub.publish(contact_to_msg(state, msg.header, msg.step))
+        out = contact_to_msg(state, msg.header, msg.step)
+        self.pub.publish(out)
         self.sensed += 1
+        self.last = out
+        if self.sampled_step is not None and msg.step >= self.sampled_step:
+            if msg.step == self.sampled_step:
+                self.pub_sampled.publish(out)
+            self.sampled_step = None  # (a later step: the sampled one was lost on the way)
+
+    @guarded(topics.ROD_STATE_SAMPLED)
+    def on_sampled(self, msg: RodState) -> None:
+        """A sampled rod state: publish its contact state on the sampled stream, now if it was
+        sensed already, else once it is (only the step is read: the state itself is sensed from
+        the per-step stream)."""
+        try:
+            self.stamps.admit(topics.ROD_STATE_SAMPLED, msg.header, int(msg.step))
+        except ContgraspError as exc:
+            self.drops.drop_error(topics.ROD_STATE_SAMPLED, exc)
+            return
+        if self.last is not None and self.last.step == msg.step:
+            self.pub_sampled.publish(self.last)
+        else:
+            self.sampled_step = int(msg.step)
 
     def _sense_waiting(self) -> None:
         waiting, self.waiting = self.waiting, None

@@ -8,8 +8,10 @@ at its header stamp (simulated time, so the app's timeline is the simulation's):
   the rod's centreline), the object's outline (where the object is, when it moves) and the
   nodes in contact; one per ``scene_period`` of simulated time;
 * ``/contgrasp/rod_state`` (JSON: step, t, s, x, y, theta, kinetic_energy; a movable object's
-  object_q, object_v, object_wrench) for plots;
-* ``/contgrasp/contact`` (JSON: step, t, s, rho, alpha, delta, in_contact);
+  object_q, object_v, object_wrench) for plots, from the simulator's sampled stream
+  (``/contgrasp/rod_state/sampled``: every ``sample_period``, 0.01 s of simulated time by default);
+* ``/contgrasp/contact`` (JSON: step, t, s, rho, alpha, delta, in_contact), from the sensor's
+  sampled stream (``/contgrasp/contact/sampled``);
 * ``/contgrasp/quality`` (JSON: step, t, Q1, Q2, Q3, contact_length, valid);
 * ``/contgrasp/status`` (JSON: the simulator's status from ``/diagnostics``).
 
@@ -86,8 +88,9 @@ class FoxgloveBridge(Node):
                      (topics.ROD_STATE, topics.CONTACT, topics.QUALITY, STATUS)}
         self.next_scene_t = 0.0
         self.contact: ContactArrays | None = None
-        self.create_subscription(RodState, topics.ROD_STATE, self.on_rod_state, qos.STREAM)
-        self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM)
+        # (the observers' sampled streams: see contgrasp_ros.topics)
+        self.create_subscription(RodState, topics.ROD_STATE_SAMPLED, self.on_rod_state, qos.STREAM)
+        self.create_subscription(ContactState, topics.CONTACT_SAMPLED, self.on_contact, qos.STREAM)
         self.create_subscription(GraspQuality, topics.QUALITY, self.on_quality, qos.STREAM)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self.on_status, qos.STREAM)
         self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.port} (open it in the Foxglove app)")
@@ -100,12 +103,12 @@ class FoxgloveBridge(Node):
         boundary = self.object.boundary
         self.outline = None if boundary is None else boundary.sample(256)[1]
 
-    @guarded(topics.ROD_STATE)
+    @guarded(topics.ROD_STATE_SAMPLED)
     def on_rod_state(self, msg: RodState) -> None:
         try:
             rod = rod_state_arrays(msg)
         except ContgraspError as exc:
-            self.drops.drop_error(topics.ROD_STATE, exc)
+            self.drops.drop_error(topics.ROD_STATE_SAMPLED, exc)
             return
         t_ns = _ns(msg.header)
         body = {} if rod.object is None else {"object_q": rod.object.q.tolist(), "object_v": rod.object.v.tolist(),
@@ -136,12 +139,12 @@ class FoxgloveBridge(Node):
         entity = SceneEntity(timestamp=stamp, frame_id="world", id="grasp", lines=lines)
         return SceneUpdate(entities=[entity])
 
-    @guarded(topics.CONTACT)
+    @guarded(topics.CONTACT_SAMPLED)
     def on_contact(self, msg: ContactState) -> None:
         try:
             c = contact_arrays(msg)
         except ContgraspError as exc:
-            self.drops.drop_error(topics.CONTACT, exc)
+            self.drops.drop_error(topics.CONTACT_SAMPLED, exc)
             return
         self.contact = c
         t_ns = _ns(msg.header)

@@ -2,7 +2,10 @@
 
 Thin wrapper of :func:`contgrasp_ros.evaluate.contact_quality` (paper Sec. IV, Prop. 4.1) over
 the run's one contact set: the contact states' own tolerance (the sensor's, the scenario's
-``SensingSettings.contact_tolerance``); the node has no tolerance of its own.
+``SensingSettings.contact_tolerance``); the node has no tolerance of its own. It reads the
+sensor's sampled stream, ``/contgrasp/contact/sampled`` (every ``sample_period`` of the
+simulator, 0.01 s by default): more evaluations than that need the per-step stream, remapped
+(``--ros-args -r /contgrasp/contact/sampled:=/contgrasp/contact``).
 Malformed contact states or objects, bad stamps and states that arrive before the object are
 dropped and counted (``/diagnostics``).
 """
@@ -55,20 +58,20 @@ class GraspQualityNode(Node):
         self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._evaluate_waiting, prepare=True)
         self.last_slot: int | None = None  # the 1/rate_hz slot of simulated time last evaluated
         self.pub = self.create_publisher(GraspQuality, topics.QUALITY, qos.STREAM)
-        self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM)
+        self.create_subscription(ContactState, topics.CONTACT_SAMPLED, self.on_contact, qos.STREAM)
 
-    @guarded(topics.CONTACT)
+    @guarded(topics.CONTACT_SAMPLED)
     def on_contact(self, msg: ContactState) -> None:
         """Validate a contact state; evaluate and publish its quality when the rate allows."""
         try:
             c = contact_arrays(msg)
-            self.stamps.admit(topics.CONTACT, msg.header, c.step)
+            self.stamps.admit(topics.CONTACT_SAMPLED, msg.header, c.step)
         except ContgraspError as exc:
-            self.drops.drop_error(topics.CONTACT, exc)
+            self.drops.drop_error(topics.CONTACT_SAMPLED, exc)
             return
         if self.object.boundary is None:
             if self.waiting is not None:
-                self.drops.drop(topics.CONTACT, "no object yet", "a newer contact state arrived before the object")
+                self.drops.drop(topics.CONTACT_SAMPLED, "no object yet", "a newer contact state arrived before the object")
             self.waiting = (msg, c)
             return
         self._evaluate(msg, c)
@@ -92,7 +95,7 @@ class GraspQualityNode(Node):
             q = contact_quality(c, boundary, -1.0, ref)  # the sensor's contact set: one per run
             require_finite("the grasp quality", q.W, q.Q1, q.Q2, q.Q3, q.contact_length)
         except ContgraspError as exc:
-            self.drops.drop_error(topics.CONTACT, exc)
+            self.drops.drop_error(topics.CONTACT_SAMPLED, exc)
             return
         self.pub.publish(quality_to_msg(q, msg.header, msg.step, c.tol))
 

@@ -1,10 +1,13 @@
-"""rod_simulator: the planar Cosserat rod and the object; publishes /clock, the rod state, the
-object boundary (transient-local), RViz markers and /diagnostics; applies the couple control.
+"""rod_simulator: the planar Cosserat rod and the object; publishes /clock, the rod state (every
+step for the loop, and every ``sample_period`` of simulated time on the observers' sampled
+stream), the object boundary (transient-local), RViz markers and /diagnostics; applies the
+couple control.
 
 Thin wrapper of :class:`contgrasp_core.rod.session.LoopSession` (the same stepping the
 core-only closed loop uses); the stepping rules are :mod:`contgrasp_ros.lockstep`. Step 0 goes
 out once the loop's peers are matched (lock-step with ``wait_for_peers``, the default: a
-rod-state subscriber and a couple publisher; always at least ``min_subscribers`` subscribers;
+rod-state subscriber and a couple publisher; always at least ``min_subscribers`` subscribers of
+the two rod-state topics together;
 after ``peer_timeout`` wall seconds it goes out anyway), so a graph started by hand runs like the launcher's. Lock-step
 mode (default): state k is published and the rod advances only when the couple stamped with
 step k arrives; after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
@@ -126,9 +129,12 @@ class RodSimulator(Node):
         declare(self, "marker_period", 0.05, "simulated seconds between RViz marker updates (0 = off)", lo=0.0, hi=1e6)
         declare(self, "clock_period", 0.01, "simulated seconds between /clock publications (0 = with every state; "
                 "the first and the last state's always go out)", lo=0.0, hi=1e6)
+        declare(self, "sample_period", 0.01, f"simulated seconds between states on {topics.ROD_STATE_SAMPLED}, the "
+                "observers' stream (0 = every state; the first and the final state always)", lo=0.0, hi=1e6)
         self.lockstep = declare(self, "lockstep", True, "advance only when the couple for the current step arrived", read_only=True)
         declare(self, "min_subscribers", 0, "publish the first state only once this many subscribers matched the "
-                "rod state (a restarted simulator: its first state is not lost while they reconnect)", lo=0, hi=1000)
+                "rod state topics, per step and sampled together (a restarted simulator: its first state is not "
+                "lost while they reconnect)", lo=0, hi=1000)
         self.gate = StartGate(
             wait_for_peers=declare(self, "wait_for_peers", True, "lock-step: publish step 0 only once a rod-state "
                                    "subscriber (the sensor) and a couple publisher (the controller) are matched",
@@ -155,6 +161,7 @@ class RodSimulator(Node):
         self.failure = ""
         self.pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, qos.STREAM)
         self.pub_state = self.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)
+        self.pub_sampled = self.create_publisher(RodState, topics.ROD_STATE_SAMPLED, qos.STREAM)
         self.pub_object = self.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
         self.pub_markers = self.create_publisher(MarkerArray, topics.MARKERS, qos.STREAM)
         self.sub_couple = self.create_subscription(CoupleControl, topics.COUPLE, self.on_couple, qos.STREAM)
@@ -219,6 +226,7 @@ class RodSimulator(Node):
         self.wall.reset()
         self.next_marker_t = 0.0
         self.next_clock_t = 0.0
+        self.next_sample_t = 0.0
         self.failure = ""
         self.stamps.reset()
         self.wrenches.reset()
@@ -250,15 +258,17 @@ class RodSimulator(Node):
         if obs.t + 1e-12 >= self.next_clock_t or self.session.finished:
             self.next_clock_t = obs.t + self.get_parameter("clock_period").value
             self.pub_clock.publish(ClockMsg(clock=header.stamp))
-        self.pub_state.publish(
-            RodState(
-                header=header, step=obs.k, s=float64_field(obs.s), x=float64_field(obs.x[:, 0]),
-                y=float64_field(obs.x[:, 1]), theta=float64_field(obs.theta), kappa=float64_field(obs.kappa),
-                radius=float64_field(obs.radius), vx=float64_field(obs.v[:, 0]), vy=float64_field(obs.v[:, 1]),
-                kinetic_energy=obs.kinetic_energy,
-                max_penetration=obs.penetration, **object_fields(centroid, obs.body, wrench),
-            )
+        state = RodState(
+            header=header, step=obs.k, s=float64_field(obs.s), x=float64_field(obs.x[:, 0]),
+            y=float64_field(obs.x[:, 1]), theta=float64_field(obs.theta), kappa=float64_field(obs.kappa),
+            radius=float64_field(obs.radius), vx=float64_field(obs.v[:, 0]), vy=float64_field(obs.v[:, 1]),
+            kinetic_energy=obs.kinetic_energy,
+            max_penetration=obs.penetration, **object_fields(centroid, obs.body, wrench),
         )
+        self.pub_state.publish(state)  # (the loop's first: the sensor is waiting for it)
+        if obs.t + 1e-12 >= self.next_sample_t or self.session.finished:
+            self.next_sample_t = obs.t + self.get_parameter("sample_period").value
+            self.pub_sampled.publish(state)
         self._publish_object_motion(obs, header)
         period = self.get_parameter("marker_period").value
         if period > 0 and obs.t + 1e-12 >= self.next_marker_t:
@@ -328,7 +338,8 @@ class RodSimulator(Node):
     def _publish_first_observation(self) -> None:
         """The run's first state, once the peers are matched (:class:`~contgrasp_ros.lockstep.StartGate`)."""
         contact = min(self.count_publishers(topics.CONTACT), self.count_subscribers(topics.CONTACT))
-        peers = Peers(self.pub_state.get_subscription_count(), self.sub_couple.get_publisher_count(), contact)
+        subscribers = self.pub_state.get_subscription_count() + self.pub_sampled.get_subscription_count()
+        peers = Peers(subscribers, self.sub_couple.get_publisher_count(), contact)
         go, line = self.gate.check(time.monotonic(), peers, self.get_parameter("min_subscribers").value)
         if line and "anyway" in line:  # (rclpy: one severity per logging call site)
             self.get_logger().warn(line)
