@@ -173,6 +173,15 @@ class Boundary:
 
         return cKDTree(self._c(self._tab_t, 0))
 
+    @staticmethod
+    def load_table_modules() -> None:
+        """Import what :meth:`prepare` builds its tables with (scipy.interpolate and
+        scipy.spatial: ~0.3 s once per process), so that preparing a boundary later takes ~1 ms:
+        a node that prepares each object it receives does this at start-up, since an object can
+        arrive while a run is starting, when 0.3 s of CPU delays the loop's first steps."""
+        import scipy.interpolate  # noqa: F401
+        import scipy.spatial  # noqa: F401
+
     def prepare(self) -> Boundary:
         """Build the lazily made interpolants and search tree now (importing scipy.interpolate
         and scipy.spatial, ~0.3-0.6 s the first time in a process) rather than on the first

@@ -517,9 +517,10 @@ class ObjectTracker:
     The object carries no step: its stamp must be valid and not from the future, but an older
     stamp is accepted (a restarted simulator republishes the object; the newest publication wins).
     ``prepare``: build the boundary's interpolation tables on arrival
-    (:meth:`~contgrasp_core.boundary.Boundary.prepare`, ~0.3 s the first time in a process) rather
-    than at the first state that needs them: for a node off the lock-step path (the quality
-    node), not for the sensor, whose circle or ellipse never needs them.
+    (:meth:`~contgrasp_core.boundary.Boundary.prepare`) rather than at the first state that needs
+    them, with the modules they need imported at construction (~0.3 s, at the node's start-up,
+    not while a run starts): for a node off the lock-step path (the quality node), not for the
+    sensor, whose circle or ellipse never needs them.
     """
 
     def __init__(self, node: Node, drops: DropCounter, stamps: StampGate,
@@ -533,6 +534,8 @@ class ObjectTracker:
         self._topic = topics.OBJECT
         self._on_change = on_change
         self._prepare = prepare
+        if prepare:
+            Boundary.load_table_modules()
         node.create_subscription(ObjectBoundary, topics.OBJECT, self.on_object, qos.LATCHED)
 
     @guarded(topics.OBJECT)

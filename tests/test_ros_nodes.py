@@ -252,19 +252,40 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
     assert states[n_before].step == 0
 
 
-def test_rod_simulator_free_running_advances_on_wall_time(graph) -> None:  # type: ignore[no-untyped-def]
-    """Free-running mode (real-time demos): the rod advances every control period of wall time
-    with the latest couple, whether or not a controller answers."""
+def _free_running(graph, couple_timeout: float):  # type: ignore[no-untyped-def]
     from rclpy.parameter import Parameter
 
     from contgrasp_ros.nodes.rod_simulator import RodSimulator
 
     ctx, ex, add = graph
-    over = [Parameter(k, value=v) for k, v in dict(n_elements=10, lockstep=False, control_period=0.02, duration=10.0).items()]
-    add(RodSimulator(context=ctx, parameter_overrides=over))
+    over = dict(n_elements=10, lockstep=False, control_period=0.02, duration=10.0, couple_timeout=couple_timeout,
+                min_subscribers=1)  # (state 0 waits for the probe's subscription)
+    sim = add(RodSimulator(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in over.items()]))
     probe = add(rclpy.create_node("probe", context=ctx))
     states: list[RodState] = []
     probe.create_subscription(RodState, topics.ROD_STATE, states.append, qos.STREAM)
+    return ex, sim, probe, states
+
+
+def test_rod_simulator_free_running_starts_with_the_first_couple_then_runs_on_wall_time(graph) -> None:  # type: ignore[no-untyped-def]
+    """Free-running mode (real-time demos): state 0 goes out and the schedule starts with the
+    run's first couple (the loop closed); from then on the rod advances every control period of
+    wall time with the latest couple, whether or not the controller answers again."""
+    from contgrasp_msgs.msg import CoupleControl
+    from contgrasp_ros.convert import couple_to_msg
+
+    ex, sim, probe, states = _free_running(graph, couple_timeout=5.0)
+    u_pub = probe.create_publisher(CoupleControl, topics.COUPLE, qos.STREAM)
+    assert spin_until(ex, lambda: len(states) >= 1 and u_pub.get_subscription_count() > 0, timeout=20)
+    spin_until(ex, lambda: len(states) > 1, timeout=0.5)
+    assert [m.step for m in states] == [0]  # (25 control periods: no step without the loop closed)
+    u_pub.publish(couple_to_msg(sim.model.joint_s, np.zeros(10), states[0].header, 0))
+    assert spin_until(ex, lambda: len(states) >= 5, timeout=20)
+    assert [m.step for m in states[-3:]] == sorted(m.step for m in states[-3:])
+
+
+def test_rod_simulator_free_running_starts_without_a_couple_after_the_timeout(graph) -> None:  # type: ignore[no-untyped-def]
+    ex, _, _, states = _free_running(graph, couple_timeout=0.2)
     assert spin_until(ex, lambda: len(states) >= 5, timeout=20)
     assert [m.step for m in states[-3:]] == sorted(m.step for m in states[-3:])
 

@@ -12,8 +12,11 @@ after ``peer_timeout`` wall seconds it goes out anyway), so a graph started by h
 mode (default): state k is published and the rod advances only when the couple stamped with
 step k arrives; after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
 couple or apply ``zero``) is used, the miss is counted and a warning logged. Free-running mode
-advances every ``control_period`` of wall time with the latest couple; each whole period it falls
-behind the wall clock is a missed deadline (:class:`~contgrasp_ros.lockstep.WallClock`). Services: ``~/pause``
+advances every ``control_period`` of wall time with the latest couple, from the run's first
+couple on (the loop closed: a controller's first answer can take a few milliseconds more than
+the next ones, and stepping on without it starts the grasp on stale feedback; after
+``couple_timeout`` it starts without one); each whole period it falls behind the wall clock is a
+missed deadline (:class:`~contgrasp_ros.lockstep.WallClock`). Services: ``~/pause``
 (std_srvs/SetBool: true pauses, false resumes) and ``~/reset`` (std_srvs/Trigger). The node runs
 in simulated time (``use_sim_time`` defaults to true: the ``/clock`` it publishes every
 ``clock_period`` of simulated time, before the state of that time) and, when the
@@ -227,6 +230,7 @@ class RodSimulator(Node):
         self.next_marker_t = 0.0
         self.next_clock_t = 0.0
         self.next_sample_t = 0.0
+        self.loop_closed = False  # (free-running: the run's first couple arrived)
         self.failure = ""
         self.stamps.reset()
         self.wrenches.reset()
@@ -370,6 +374,7 @@ class RodSimulator(Node):
             return
         if not self.lockstep:
             self.last_couple = u
+            self.loop_closed = True
             return
         now, ended = self.rule.couple(u, self._can_step())
         if ended:
@@ -388,6 +393,12 @@ class RodSimulator(Node):
         if not self._can_step():
             return
         if not self.lockstep:
+            if not self.loop_closed:
+                timeout = self.get_parameter("couple_timeout").value
+                if self.rule.waiting_since is not None and time.monotonic() - self.rule.waiting_since <= timeout:
+                    return  # (the schedule starts with the first couple)
+                self.get_logger().warn(f"no couple within {timeout:g} s of the first state: free-running without one")
+                self.loop_closed = True
             lost = self.wall.step(time.monotonic())
             if lost and self.wall.missed == lost:  # (the first time; the status says so at once: WARN)
                 self.get_logger().warn(f"step {self.session.k} began {lost} control period(s) late: the simulation "
