@@ -64,6 +64,12 @@ def test_full_rate_run_is_recorded_completely(graph_bag: tuple[Path, dict]) -> N
     clock = [m.clock.sec + 1e-9 * m.clock.nanosec for _, m in iter_decoded(open_recording(path), ["/clock"])]
     assert clock[0] == 0.0 and clock[-1] == pytest.approx(summary["sim_time_s"], abs=1e-9)
     assert np.allclose(np.diff(clock[:-1]), 0.01, atol=1e-9) and 0.0 < clock[-1] - clock[-2] <= 0.01 + 1e-9
+    # the observers' streams: every sample_period (0.01 s = 5 steps) and the final state; the
+    # sensor's sampled contact states are exactly those steps
+    sampled = [m.step for _, m in iter_decoded(open_recording(path), ["/contgrasp/rod_state/sampled"])]
+    contact = [m.step for _, m in iter_decoded(open_recording(path), ["/contgrasp/contact/sampled"])]
+    assert sampled == sorted({*range(0, summary["steps"] + 1, 5), summary["steps"]})
+    assert sorted(contact) == sampled
 
 
 def test_bag_follows_rosbag2_mcap_conventions(graph_bag: tuple[Path, dict]) -> None:

@@ -101,9 +101,17 @@ def test_sensor_republishes_the_contact_of_each_sampled_step_whichever_arrives_f
     assert sampled_steps() == [0]
     sensor.on_rod_state(by_step[3])
     assert sampled_steps() == [0, 3] and sensor.pub_sampled.msgs[-1] is sensor.pub.msgs[-1]
-    sensor.on_sampled(by_step[6])  # state 6 is lost on the way: nothing for step 6, later ones still work
-    sensor.on_rod_state(by_step[7])
+    for k in (5, 6):
+        sensor.on_rod_state(by_step[k])
+    sensor.on_sampled(by_step[5])  # after the next state too (its executor took the per-step topic first)
+    assert sampled_steps() == [0, 3, 5] and sensor.pub_sampled.msgs[-1] is sensor.pub.msgs[-2]
+    sensor.on_sampled(by_step[8])  # state 8 is lost on the way: nothing for step 8, later ones still work
     sensor.on_rod_state(by_step[9])
     sensor.on_sampled(by_step[9])
-    assert sampled_steps() == [0, 3, 9]
-    assert [m.step for m in sensor.pub.msgs] == [0, 1, 2, 3, 7, 9] and sensor.drops.total == 0
+    assert sampled_steps() == [0, 3, 5, 9]
+    sensor.on_sampled(by_step[4])  # a state it never sensed, older than the newest: nothing
+    assert sampled_steps() == [0, 3, 5, 9]
+    sensor.on_sampled(by_step[0])  # a new run (the simulator's reset): its step 0 before its state
+    sensor.on_rod_state(by_step[0])
+    assert sampled_steps() == [0, 3, 5, 9, 0]
+    assert [m.step for m in sensor.pub.msgs] == [0, 1, 2, 3, 5, 6, 9, 0] and sensor.drops.total == 0

@@ -16,6 +16,7 @@ reason (``/diagnostics``); see :mod:`contgrasp_ros.runtime`.
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
 from rclpy.node import Node
@@ -39,6 +40,9 @@ from contgrasp_ros.runtime import (
 )
 
 
+RECENT = 16  # contact states kept for the sampled stream's announcements that arrive late
+
+
 class BoundarySensor(Node):
     """Senses the contact kinematics of every rod state against the current object."""
 
@@ -56,8 +60,11 @@ class BoundarySensor(Node):
         self.waiting: tuple[RodState, RodArrays] | None = None
         self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._sense_waiting)
         self.sensed = 0
-        self.last: ContactState | None = None  # the last contact state published
-        self.sampled_step: int | None = None  # a sampled step announced before its state was sensed
+        # the contact states last published (the sampled announcement of a state can arrive after
+        # the next states: the executor takes the per-step topic first) and a sampled step
+        # announced before its state was sensed
+        self.recent: deque[ContactState] = deque(maxlen=RECENT)
+        self.sampled_step: int | None = None
         self.pub = self.create_publisher(ContactState, topics.CONTACT, qos.STREAM)
         self.pub_sampled = self.create_publisher(ContactState, topics.CONTACT_SAMPLED, qos.STREAM)
         self.create_subscription(RodState, topics.ROD_STATE, self.on_rod_state, qos.STREAM)
@@ -91,7 +98,7 @@ class BoundarySensor(Node):
         out = contact_to_msg(state, msg.header, msg.step)
         self.pub.publish(out)
         self.sensed += 1
-        self.last = out
+        self.recent.append(out)
         if self.sampled_step is not None and msg.step >= self.sampled_step:
             if msg.step == self.sampled_step:
                 self.pub_sampled.publish(out)
@@ -107,10 +114,12 @@ class BoundarySensor(Node):
         except ContgraspError as exc:
             self.drops.drop_error(topics.ROD_STATE_SAMPLED, exc)
             return
-        if self.last is not None and self.last.step == msg.step:
-            self.pub_sampled.publish(self.last)
-        else:
+        sensed = next((c for c in reversed(self.recent) if c.step == msg.step), None)
+        if sensed is not None:
+            self.pub_sampled.publish(sensed)
+        elif not self.recent or msg.step > self.recent[-1].step or msg.step == 0:  # (step 0: a new run)
             self.sampled_step = int(msg.step)
+        # (else an older state this node never sensed: dropped or lost on the way, nothing to republish)
 
     def _sense_waiting(self) -> None:
         waiting, self.waiting = self.waiting, None
