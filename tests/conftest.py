@@ -62,6 +62,40 @@ def ros_context():  # type: ignore[no-untyped-def]
         rclpy.shutdown(context=ctx)
 
 
+@pytest.fixture
+def make(ros_context):  # type: ignore[no-untyped-def]
+    """Build nodes on the test's context (``make(NodeClass, **parameters)``, wall time unless
+    ``use_sim_time`` is given: no /clock here, the stamp rule runs against wall time);
+    destroyed after the test."""
+    from rclpy.parameter import Parameter
+
+    nodes = []
+
+    def build(cls, **params):  # type: ignore[no-untyped-def]
+        params.setdefault("use_sim_time", False)
+        node = cls(context=ros_context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+        nodes.append(node)
+        return node
+
+    yield build
+    for n in nodes:
+        n.destroy_node()
+
+
+class Sink:
+    """Stands in for a node's publisher: keeps what would have been published (and has no
+    subscribers)."""
+
+    def __init__(self) -> None:
+        self.msgs: list[Any] = []
+
+    def publish(self, msg: Any) -> None:
+        self.msgs.append(msg)
+
+    def get_subscription_count(self) -> int:
+        return 0
+
+
 def pytest_sessionfinish(session, exitstatus):  # type: ignore[no-untyped-def]
     """Leave no Fast DDS shared-memory files of killed test processes in /dev/shm."""
     try:

@@ -39,37 +39,11 @@ from contgrasp_ros import qos, topics  # noqa: E402
 from contgrasp_ros.convert import MAX_SAMPLES, boundary_to_msg  # noqa: E402
 from contgrasp_ros.runtime import stamp_problem  # noqa: E402
 
-from conftest import fresh_domain_id  # noqa: E402
+from conftest import Sink, fresh_domain_id  # noqa: E402
 
 OBJ = circle(0.025, (0.08, 0.08))
 NS = 1_000_000_000
 PROPERTY = settings(max_examples=60, deadline=None)
-
-
-class Sink:
-    """Stands in for a node's publisher: keeps what would have been published."""
-
-    def __init__(self) -> None:
-        self.msgs: list[Any] = []
-
-    def publish(self, msg: Any) -> None:
-        self.msgs.append(msg)
-
-
-@pytest.fixture
-def make(ros_context):  # type: ignore[no-untyped-def]
-    """Build nodes on the test's context; destroyed after the test."""
-    nodes = []
-
-    def build(cls, **params):  # type: ignore[no-untyped-def]
-        params.setdefault("use_sim_time", False)  # no /clock here: the stamp rule against wall time
-        node = cls(context=ros_context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
-        nodes.append(node)
-        return node
-
-    yield build
-    for n in nodes:
-        n.destroy_node()
 
 
 # ---------------------------------------------------------------------------- hostile messages
@@ -676,7 +650,8 @@ BAD_AT_RUN_TIME = {
                   ("lockstep", False, "read-only"), ("start_paused", True, "read-only"), ("max_kinetic_energy", 0.0, "out of range"),
                   ("max_penetration_limit", -1.0, "out of range"), ("marker_period", math.nan, "out of range"),
                   ("clock_period", -0.01, "out of range"), ("clock_period", math.nan, "out of range"),
-                  ("settle_speed", 1.0, "read-only")],
+                  ("sample_period", -0.01, "out of range"), ("sample_period", math.inf, "out of range"),
+                  ("sample_period", "often", "type"), ("settle_speed", 1.0, "read-only")],
 }
 
 
@@ -703,6 +678,7 @@ def test_invalid_parameters_are_refused_at_run_time(make, which) -> None:  # typ
     ("simulator", {"object": "outline"}),
     ("simulator", {"control_period": 0.01, "dt": 0.003}),
     ("simulator", {"max_kinetic_energy": -1.0}),
+    ("simulator", {"sample_period": -0.01}),
     ("controller", {"adaptive_mu2": True, "length_unit": 1e-9}),
     ("controller", {"mu1": 0.0}),
     ("controller", {"radius_base": 0.5}),

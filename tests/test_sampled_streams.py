@@ -5,50 +5,23 @@ of the two messages reaches it first (docs/ros.md, "How fast")."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pytest
 
 rclpy = pytest.importorskip("rclpy")
 pytest.importorskip("contgrasp_msgs.msg")
 
-from rclpy.parameter import Parameter  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
+
+from contgrasp_msgs.msg import RodState  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
 
 from contgrasp_core.boundary import circle  # noqa: E402
 from contgrasp_ros.convert import boundary_to_msg, couple_to_msg  # noqa: E402
 
+from conftest import Sink  # noqa: E402
+
 OBJ = circle(0.025, (0.08, 0.08))
-
-
-class Sink:
-    """Stands in for a publisher: keeps what would have been published."""
-
-    def __init__(self) -> None:
-        self.msgs: list[Any] = []
-
-    def publish(self, msg: Any) -> None:
-        self.msgs.append(msg)
-
-    def get_subscription_count(self) -> int:
-        return 0
-
-
-@pytest.fixture
-def make(ros_context):  # type: ignore[no-untyped-def]
-    nodes = []
-
-    def build(cls, **params):  # type: ignore[no-untyped-def]
-        params.setdefault("use_sim_time", False)
-        node = cls(context=ros_context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
-        nodes.append(node)
-        return node
-
-    yield build
-    for n in nodes:
-        n.destroy_node()
 
 
 def run_small_sim(make, **params):  # type: ignore[no-untyped-def]
@@ -115,3 +88,8 @@ def test_sensor_republishes_the_contact_of_each_sampled_step_whichever_arrives_f
     sensor.on_rod_state(by_step[0])
     assert sampled_steps() == [0, 3, 5, 9, 0]
     assert [m.step for m in sensor.pub.msgs] == [0, 1, 2, 3, 5, 6, 9, 0] and sensor.drops.total == 0
+    bad = RodState(step=3)  # an announcement with an invalid stamp: dropped and counted, nothing published
+    bad.header.stamp.nanosec = 2_000_000_000
+    sensor.on_sampled(bad)
+    assert sensor.drops.counts == {"/contgrasp/rod_state/sampled: invalid stamp": 1}
+    assert sampled_steps() == [0, 3, 5, 9, 0]
