@@ -227,9 +227,7 @@ class RodSimulator(Node):
         self.last_couple: np.ndarray | FeedbackExpansion = np.zeros(self.model.n_elements)
         self.rule.reset()
         self.wall.reset()
-        self.next_marker_t = 0.0
-        self.next_clock_t = 0.0
-        self.next_sample_t = 0.0
+        self.next_t: dict[str, float] = {}  # simulated time of the next /clock, sampled state, markers
         self.loop_closed = False  # (free-running: the run's first couple arrived)
         self.failure = ""
         self.stamps.reset()
@@ -259,8 +257,7 @@ class RodSimulator(Node):
         header = Header(stamp=_stamp(obs.t), frame_id="world")
         wrench = self.wrenches.freeze(obs.k, obs.t)  # held over the period from this state
         centroid = None if self.system.body is None else self.system.body.centroid
-        if obs.t + 1e-12 >= self.next_clock_t or self.session.finished:
-            self.next_clock_t = obs.t + self.get_parameter("clock_period").value
+        if self._due("clock_period", obs.t, final=True):
             self.pub_clock.publish(ClockMsg(clock=header.stamp))
         state = RodState(
             header=header, step=obs.k, s=float64_field(obs.s), x=float64_field(obs.x[:, 0]),
@@ -270,16 +267,22 @@ class RodSimulator(Node):
             max_penetration=obs.penetration, **object_fields(centroid, obs.body, wrench),
         )
         self.pub_state.publish(state)  # (the loop's first: the sensor is waiting for it)
-        if obs.t + 1e-12 >= self.next_sample_t or self.session.finished:
-            self.next_sample_t = obs.t + self.get_parameter("sample_period").value
+        if self._due("sample_period", obs.t, final=True):
             self.pub_sampled.publish(state)
         self._publish_object_motion(obs, header)
-        period = self.get_parameter("marker_period").value
-        if period > 0 and obs.t + 1e-12 >= self.next_marker_t:
-            self.next_marker_t = obs.t + period
+        if self.get_parameter("marker_period").value > 0 and self._due("marker_period", obs.t, final=False):
             self.pub_markers.publish(scene_markers(self.boundary, obs, header, centroid))
         self.rule.published(time.monotonic())
         self.diagnostics.update(_stamp(obs.t))  # (a change of state, a missed deadline: at once)
+
+    def _due(self, period_parameter: str, t: float, *, final: bool) -> bool:
+        """Whether the state at simulated time ``t`` goes out on the stream published every
+        ``period_parameter`` of simulated time (the first state of the run always; the final
+        state too with ``final``); if so the stream's next time is ``t`` + the period."""
+        if t + 1e-12 < self.next_t.get(period_parameter, 0.0) and not (final and self.session.finished):
+            return False
+        self.next_t[period_parameter] = t + self.get_parameter(period_parameter).value
+        return True
 
     def _publish_object_motion(self, obs: Observation, header: Header) -> None:
         """A movable object's pose (centroid, rotation from the start pose) and twist."""
