@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from array import array
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from contgrasp_msgs.msg import GraspQuality as GraspQualityMsg
     from contgrasp_msgs.msg import RodState as RodStateMsg
     from contgrasp_core.rod.body import BodyState
+    from contgrasp_core.rod.session import Observation
     from geometry_msgs.msg import WrenchStamped
     from std_msgs.msg import Header
 
@@ -42,10 +43,13 @@ __all__ = [
     "ObjectArrays",
     "rod_state_arrays",
     "object_fields",
+    "rod_state_fields",
     "wrench_arrays",
+    "contact_fields",
     "contact_to_msg",
     "ContactArrays",
     "contact_arrays",
+    "couple_fields",
     "couple_to_msg",
     "couple_arrays",
     "quality_to_msg",
@@ -183,6 +187,16 @@ def object_fields(centroid: tuple[float, float] | None, body: BodyState | None, 
             "object_wrench": float64_field(np.zeros(3) if wrench is None else wrench)}
 
 
+def rod_state_fields(obs: Observation, header: Header | Any, centroid: tuple[float, float] | None,
+                     wrench: Array | None) -> dict[str, Any]:
+    """The fields of the RodState message of an observation (arrays as numpy arrays, for
+    :class:`~contgrasp_ros.cdr.Codec`); the object fields as :func:`object_fields` says."""
+    return {"header": header, "step": obs.k, "s": obs.s, "x": obs.x[:, 0], "y": obs.x[:, 1], "theta": obs.theta,
+            "kappa": obs.kappa, "radius": obs.radius, "vx": obs.v[:, 0], "vy": obs.v[:, 1],
+            "kinetic_energy": obs.kinetic_energy, "max_penetration": obs.penetration,
+            **object_fields(centroid, obs.body, wrench)}
+
+
 def _object_arrays(msg: RodStateMsg) -> ObjectArrays | None:
     # (recordings made before the object could move have none of these fields)
     values = {name: np.asarray(getattr(msg, name, ()), dtype=float) for name, _ in _OBJECT_FIELDS}
@@ -232,23 +246,30 @@ def wrench_arrays(msg: WrenchStamped) -> Array:
     return w[:3]
 
 
+def contact_fields(state: ContactState, header: Header | Any, step: int) -> dict[str, Any]:
+    """The fields of the ContactState message of a sensed contact state (arrays as numpy
+    arrays: for :class:`~contgrasp_ros.cdr.Codec` or :func:`contact_to_msg`)."""
+    return {"header": header, "step": int(step), "s": state.s, "rho": state.rho, "alpha": state.alpha, "delta": state.delta,
+            "s_o": state.s_o, "shadow_x": state.foot[:, 0], "shadow_y": state.foot[:, 1],
+            "in_contact": np.asarray(state.in_contact, dtype=bool), "contact_tolerance": float(state.tol)}
+
+
 def contact_to_msg(state: ContactState, header: Header, step: int) -> ContactStateMsg:
     """ContactState message of a sensed contact state."""
     from contgrasp_msgs.msg import ContactState as ContactStateMsg
 
-    return ContactStateMsg(
-        header=header,
-        step=int(step),
-        s=float64_field(state.s),
-        rho=float64_field(state.rho),
-        alpha=float64_field(state.alpha),
-        delta=float64_field(state.delta),
-        s_o=float64_field(state.s_o),
-        shadow_x=float64_field(state.foot[:, 0]),
-        shadow_y=float64_field(state.foot[:, 1]),
-        in_contact=np.asarray(state.in_contact, dtype=bool).tolist(),
-        contact_tolerance=float(state.tol),
-    )
+    return ContactStateMsg(**_typed(contact_fields(state, header, step)))
+
+
+def _typed(fields: dict[str, Any]) -> dict[str, Any]:
+    """Message fields as the generated message classes take them fast: float64 arrays as
+    ``array('d')`` (:func:`float64_field`), bool arrays as lists."""
+    out = {}
+    for name, value in fields.items():
+        if isinstance(value, np.ndarray):
+            value = value.tolist() if value.dtype == np.bool_ else float64_field(value)
+        out[name] = value
+    return out
 
 
 @dataclass(frozen=True)
@@ -291,19 +312,25 @@ def contact_arrays(msg: ContactStateMsg) -> ContactArrays:
     )
 
 
+def couple_fields(s: Array, couple: Array | FeedbackExpansion, header: Header | Any, step: int) -> dict[str, Any]:
+    """The fields of the CoupleControl message of the couple u (N m) at the joint arclengths s,
+    with the law's first-order expansion when given a :class:`FeedbackExpansion` (arrays as
+    numpy arrays: for :class:`~contgrasp_ros.cdr.Codec` or :func:`couple_to_msg`)."""
+    fields = {"header": header, "step": int(step), "s": np.asarray(s, dtype=float)}
+    if isinstance(couple, FeedbackExpansion):
+        fields.update(u=couple.u, rho_ref=couple.rho_ref, alpha_ref=couple.alpha_ref, du_drho=couple.g_rho,
+                      du_dalpha=couple.g_alpha)
+    else:
+        fields["u"] = np.asarray(couple, dtype=float)
+    return fields
+
+
 def couple_to_msg(s: Array, couple: Array | FeedbackExpansion, header: Header, step: int) -> CoupleControl:
     """CoupleControl message: the couple u (N m) at the joint arclengths s, with the law's
     first-order expansion when given a :class:`FeedbackExpansion`."""
     from contgrasp_msgs.msg import CoupleControl
 
-    msg = CoupleControl(header=header, step=int(step), s=float64_field(s))
-    if isinstance(couple, FeedbackExpansion):
-        msg.u = float64_field(couple.u)
-        msg.rho_ref, msg.alpha_ref = float64_field(couple.rho_ref), float64_field(couple.alpha_ref)
-        msg.du_drho, msg.du_dalpha = float64_field(couple.g_rho), float64_field(couple.g_alpha)
-    else:
-        msg.u = float64_field(couple)
-    return msg
+    return CoupleControl(**_typed(couple_fields(s, couple, header, step)))
 
 
 def couple_arrays(msg: CoupleControl) -> tuple[int, Array, Array | FeedbackExpansion]:

@@ -84,12 +84,19 @@ def make(ros_context):  # type: ignore[no-untyped-def]
 
 class Sink:
     """Stands in for a node's publisher: keeps what would have been published (and has no
-    subscribers)."""
+    subscribers). A serialized message (the loop's nodes publish bytes, contgrasp_ros.cdr) is
+    kept as rclpy's own deserializer reads it as ``msg_type``."""
 
-    def __init__(self) -> None:
+    def __init__(self, msg_type: Any = None) -> None:
         self.msgs: list[Any] = []
+        self.msg_type = msg_type
 
     def publish(self, msg: Any) -> None:
+        if isinstance(msg, bytes):
+            from rclpy.serialization import deserialize_message
+
+            assert self.msg_type is not None, "a Sink for serialized messages needs their type"
+            msg = deserialize_message(msg, self.msg_type)
         self.msgs.append(msg)
 
     def get_subscription_count(self) -> int:

@@ -26,6 +26,7 @@ rclpy = pytest.importorskip("rclpy")
 pytest.importorskip("contgrasp_msgs.msg")
 
 from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
@@ -141,7 +142,7 @@ def test_boundary_sensor_survives_hostile_rod_states(make) -> None:  # type: ign
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
 
     node = make(BoundarySensor)
-    node.pub = Sink()
+    node.pub = Sink(ContactState)
     node.object.on_object(boundary_to_msg(OBJ, Header()))
     assert node.object.boundary is not None
     expect = Expect(node.drops, lambda: len(node.pub.msgs))
@@ -158,7 +159,7 @@ def test_boundary_sensor_survives_hostile_rod_states(make) -> None:  # type: ign
         step = max(step, node.stamps.newest_step.get(topics.ROD_STATE, 0))  # (a lower step starts a new run)
         msg = RodState(step=0 if reset else step, **arrays)
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
-        ok, reason = expect.deliver(node.on_rod_state, msg)
+        ok, reason = expect.deliver(node.on_rod_state, serialize_message(msg))  # (as its raw subscription gets it)
         check_outcome(ok, reason, bad, stamp_reason)
         if ok:
             out = node.pub.msgs[-1]
@@ -197,7 +198,7 @@ def test_grasp_controller_survives_hostile_contact_states(make) -> None:  # type
 
     n_el = 8
     node = make(GraspController, n_elements=n_el)
-    node.pub = Sink()
+    node.pub = Sink(CoupleControl)
     expect = Expect(node.drops, lambda: len(node.pub.msgs))
     clock = [NS]
 
@@ -213,7 +214,7 @@ def test_grasp_controller_survives_hostile_contact_states(make) -> None:  # type
         step = max(step, node.stamps.newest_step.get(topics.CONTACT, 0))  # (a lower step starts a new run)
         msg = ContactState(step=0 if reset else step, **fields)
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
-        ok, reason = expect.deliver(node.on_contact, msg)
+        ok, reason = expect.deliver(node.on_contact, serialize_message(msg))  # (as its raw subscription gets it)
         check_outcome(ok, reason, bad, stamp_reason)
         if bad == "wrong node count":
             assert reason == "wrong node count"
@@ -320,7 +321,7 @@ def test_rod_simulator_survives_hostile_couples(make) -> None:  # type: ignore[n
         msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nsec
         if bad == "none" and sim.model.n_elements != len(arrays["u"]):
             bad = "wrong joints"
-        ok, reason = expect.deliver(sim.on_couple, msg)
+        ok, reason = expect.deliver(sim.on_couple, serialize_message(msg))  # (as its raw subscription gets it)
         check_outcome(ok, reason, bad, stamp_reason)
 
     prop()
@@ -431,7 +432,7 @@ def test_sensor_keeps_only_the_newest_state_while_the_object_is_missing(make) ->
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
 
     node = make(BoundarySensor)
-    node.pub = Sink()
+    node.pub = Sink(ContactState)
     for step in (1, 2):
         msg = RodState(step=step, **rod_arrays(9, 10.0, (0.0, 0.0, 0.0)))
         msg.header.stamp.sec = step
@@ -466,7 +467,7 @@ def test_stamp_rule_in_sim_time(make) -> None:  # type: ignore[no-untyped-def]
     from contgrasp_ros.nodes.grasp_controller import GraspController
 
     node = make(GraspController, n_elements=8, use_sim_time=True, max_future_stamp=0.5)
-    node.pub = Sink()
+    node.pub = Sink(CoupleControl)
     arrays, flags, tol = contact_arrays_of(9, 10.0, (0.0, 0.0, 0.0))
 
     def deliver(sec: float, step: int) -> None:
@@ -566,7 +567,7 @@ def test_internal_errors_in_every_handler_are_contained(make, monkeypatch, which
     assert node.drops.counts == {key: 1}
     monkeypatch.undo()
     if which in ("controller", "quality"):  # and it works again afterwards
-        node.pub = Sink()
+        node.pub = Sink(node.pub.msg_type)
         msg = ContactState(step=2, **arrays, in_contact=flags, contact_tolerance=tol)
         msg.header.stamp.sec = 1
         node.on_contact(msg)

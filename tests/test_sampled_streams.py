@@ -13,7 +13,7 @@ pytest.importorskip("contgrasp_msgs.msg")
 
 from std_msgs.msg import Header  # noqa: E402
 
-from contgrasp_msgs.msg import RodState  # noqa: E402
+from contgrasp_msgs.msg import ContactState, RodState  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
 
 from contgrasp_core.boundary import circle  # noqa: E402
@@ -30,7 +30,7 @@ def run_small_sim(make, **params):  # type: ignore[no-untyped-def]
 
     sim = make(RodSimulator, n_elements=6, control_period=0.002, duration=0.021, marker_period=0.0,
                wait_for_peers=False, start_paused=True, **params)
-    sim.pub_state, sim.pub_sampled = Sink(), Sink()
+    sim.pub_state, sim.pub_sampled = Sink(RodState), Sink(RodState)
     sim.on_pause(SetBool.Request(data=False), SetBool.Response())
     for _ in range(100):
         if sim.session.finished:
@@ -45,7 +45,7 @@ def test_simulator_samples_every_period_and_the_first_and_final_state(make) -> N
     sim, states, sampled = run_small_sim(make, sample_period=0.006)
     assert [m.step for m in states] == list(range(12))  # duration 0.021 s in 2 ms steps: states 0..11
     assert [m.step for m in sampled] == [0, 3, 6, 9, 11]  # t = 0, 6, 12, 18 ms and the final state (22 ms)
-    assert all(any(m is s for s in states) for m in sampled)  # the very messages of the per-step stream
+    assert all(any(m == s for s in states) for m in sampled)  # the same messages as on the per-step stream
 
 
 def test_sample_period_zero_samples_every_state(make) -> None:  # type: ignore[no-untyped-def]
@@ -58,7 +58,7 @@ def test_sensor_republishes_the_contact_of_each_sampled_step_whichever_arrives_f
 
     sim, states, _ = run_small_sim(make, sample_period=0.006)
     sensor = make(BoundarySensor)
-    sensor.pub, sensor.pub_sampled = Sink(), Sink()
+    sensor.pub, sensor.pub_sampled = Sink(ContactState), Sink(ContactState)
     sensor.object.on_object(boundary_to_msg(OBJ, Header()))
     by_step = {m.step: m for m in states}
 
@@ -67,17 +67,17 @@ def test_sensor_republishes_the_contact_of_each_sampled_step_whichever_arrives_f
 
     sensor.on_rod_state(by_step[0])
     sensor.on_sampled(by_step[0])  # after its state was sensed: at once
-    assert sampled_steps() == [0] and sensor.pub_sampled.msgs[0] is sensor.pub.msgs[0]
+    assert sampled_steps() == [0] and sensor.pub_sampled.msgs[0] == sensor.pub.msgs[0]
     sensor.on_sampled(by_step[3])  # before its state: once it is sensed
     for k in (1, 2):
         sensor.on_rod_state(by_step[k])
     assert sampled_steps() == [0]
     sensor.on_rod_state(by_step[3])
-    assert sampled_steps() == [0, 3] and sensor.pub_sampled.msgs[-1] is sensor.pub.msgs[-1]
+    assert sampled_steps() == [0, 3] and sensor.pub_sampled.msgs[-1] == sensor.pub.msgs[-1]
     for k in (5, 6):
         sensor.on_rod_state(by_step[k])
     sensor.on_sampled(by_step[5])  # after the next state too (its executor took the per-step topic first)
-    assert sampled_steps() == [0, 3, 5] and sensor.pub_sampled.msgs[-1] is sensor.pub.msgs[-2]
+    assert sampled_steps() == [0, 3, 5] and sensor.pub_sampled.msgs[-1] == sensor.pub.msgs[-2]
     sensor.on_sampled(by_step[8])  # state 8 is lost on the way: nothing for step 8, later ones still work
     sensor.on_rod_state(by_step[9])
     sensor.on_sampled(by_step[9])

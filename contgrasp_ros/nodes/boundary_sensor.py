@@ -26,7 +26,8 @@ from contgrasp_core.errors import ContgraspError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, RodState
 from contgrasp_ros import qos, topics
-from contgrasp_ros.convert import RodArrays, contact_to_msg, require_finite, rod_state_arrays
+from contgrasp_ros.cdr import Codec, MessageView
+from contgrasp_ros.convert import RodArrays, contact_fields, require_finite, rod_state_arrays
 from contgrasp_ros.runtime import (
     Diagnostics,
     DropCounter,
@@ -57,23 +58,28 @@ class BoundarySensor(Node):
         # The latched object and the first rod state race (e.g. on one executor): a state that
         # arrives first is kept and sensed as soon as the object is there, so the lock-step
         # simulator is not left waiting for its first couple.
-        self.waiting: tuple[RodState, RodArrays] | None = None
+        self.waiting: tuple[MessageView | RodState, RodArrays] | None = None  # (a decoded or typed message)
         self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._sense_waiting)
         self.sensed = 0
         # the contact states last published (the sampled announcement of a state can arrive after
         # the next states: the executor takes the per-step topic first) and a sampled step
         # announced before its state was sensed
-        self.recent: deque[ContactState] = deque(maxlen=RECENT)
+        self.recent: deque[tuple[int, bytes]] = deque(maxlen=RECENT)  # (step, serialized contact state)
         self.sampled_step: int | None = None
+        # the loop's messages go in and out serialized (contgrasp_ros.cdr: no conversion to
+        # Python message objects); a typed message passed to the callbacks directly works too
+        self.rod_codec, self.contact_codec = Codec(RodState), Codec(ContactState)
         self.pub = self.create_publisher(ContactState, topics.CONTACT, qos.STREAM)
         self.pub_sampled = self.create_publisher(ContactState, topics.CONTACT_SAMPLED, qos.STREAM)
-        self.create_subscription(RodState, topics.ROD_STATE, self.on_rod_state, qos.STREAM)
-        self.create_subscription(RodState, topics.ROD_STATE_SAMPLED, self.on_sampled, qos.STREAM)
+        self.create_subscription(RodState, topics.ROD_STATE, self.on_rod_state, qos.STREAM, raw=True)
+        self.create_subscription(RodState, topics.ROD_STATE_SAMPLED, self.on_sampled, qos.STREAM, raw=True)
 
     @guarded(topics.ROD_STATE)
-    def on_rod_state(self, msg: RodState) -> None:
-        """Validate a rod state and sense it (or keep it until the object is known)."""
+    def on_rod_state(self, data: bytes | RodState) -> None:
+        """Validate a rod state (serialized, or a message) and sense it (or keep it until the
+        object is known)."""
         try:
+            msg = self.rod_codec.decode(data) if isinstance(data, bytes) else data
             rod = rod_state_arrays(msg)
             self.stamps.admit(topics.ROD_STATE, msg.header, rod.step)
         except ContgraspError as exc:
@@ -86,7 +92,7 @@ class BoundarySensor(Node):
             return
         self._sense(msg, rod)
 
-    def _sense(self, msg: RodState, rod: RodArrays) -> None:
+    def _sense(self, msg: Any, rod: RodArrays) -> None:
         boundary = self.object.boundary
         assert boundary is not None  # (sensed only once the object is known)
         try:
@@ -95,30 +101,32 @@ class BoundarySensor(Node):
         except ContgraspError as exc:
             self.drops.drop_error(topics.ROD_STATE, exc)
             return
-        out = contact_to_msg(state, msg.header, msg.step)
+        out = self.contact_codec.encode(contact_fields(state, msg.header, rod.step))
         self.pub.publish(out)
         self.sensed += 1
-        self.recent.append(out)
-        if self.sampled_step is not None and msg.step >= self.sampled_step:
-            if msg.step == self.sampled_step:
+        self.recent.append((rod.step, out))
+        if self.sampled_step is not None and rod.step >= self.sampled_step:
+            if rod.step == self.sampled_step:
                 self.pub_sampled.publish(out)
             self.sampled_step = None  # (a later step: the sampled one was lost on the way)
 
     @guarded(topics.ROD_STATE_SAMPLED)
-    def on_sampled(self, msg: RodState) -> None:
+    def on_sampled(self, data: bytes | RodState) -> None:
         """A sampled rod state: publish its contact state on the sampled stream, now if it was
         sensed already, else once it is (only the step is read: the state itself is sensed from
         the per-step stream)."""
         try:
-            self.stamps.admit(topics.ROD_STATE_SAMPLED, msg.header, int(msg.step))
+            msg = self.rod_codec.decode(data) if isinstance(data, bytes) else data
+            step = int(msg.step)
+            self.stamps.admit(topics.ROD_STATE_SAMPLED, msg.header, step)
         except ContgraspError as exc:
             self.drops.drop_error(topics.ROD_STATE_SAMPLED, exc)
             return
-        sensed = next((c for c in reversed(self.recent) if c.step == msg.step), None)
+        sensed = next((out for k, out in reversed(self.recent) if k == step), None)
         if sensed is not None:
             self.pub_sampled.publish(sensed)
-        elif not self.recent or msg.step > self.recent[-1].step or msg.step == 0:  # (step 0: a new run)
-            self.sampled_step = int(msg.step)
+        elif not self.recent or step > self.recent[-1][0] or step == 0:  # (step 0: a new run)
+            self.sampled_step = step
         # (else an older state this node never sensed: dropped or lost on the way, nothing to republish)
 
     def _sense_waiting(self) -> None:

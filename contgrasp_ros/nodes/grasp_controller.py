@@ -20,7 +20,8 @@ from contgrasp_core.errors import ContgraspError, InvalidParameterError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros import qos, topics
-from contgrasp_ros.convert import MessageError, contact_arrays, couple_to_msg, require_finite
+from contgrasp_ros.cdr import Codec
+from contgrasp_ros.convert import MessageError, contact_arrays, couple_fields, require_finite
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import (
     Diagnostics,
@@ -58,8 +59,11 @@ class GraspController(Node):
         self.gains = self._gains({n: self.get_parameter(n).value for n in GAIN_PARAMETERS})
         add_parameter_check(self, self._check_gains)
         self.add_post_set_parameters_callback(self.drops.guard("parameters", self._refresh))
+        # the loop's messages go in and out serialized (contgrasp_ros.cdr); a typed message
+        # passed to on_contact directly works too
+        self.contact_codec, self.couple_codec = Codec(ContactState), Codec(CoupleControl)
         self.pub = self.create_publisher(CoupleControl, topics.COUPLE, qos.STREAM)
-        self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM)
+        self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM, raw=True)
 
     def _gains(self, p: dict[str, Any]) -> FeedbackGains:
         if p["adaptive_mu2"]:
@@ -82,9 +86,11 @@ class GraspController(Node):
         self.gains = self._gains({n: self.get_parameter(n).value for n in GAIN_PARAMETERS})
 
     @guarded(topics.CONTACT)
-    def on_contact(self, msg: ContactState) -> None:
-        """Validate a contact state and answer it with the couple (echoing its stamp and step)."""
+    def on_contact(self, data: bytes | ContactState) -> None:
+        """Validate a contact state (serialized, or a message) and answer it with the couple
+        (echoing its stamp and step)."""
         try:
+            msg = self.contact_codec.decode(data) if isinstance(data, bytes) else data
             c = contact_arrays(msg)
             if len(c.s) != self.model.n_elements + 1:
                 raise MessageError(
@@ -97,7 +103,7 @@ class GraspController(Node):
         except ContgraspError as exc:
             self.drops.drop_error(topics.CONTACT, exc)
             return
-        self.pub.publish(couple_to_msg(self.model.joint_s, u, msg.header, msg.step))
+        self.pub.publish(self.couple_codec.encode(couple_fields(self.model.joint_s, u, msg.header, c.step)))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -70,7 +70,8 @@ from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_msgs.srv import ApplyWrench
 from contgrasp_ros import qos, topics
-from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, float64_field, object_fields, wrench_arrays
+from contgrasp_ros.cdr import Codec
+from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, rod_state_fields, wrench_arrays
 from contgrasp_ros.lockstep import LockStep, Peers, StartGate, WallClock
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
@@ -162,12 +163,15 @@ class RodSimulator(Node):
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops, self._status_values)
         self.failure = ""
+        # the loop's messages go out and in serialized (contgrasp_ros.cdr: no conversion to Python
+        # message objects); a typed couple passed to on_couple directly works too
+        self.state_codec, self.couple_codec = Codec(RodState), Codec(CoupleControl)
         self.pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, qos.STREAM)
         self.pub_state = self.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)
         self.pub_sampled = self.create_publisher(RodState, topics.ROD_STATE_SAMPLED, qos.STREAM)
         self.pub_object = self.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
         self.pub_markers = self.create_publisher(MarkerArray, topics.MARKERS, qos.STREAM)
-        self.sub_couple = self.create_subscription(CoupleControl, topics.COUPLE, self.on_couple, qos.STREAM)
+        self.sub_couple = self.create_subscription(CoupleControl, topics.COUPLE, self.on_couple, qos.STREAM, raw=True)
         if self.system.body is not None:
             self.pub_pose = self.create_publisher(PoseStamped, topics.OBJECT_POSE, qos.STREAM)
             self.pub_twist = self.create_publisher(TwistStamped, topics.OBJECT_TWIST, qos.STREAM)
@@ -259,13 +263,7 @@ class RodSimulator(Node):
         centroid = None if self.system.body is None else self.system.body.centroid
         if self._due("clock_period", obs.t, final=True):
             self.pub_clock.publish(ClockMsg(clock=header.stamp))
-        state = RodState(
-            header=header, step=obs.k, s=float64_field(obs.s), x=float64_field(obs.x[:, 0]),
-            y=float64_field(obs.x[:, 1]), theta=float64_field(obs.theta), kappa=float64_field(obs.kappa),
-            radius=float64_field(obs.radius), vx=float64_field(obs.v[:, 0]), vy=float64_field(obs.v[:, 1]),
-            kinetic_energy=obs.kinetic_energy,
-            max_penetration=obs.penetration, **object_fields(centroid, obs.body, wrench),
-        )
+        state = self.state_codec.encode(rod_state_fields(obs, header, centroid, wrench))
         self.pub_state.publish(state)  # (the loop's first: the sensor is waiting for it)
         if self._due("sample_period", obs.t, final=True):
             self.pub_sampled.publish(state)
@@ -359,9 +357,11 @@ class RodSimulator(Node):
         return self.rule.started and not self.paused and not self.session.finished and not self.failure
 
     @guarded(topics.COUPLE)
-    def on_couple(self, msg: CoupleControl) -> None:
-        """Validate a couple; in lock-step advance with the couple answering the current step."""
+    def on_couple(self, data: bytes | CoupleControl) -> None:
+        """Validate a couple (serialized, or a message); in lock-step advance with the couple
+        answering the current step."""
         try:
+            msg = self.couple_codec.decode(data) if isinstance(data, bytes) else data
             step, s, u = couple_arrays(msg)
             n = len(u.u) if isinstance(u, FeedbackExpansion) else len(u)
             if n != self.model.n_elements or len(s) != n or np.max(np.abs(s - self.model.joint_s)) > 1e-12:
