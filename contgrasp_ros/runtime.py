@@ -376,15 +376,18 @@ class Diagnostics:
     and at once on the first drop; :meth:`update` publishes a node's events (the simulator's
     states) at most every ``min_period_s`` of wall time and at once when the level or the
     message changes. ``build()`` gives (level, message, key/values); the drop counts
-    (:meth:`DropCounter.key_values`) are added. Default: OK / WARN when messages were dropped."""
+    (:meth:`DropCounter.key_values`) are added. Default: OK / WARN when messages were dropped.
+    ``summary()`` gives (level, message) alone, cheaply: :meth:`update` then builds the values
+    only when it publishes (the simulator updates after every state)."""
 
     def __init__(self, node: Node, drops: DropCounter, build: Callable[[], Status] | None = None, period_s: float = 1.0,
-                 min_period_s: float = 0.2) -> None:
+                 min_period_s: float = 0.2, summary: Callable[[], tuple[int, str]] | None = None) -> None:
         from contgrasp_ros import qos
 
         self._node = node
         self._drops = drops
         self._build = build
+        self._summary = summary
         self._min_period = min_period_s
         self._last: tuple[float, int, str] | None = None  # (wall time, level, message) of the last publication
         self.pub = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, qos.STREAM)
@@ -399,9 +402,10 @@ class Diagnostics:
             total = self._drops.total
             level = DiagnosticStatus.WARN if total else DiagnosticStatus.OK
             message, values = (f"{total} messages dropped" if total else "ok"), {}
-        if self._drops.total and level == DiagnosticStatus.OK:
-            level = DiagnosticStatus.WARN
-        return level, message, values
+        return self._with_drops(level), message, values
+
+    def _with_drops(self, level: int) -> int:
+        return DiagnosticStatus.WARN if self._drops.total and level == DiagnosticStatus.OK else level
 
     def status(self, values: Status | None = None) -> DiagnosticStatus:
         """The current DiagnosticStatus (of ``values`` when given: a :meth:`_values` result)."""
@@ -422,10 +426,15 @@ class Diagnostics:
         ``min_period_s`` wall seconds passed since then (a status per event, a few per second
         at most: building and delivering one after every simulator state cost more than the
         state itself, benchmarks/RESULTS.md, ros_loop)."""
-        values = self._values()
         last = self._last
-        if last is None or (values[0], values[1]) != last[1:] or time.monotonic() - last[0] >= self._min_period:
-            self.publish(stamp, values)
+        if last is not None and time.monotonic() - last[0] < self._min_period:
+            if self._summary is not None:
+                level, message = self._summary()
+                if (self._with_drops(level), message) == last[1:]:
+                    return
+            elif self._values()[:2] == last[1:]:
+                return
+        self.publish(stamp)
 
 
 # ---------------------------------------------------------------------------- time and the end of a run

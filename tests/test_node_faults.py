@@ -578,6 +578,46 @@ def test_internal_errors_in_every_handler_are_contained(make, monkeypatch, which
 
 
 # ---------------------------------------------------------------------------- diagnostics
+@pytest.mark.parametrize("with_summary", [True, False])
+def test_diagnostics_update_publishes_on_a_change_at_once_and_otherwise_a_few_times_a_second(make, with_summary) -> None:  # type: ignore[no-untyped-def]
+    """Diagnostics.update (after every simulator state): the first call publishes; within
+    min_period_s only a change of level or message does; with a ``summary`` the values are
+    built only for a publication."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
+    from contgrasp_ros.runtime import Diagnostics
+
+    host = make(BoundarySensor)
+    state = {"level": DiagnosticStatus.OK, "message": "running", "built": 0}
+
+    def build() -> tuple[int, str, dict[str, str]]:
+        state["built"] += 1
+        return state["level"], state["message"], {"step": "1"}
+
+    d = Diagnostics(host, host.drops, build, min_period_s=0.3,
+                    summary=(lambda: (state["level"], state["message"])) if with_summary else None)
+    d.pub = Sink(DiagnosticArray)
+
+    def published() -> list[tuple[int, str]]:
+        return [(m.status[0].level, m.status[0].message) for m in d.pub.msgs]
+
+    d.update()
+    d.update()
+    assert published() == [(DiagnosticStatus.OK, "running")]
+    state["message"] = "paused"
+    d.update()
+    state["level"] = DiagnosticStatus.WARN
+    d.update()
+    d.update()
+    assert published()[1:] == [(DiagnosticStatus.OK, "paused"), (DiagnosticStatus.WARN, "paused")]
+    if with_summary:
+        assert state["built"] == 3  # (only for the three publications)
+    time.sleep(0.35)
+    d.update()
+    assert len(published()) == 4
+
+
 def test_diagnostics_report_drops_by_reason(make) -> None:  # type: ignore[no-untyped-def]
     """The first drop is published at once, later ones at most once per wall second; keys are
     ``dropped_messages`` and ``dropped: <topic>: <reason>``; the simulator keeps its own keys."""

@@ -161,7 +161,7 @@ class RodSimulator(Node):
 
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
-        self.diagnostics = Diagnostics(self, self.drops, self._status_values)
+        self.diagnostics = Diagnostics(self, self.drops, self._status_values, summary=self._status_summary)
         self.failure = ""
         # the loop's messages go out and in serialized (contgrasp_ros.cdr: no conversion to Python
         # message objects); a typed couple passed to on_couple directly works too
@@ -271,7 +271,7 @@ class RodSimulator(Node):
         if self.get_parameter("marker_period").value > 0 and self._due("marker_period", obs.t, final=False):
             self.pub_markers.publish(scene_markers(self.boundary, obs, header, centroid))
         self.rule.published(time.monotonic())
-        self.diagnostics.update(_stamp(obs.t))  # (a change of state, a missed deadline: at once)
+        self.diagnostics.update(header.stamp)  # (a change of state, a missed deadline: at once)
 
     def _due(self, period_parameter: str, t: float, *, final: bool) -> bool:
         """Whether the state at simulated time ``t`` goes out on the stream published every
@@ -316,8 +316,12 @@ class RodSimulator(Node):
             "max_penetration": repr(float(s.max_penetration)),
             "message": self.failure,
         }
+        return *self._status_summary(), values
+
+    def _status_summary(self) -> tuple[int, str]:
+        """The status's level and state (what the values' publication depends on)."""
         level = DiagnosticStatus.ERROR if self.failure else (DiagnosticStatus.WARN if self.missed else DiagnosticStatus.OK)
-        return level, values["state"], values
+        return level, self._status()
 
     def _publish_status(self) -> None:
         self.diagnostics.publish(_stamp(float(self.session.state.t)))
