@@ -3,9 +3,10 @@
 A pinger publishes a RodState of the paper's size (N = 100 elements) on ``/hop/ping``; an echo
 process (this script with ``--echo``) republishes every message it takes on ``/hop/pong``; the
 pinger waits for each echo before sending the next, as the lock-step loop does. For each
-executor (rclpy's SingleThreadedExecutor and contgrasp's LeanExecutor, both ends alike) the
-round trip's median and the CPU time per message of each end are reported, and the ratios in
-the same run. Everything stays on loopback with its own ROS_DOMAIN_ID.
+variant - rclpy's SingleThreadedExecutor, contgrasp's LeanExecutor (both ends alike), and the
+LeanExecutor with serialized messages (``raw=True`` subscriptions and ``publish`` of the bytes,
+as the loop's nodes do: contgrasp_ros.cdr) - the round trip's median and the CPU time per
+message of each end are reported, and the ratios in the same run. Everything stays on loopback with its own ROS_DOMAIN_ID.
 
     AMENT_PREFIX_PATH=.venv .venv/bin/python benchmarks/hop.py [--messages 3000] [--repeat 3]
 """
@@ -22,7 +23,7 @@ import time
 
 import numpy as np
 
-EXECUTORS = ("rclpy", "lean")
+EXECUTORS = ("rclpy", "lean", "lean-raw")
 N_NODES = 101
 
 
@@ -31,7 +32,7 @@ def _executor(kind: str):  # type: ignore[no-untyped-def]
 
     from contgrasp_ros.executor import LeanExecutor
 
-    return LeanExecutor() if kind == "lean" else SingleThreadedExecutor()
+    return SingleThreadedExecutor() if kind == "rclpy" else LeanExecutor()
 
 
 def _message():  # type: ignore[no-untyped-def]
@@ -59,14 +60,14 @@ def echo(kind: str) -> None:
     count = 0
     cpu0 = time.process_time()
 
-    def on_ping(msg: RodState) -> None:
+    def on_ping(msg: RodState | bytes) -> None:
         nonlocal count, cpu0
         if count == 0:
             cpu0 = time.process_time()  # (from the first message: start-up is not a hop's cost)
         count += 1
         pub.publish(msg)
 
-    node.create_subscription(RodState, "/hop/ping", on_ping, qos.STREAM)
+    node.create_subscription(RodState, "/hop/ping", on_ping, qos.STREAM, raw=kind.endswith("raw"))
     ex = _executor(kind)
     ex.add_node(node)
     try:
@@ -81,6 +82,7 @@ def ping(kind: str, messages: int, domain: int) -> dict[str, float]:
     """Start an echo process, exchange ``messages`` ping-pongs, return the medians and CPU."""
     import rclpy
     from rclpy.node import Node
+    from rclpy.serialization import serialize_message
 
     from contgrasp_msgs.msg import RodState
     from contgrasp_ros import qos
@@ -93,7 +95,8 @@ def ping(kind: str, messages: int, domain: int) -> dict[str, float]:
         node = Node("hop_ping")
         pub = node.create_publisher(RodState, "/hop/ping", qos.STREAM)
         got = [0]
-        node.create_subscription(RodState, "/hop/pong", lambda m: got.__setitem__(0, got[0] + 1), qos.STREAM)
+        raw = kind.endswith("raw")
+        node.create_subscription(RodState, "/hop/pong", lambda m: got.__setitem__(0, got[0] + 1), qos.STREAM, raw=raw)
         ex = _executor(kind)
         ex.add_node(node)
         deadline = time.monotonic() + 30.0
@@ -101,7 +104,7 @@ def ping(kind: str, messages: int, domain: int) -> dict[str, float]:
             ex.spin_once(timeout_sec=0.05)
             if time.monotonic() > deadline:
                 raise RuntimeError("the echo process did not connect within 30 s")
-        msg = _message()
+        msg = serialize_message(_message()) if raw else _message()
         warm = 200
         trips = []
         cpu0 = 0.0
@@ -146,7 +149,7 @@ def main() -> None:
         for j, kind in enumerate(EXECUTORS):
             # (each measurement in its own process: one rclpy init per process)
             code = f"import json, sys; sys.path.insert(0, {os.path.dirname(__file__)!r}); import hop; " \
-                   f"print(json.dumps(hop.ping({kind!r}, {args.messages}, {base + 2 * r + j})))"
+                   f"print(json.dumps(hop.ping({kind!r}, {args.messages}, {base + len(EXECUTORS) * r + j})))"
             res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
             if res.returncode != 0:
                 raise SystemExit(res.stderr[-2000:])
@@ -157,7 +160,8 @@ def main() -> None:
     for k, m in med.items():
         print(f"{k:<8} {m['round_trip_ms']:>14.3f} {m['ping_cpu_ms_per_message']:>16.3f} {m['echo_cpu_ms_per_message']:>16.3f}")
     for m in ("round_trip_ms", "ping_cpu_ms_per_message", "echo_cpu_ms_per_message"):
-        print(f"rclpy / lean {m}: {med['rclpy'][m] / med['lean'][m]:.2f}x")
+        print(f"rclpy / lean {m}: {med['rclpy'][m] / med['lean'][m]:.2f}x; "
+              f"lean / lean-raw: {med['lean'][m] / med['lean-raw'][m]:.2f}x")
     print(f"load average at end: {os.getloadavg()}")
 
 
