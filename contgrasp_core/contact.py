@@ -210,16 +210,25 @@ def sense(
     ):
         raise InvalidParameterError("arm shape contains NaN or infinite values")
     rad = _radius_array(radius, len(r))
-    proj = boundary.project(r)
-    s_o = _unwrap(proj.s_o, boundary.length)
-    rho = proj.signed_distance
-    alpha = _wrap_pi(proj.phi + 0.5 * np.pi - theta)
-    kappa_o = proj.kappa_o
-    one_plus = 1.0 + rho * kappa_o
-    with np.errstate(divide="ignore", invalid="ignore"):
-        nu_o = np.sin(alpha) / one_plus
-        foot_turn = kappa_o / one_plus
-    delta = rad - rho
+    if _kernels.ENABLED and isinstance(boundary, Boundary) and boundary.kind == "circle" and len(r):
+        # the same operations in one compiled pass (the sensing of every step of the paper run)
+        c = boundary.params["center"]
+        s_o, rho, alpha, delta, foot, kappa_o, nu_o, foot_turn, normal_out, _ = _kernels.circle_sense(
+            _kernels.f64(r), _kernels.f64(theta), _kernels.f64(rad), float(boundary.params["R"]), float(c[0]),
+            float(c[1]), float(boundary.length))
+        one_plus = 1.0 + rho * kappa_o
+    else:
+        proj = boundary.project(r)
+        s_o = _unwrap(proj.s_o, boundary.length)
+        rho = proj.signed_distance
+        alpha = _wrap_pi(proj.phi + 0.5 * np.pi - theta)
+        kappa_o = proj.kappa_o
+        one_plus = 1.0 + rho * kappa_o
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nu_o = np.sin(alpha) / one_plus
+            foot_turn = kappa_o / one_plus
+        delta = rad - rho
+        foot, normal_out = proj.foot, proj.normal_out
     valid = (rho > 0.0) & (alpha > 0.0) & (alpha < np.pi) & (one_plus > 0.0)
     return ContactState(
         s=ss,
@@ -227,11 +236,11 @@ def sense(
         alpha=alpha,
         delta=delta,
         s_o=s_o,
-        foot=proj.foot,
+        foot=foot,
         kappa_o=kappa_o,
         nu_o=nu_o,
         foot_turn=foot_turn,
-        normal_out=proj.normal_out,
+        normal_out=normal_out,
         in_contact=delta >= -tol,
         valid=valid,
         tol=float(tol),

@@ -115,9 +115,12 @@ def test_sense_outward_normal_points_from_the_foot_to_the_arm() -> None:
 
 
 @pytest.mark.parametrize("start,crosses", [(0.5 * np.pi, False), (-0.25, True)], ids=["no-seam", "across-the-seam"])
-def test_sense_unwraps_s_o_like_numpy(start: float, crosses: bool) -> None:
+def test_sense_unwraps_s_o_like_numpy(start: float, crosses: bool, monkeypatch: pytest.MonkeyPatch) -> None:
     """s_o is np.unwrap of the projection's arclengths (sense skips the call when no step can
-    cross the seam s_o = 0, which must not change a bit)."""
+    cross the seam s_o = 0, which must not change a bit). Against a circle Boundary this is the
+    numpy path (kernels off); its compiled twin is compared with it in tests/test_kernels.py."""
+    from contgrasp_core.rod import _kernels
+
     b = circle(1.0)
     s = np.linspace(0, 0.5 * np.pi * 1.2, 80)  # a quarter turn at distance 0.2, counter-clockwise
     base = BasePose(1.2 * np.cos(start), 1.2 * np.sin(start), start + np.pi / 2)
@@ -125,7 +128,9 @@ def test_sense_unwraps_s_o_like_numpy(start: float, crosses: bool) -> None:
     for obj in (b, Obstacle(b)):
         wrapped = obj.project(shape.r).s_o
         assert bool(np.any(np.diff(wrapped) < 0)) == crosses
+        monkeypatch.setattr(_kernels, "ENABLED", not isinstance(obj, type(b)))
         geo = sense(shape, obj, 0.1)
+        monkeypatch.undo()
         np.testing.assert_array_equal(geo.s_o, np.unwrap(wrapped, period=b.length))
         assert np.all(np.diff(geo.s_o) > 0)
 

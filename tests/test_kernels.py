@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from contgrasp_core.arm import ArmShape
 from contgrasp_core.boundary import circle, ellipse
 from contgrasp_core.control import feedback_at_joints
 from contgrasp_core.contact import sense, shadow_geometry
@@ -69,6 +70,33 @@ def test_obstacle_circle_kernel() -> None:
     ref, got = _both(lambda: obstacle.project(q))
     for name in ("foot", "s_o", "phi", "kappa_o", "signed_distance", "normal_out"):
         np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=1e-15, err_msg=name)
+
+
+def test_circle_sensing_kernel_equals_numpy_to_rounding() -> None:
+    """sense() against a circle Boundary, compiled in one pass, against the numpy path: every
+    field to rounding, the seam (s_o unwrapped along an arm that winds round the circle more than
+    once, backwards too), a point at the centre and points on the circle itself (rho = 0, where
+    1 + rho kappa_o and the signs meet their edge cases) included."""
+    rng = np.random.default_rng(11)
+    for trial in range(200):
+        n = int(rng.integers(1, 80))
+        b = circle(float(rng.uniform(0.01, 1.0)), (float(rng.uniform(-1, 1)), float(rng.uniform(-1, 1))))
+        R, c = b.params["R"], np.asarray(b.params["center"])
+        turns = np.cumsum(rng.uniform(-0.3, 1.2, n))  # (winds round up to ~10 times, with steps back)
+        dist = rng.uniform(0.0, 2.0, n) * R
+        if trial % 4 == 0:
+            dist[rng.integers(0, n)] = R  # on the circle
+        q = c + dist[:, None] * np.stack([np.cos(turns), np.sin(turns)], -1)
+        if trial % 5 == 0:
+            q[0] = c  # the centre
+        shape = ArmShape(s=0.01 * np.arange(n), r=q, theta=rng.uniform(-7.0, 7.0, n))
+        radius = rng.uniform(0.0, 0.02, n)
+        ref, got = _both(lambda: sense(shape, b, radius, tol=1e-3))  # noqa: B023 (called at once)
+        for name in ("rho", "alpha", "delta", "s_o", "foot", "kappa_o", "nu_o", "foot_turn", "normal_out"):
+            np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=1e-13, atol=2e-15 * max(1.0, R * turns.max()),
+                                       err_msg=name)
+        for name in ("in_contact", "valid"):  # (edge cases aside: one flag may flip at a tie)
+            assert np.sum(getattr(got, name) != getattr(ref, name)) <= (1 if trial % 4 == 0 else 0), name
 
 
 def _same_projection(fast, slow, length: float, scale: float) -> None:  # type: ignore[no-untyped-def]

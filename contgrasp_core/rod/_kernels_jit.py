@@ -9,7 +9,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["frames_nodes", "kinetic_energy", "newton_system", "chain_solve", "circle_projection",
-           "circle_shadow_geometry", "joint_couple_jacobian"]
+           "circle_shadow_geometry", "circle_sense", "joint_couple_jacobian"]
 
 
 @njit(cache=True)
@@ -459,6 +459,69 @@ def circle_shadow_geometry(q: np.ndarray, angles: np.ndarray, radius: float, cx:
         alpha[i] = (phi + 0.5 * np.pi - angles[i] + np.pi) % (2.0 * np.pi) - np.pi
         turn[i] = kappa[i] / (1.0 + rho[i] * kappa[i])
     return rho, alpha, kappa, turn, nrm
+
+
+@njit(cache=True, error_model="numpy")  # (1 + rho kappa_o = 0 gives inf or NaN, as numpy's division)
+def circle_sense(r: np.ndarray, theta: np.ndarray, rad: np.ndarray, radius: float, cx: float, cy: float,
+                 length: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                         np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`contgrasp_core.contact.sense` of the points ``r`` (n, 2) with tangent angles
+    ``theta`` and arm radii ``rad`` (n,) against the circle of ``radius`` about ``(cx, cy)``
+    (a :class:`~contgrasp_core.boundary.Boundary` of kind circle, perimeter ``length``), in one
+    pass: the closest point as ``Boundary._project_circle`` computes it (foot from the query's
+    polar angle ``t``), then eqs. (4), (5) and (7) as ``sense`` does, and ``s_o`` unwrapped along
+    the arm as ``contact._unwrap`` (numpy's ``unwrap`` with period ``length``). Returns ``s_o``,
+    ``rho``, ``alpha``, ``delta``, ``foot`` (n, 2), ``kappa_o``, ``nu_o``, ``foot_turn``,
+    ``normal_out`` (n, 2) and ``phi``; the same operations as the numpy path (agreement to
+    rounding: numpy's and libm's transcendental functions may differ in the last bit)."""
+    n = r.shape[0]
+    two_pi = 2.0 * np.pi
+    s_o = np.empty(n)
+    rho = np.empty(n)
+    alpha = np.empty(n)
+    delta = np.empty(n)
+    foot = np.empty((n, 2))
+    kappa = np.full(n, 1.0 / radius)
+    nu = np.empty(n)
+    turn = np.empty(n)
+    nrm = np.empty((n, 2))
+    phi = np.empty(n)
+    for i in range(n):
+        t = math.atan2(r[i, 1] - cy, r[i, 0] - cx) % two_pi
+        if t >= two_pi:
+            t = 0.0  # (mod of a tiny negative rounds to 2 pi: the seam is t = 0)
+        cs, sn = math.cos(t), math.sin(t)
+        foot[i, 0] = radius * cs + cx
+        foot[i, 1] = radius * sn + cy
+        rel0, rel1 = r[i, 0] - foot[i, 0], r[i, 1] - foot[i, 1]
+        d = math.hypot(rel0, rel1)
+        cross = -radius * sn * rel1 - radius * cs * rel0  # c'(t) x (q - foot) > 0: inside
+        side = -np.sign(cross)
+        so = (radius * t) % length
+        s_o[i] = 0.0 if so >= length else so
+        rho[i] = side * d
+        phi[i] = t + 0.5 * np.pi
+        alpha[i] = (phi[i] + 0.5 * np.pi - theta[i] + np.pi) % two_pi - np.pi
+        one_plus = 1.0 + rho[i] * kappa[i]
+        nu[i] = math.sin(alpha[i]) / one_plus
+        turn[i] = kappa[i] / one_plus
+        delta[i] = rad[i] - rho[i]
+        nrm[i, 0] = math.sin(phi[i])
+        nrm[i, 1] = -math.cos(phi[i])
+    # unwrap s_o along the arm (numpy's unwrap, period = length, discont = length / 2)
+    half = length / 2
+    correction = 0.0
+    previous = s_o[0] if n else 0.0
+    for i in range(1, n):
+        dd = s_o[i] - previous
+        previous = s_o[i]
+        if abs(dd) >= half:
+            ddmod = (dd + half) % length - half
+            if ddmod == -half and dd > 0:
+                ddmod = half  # (a step of exactly +period/2 stays)
+            correction += ddmod - dd
+        s_o[i] += correction
+    return s_o, rho, alpha, delta, foot, kappa, nu, turn, nrm, phi
 
 
 @njit(cache=True)
