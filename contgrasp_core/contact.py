@@ -41,6 +41,7 @@ __all__ = [
     "ContactState",
     "ContactKinematics",
     "sense",
+    "load_sensing",
     "shadow_geometry",
     "integrate_contact",
     "shape_from_contact",
@@ -245,6 +246,17 @@ def sense(
         valid=valid,
         tol=float(tol),
     )
+
+
+def load_sensing() -> None:
+    """Load the compiled sensing of :func:`sense` now (numba and its on-disk cache, ~0.3 s on
+    first use in a process) by sensing a two-node arm against a unit circle once. The ROS
+    boundary sensor calls it at start-up: in lock-step the whole loop waits for its first
+    contact state, so paying this at the run's first state would cost the run that much."""
+    from .boundary import circle
+
+    sense(ArmShape(s=np.array([0.0, 1.0]), r=np.array([[2.0, 0.0], [2.0, 1.0]]), theta=np.array([0.5 * np.pi] * 2)),
+          circle(1.0), 0.0)
 
 
 def check_state(boundary: Boundary, rho: float, alpha: float, s_o: float, *, s: float = 0.0) -> None:

@@ -197,3 +197,27 @@ def test_read_only_inputs_use_the_compiled_signature() -> None:
     system.kinetic_energy(ro_state)
     after = {k: len(getattr(_kernels, k).signatures) for k in before}
     assert after == before
+
+
+def test_load_sensing_loads_the_signature_the_sensing_uses() -> None:
+    """contact.load_sensing (the ROS boundary sensor's start-up) loads the one compiled signature
+    that sensing a rod state uses later: a fresh process senses the paper's arm without
+    compiling or loading another."""
+    import subprocess
+    import sys
+
+    code = """
+from contgrasp_core.contact import load_sensing, sense
+from contgrasp_core.rod import _kernels
+from contgrasp_core.rod.session import LoopSession, sensed_shape
+from contgrasp_core.scenario import PAPER
+load_sensing()
+loaded = list(_kernels.circle_sense.signatures)
+assert len(loaded) == 1, loaded
+session = LoopSession(PAPER.system(), PAPER.loop)
+obs = session.observe()
+sense(sensed_shape(session.system, obs), PAPER.object.boundary(), obs.radius, tol=PAPER.sensing.contact_tolerance)
+assert list(_kernels.circle_sense.signatures) == loaded, _kernels.circle_sense.signatures
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr

@@ -21,7 +21,7 @@ from typing import Any
 
 from rclpy.node import Node
 
-from contgrasp_core.contact import sense
+from contgrasp_core.contact import load_sensing, sense
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, RodState
@@ -69,6 +69,7 @@ class BoundarySensor(Node):
         # the loop's messages go in and out serialized (contgrasp_ros.cdr: no conversion to
         # Python message objects); a typed message passed to the callbacks directly works too
         self.rod_codec, self.contact_codec = Codec(RodState), Codec(ContactState)
+        load_sensing()  # (the compiled sensing, now rather than at the run's first state)
         self.pub = self.create_publisher(ContactState, topics.CONTACT, qos.STREAM)
         self.pub_sampled = self.create_publisher(ContactState, topics.CONTACT_SAMPLED, qos.STREAM)
         self.create_subscription(RodState, topics.ROD_STATE, self.on_rod_state, qos.STREAM, raw=True)
