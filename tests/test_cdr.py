@@ -39,7 +39,7 @@ def messages(draw: Any, msg_type: Any) -> tuple[dict[str, Any], Any]:
         n = draw(st.integers(0, 12))
         if kind == "header":
             values[name] = Header(stamp=Time(sec=draw(st.integers(-2**31, 2**31 - 1)), nanosec=draw(st.integers(0, 2**32 - 1))),
-                                  frame_id=draw(st.text(st.characters(blacklist_characters="\x00"), max_size=9)))  # (C strings)
+                                  frame_id=draw(st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"), max_size=9)))  # (C strings)
         elif kind == "uint64":
             values[name] = draw(st.integers(0, 2**64 - 1))
         elif kind == "double":
