@@ -41,7 +41,7 @@ def node_main(roles: list[str]) -> None:
     from std_msgs.msg import Header
 
     from contgrasp_core.arm import ArmShape
-    from contgrasp_core.contact import sense
+    from contgrasp_core.contact import load_sensing, sense
     from contgrasp_core.control import FeedbackExpansion, feedback_at_joints
     from contgrasp_core.rod.session import LoopSession, preload
     from contgrasp_core.scenario import PAPER
@@ -63,6 +63,7 @@ def node_main(roles: list[str]) -> None:
     if "sensor" in roles:
         sensor = node("sensor")
         boundary = PAPER.object.boundary()
+        load_sensing()  # (as the boundary sensor node: not at the run's first state)
         contact_pub = sensor.create_publisher(ContactState, "floor/contact", qos.STREAM)
 
         def on_state(data: bytes) -> None:
