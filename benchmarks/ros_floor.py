@@ -156,6 +156,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="runs of each grouping (medians reported)")
     ap.add_argument("--node", help=argparse.SUPPRESS)  # (a helper process: the roles it runs)
     args = ap.parse_args()
+    if args.repeat < 1:
+        ap.error(f"--repeat must be at least 1, got {args.repeat}")
     if args.node:
         node_main(args.node.split(","))
         return

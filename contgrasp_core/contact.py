@@ -214,7 +214,7 @@ def sense(
     if _kernels.ENABLED and isinstance(boundary, Boundary) and boundary.kind == "circle" and len(r):
         # the same operations in one compiled pass (the sensing of every step of the paper run)
         c = boundary.params["center"]
-        s_o, rho, alpha, delta, foot, kappa_o, nu_o, foot_turn, normal_out, _ = _kernels.circle_sense(
+        s_o, rho, alpha, delta, foot, kappa_o, nu_o, foot_turn, normal_out = _kernels.circle_sense(
             _kernels.f64(r), _kernels.f64(theta), _kernels.f64(rad), float(boundary.params["R"]), float(c[0]),
             float(c[1]), float(boundary.length))
         one_plus = 1.0 + rho * kappa_o

@@ -77,10 +77,6 @@ class MessageView:
         return f"{type(self).__name__}({', '.join(f'{k}={getattr(self, k)!r}' for k in names)})"
 
 
-def _align(offset: int, size: int) -> int:
-    return offset + (-offset % size)
-
-
 class Codec:
     """Encodes and decodes the CDR form of one message type (a rosidl message class)."""
 
@@ -125,6 +121,11 @@ class Codec:
         return b"".join(parts)
 
     # ------------------------------------------------------------------ decode
+    def message(self, data: Any) -> Any:
+        """What a node's callback got, as a message: serialized bytes (its ``raw=True``
+        subscription) decoded, a typed message (a direct call) as it is."""
+        return self.decode(data) if isinstance(data, bytes) else data
+
     def decode(self, data: bytes) -> Any:
         """The message in ``data`` (its serialized form, as a ``raw=True`` subscription gets it): a
         :class:`MessageView` (typed Any: its fields are attributes made per message type)."""

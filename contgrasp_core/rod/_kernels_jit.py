@@ -464,15 +464,15 @@ def circle_shadow_geometry(q: np.ndarray, angles: np.ndarray, radius: float, cx:
 @njit(cache=True, error_model="numpy")  # (1 + rho kappa_o = 0 gives inf or NaN, as numpy's division)
 def circle_sense(r: np.ndarray, theta: np.ndarray, rad: np.ndarray, radius: float, cx: float, cy: float,
                  length: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                         np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                                         np.ndarray, np.ndarray, np.ndarray]:
     """:func:`contgrasp_core.contact.sense` of the points ``r`` (n, 2) with tangent angles
     ``theta`` and arm radii ``rad`` (n,) against the circle of ``radius`` about ``(cx, cy)``
     (a :class:`~contgrasp_core.boundary.Boundary` of kind circle, perimeter ``length``), in one
     pass: the closest point as ``Boundary._project_circle`` computes it (foot from the query's
     polar angle ``t``), then eqs. (4), (5) and (7) as ``sense`` does, and ``s_o`` unwrapped along
     the arm as ``contact._unwrap`` (numpy's ``unwrap`` with period ``length``). Returns ``s_o``,
-    ``rho``, ``alpha``, ``delta``, ``foot`` (n, 2), ``kappa_o``, ``nu_o``, ``foot_turn``,
-    ``normal_out`` (n, 2) and ``phi``; the same operations as the numpy path (agreement to
+    ``rho``, ``alpha``, ``delta``, ``foot`` (n, 2), ``kappa_o``, ``nu_o``, ``foot_turn`` and
+    ``normal_out`` (n, 2); the same operations as the numpy path (agreement to
     rounding: numpy's and libm's transcendental functions may differ in the last bit)."""
     n = r.shape[0]
     two_pi = 2.0 * np.pi
@@ -485,7 +485,6 @@ def circle_sense(r: np.ndarray, theta: np.ndarray, rad: np.ndarray, radius: floa
     nu = np.empty(n)
     turn = np.empty(n)
     nrm = np.empty((n, 2))
-    phi = np.empty(n)
     for i in range(n):
         t = math.atan2(r[i, 1] - cy, r[i, 0] - cx) % two_pi
         if t >= two_pi:
@@ -500,14 +499,14 @@ def circle_sense(r: np.ndarray, theta: np.ndarray, rad: np.ndarray, radius: floa
         so = (radius * t) % length
         s_o[i] = 0.0 if so >= length else so
         rho[i] = side * d
-        phi[i] = t + 0.5 * np.pi
-        alpha[i] = (phi[i] + 0.5 * np.pi - theta[i] + np.pi) % two_pi - np.pi
+        phi = t + 0.5 * np.pi
+        alpha[i] = (phi + 0.5 * np.pi - theta[i] + np.pi) % two_pi - np.pi
         one_plus = 1.0 + rho[i] * kappa[i]
         nu[i] = math.sin(alpha[i]) / one_plus
         turn[i] = kappa[i] / one_plus
         delta[i] = rad[i] - rho[i]
-        nrm[i, 0] = math.sin(phi[i])
-        nrm[i, 1] = -math.cos(phi[i])
+        nrm[i, 0] = math.sin(phi)
+        nrm[i, 1] = -math.cos(phi)
     # unwrap s_o along the arm (numpy's unwrap, period = length, discont = length / 2)
     half = length / 2
     correction = 0.0
@@ -521,7 +520,7 @@ def circle_sense(r: np.ndarray, theta: np.ndarray, rad: np.ndarray, radius: floa
                 ddmod = half  # (a step of exactly +period/2 stays)
             correction += ddmod - dd
         s_o[i] += correction
-    return s_o, rho, alpha, delta, foot, kappa, nu, turn, nrm, phi
+    return s_o, rho, alpha, delta, foot, kappa, nu, turn, nrm
 
 
 @njit(cache=True)

@@ -80,7 +80,7 @@ class BoundarySensor(Node):
         """Validate a rod state (serialized, or a message) and sense it (or keep it until the
         object is known)."""
         try:
-            msg = self.rod_codec.decode(data) if isinstance(data, bytes) else data
+            msg = self.rod_codec.message(data)
             rod = rod_state_arrays(msg)
             self.stamps.admit(topics.ROD_STATE, msg.header, rod.step)
         except ContgraspError as exc:
@@ -117,7 +117,7 @@ class BoundarySensor(Node):
         sensed already, else once it is (only the step is read: the state itself is sensed from
         the per-step stream)."""
         try:
-            msg = self.rod_codec.decode(data) if isinstance(data, bytes) else data
+            msg = self.rod_codec.message(data)
             step = int(msg.step)
             self.stamps.admit(topics.ROD_STATE_SAMPLED, msg.header, step)
         except ContgraspError as exc:

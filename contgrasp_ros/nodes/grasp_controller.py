@@ -90,7 +90,7 @@ class GraspController(Node):
         """Validate a contact state (serialized, or a message) and answer it with the couple
         (echoing its stamp and step)."""
         try:
-            msg = self.contact_codec.decode(data) if isinstance(data, bytes) else data
+            msg = self.contact_codec.message(data)
             c = contact_arrays(msg)
             if len(c.s) != self.model.n_elements + 1:
                 raise MessageError(

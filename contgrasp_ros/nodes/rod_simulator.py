@@ -365,7 +365,7 @@ class RodSimulator(Node):
         """Validate a couple (serialized, or a message); in lock-step advance with the couple
         answering the current step."""
         try:
-            msg = self.couple_codec.decode(data) if isinstance(data, bytes) else data
+            msg = self.couple_codec.message(data)
             step, s, u = couple_arrays(msg)
             n = len(u.u) if isinstance(u, FeedbackExpansion) else len(u)
             if n != self.model.n_elements or len(s) != n or np.max(np.abs(s - self.model.joint_s)) > 1e-12:
