@@ -7,11 +7,13 @@ N = 100, 2 ms control period, until settled) run four ways in one process, one a
   (b) the graph in one process on one executor (`contgrasp-launch --in-process`), lock-step;
   (c) the graph as separate processes (`contgrasp-launch`), lock-step: the main job;
   (d) the graph as separate processes in wall-clock mode (`lockstep: false`: the simulator steps
-      every control period of wall time with the latest couple).
+      every control period of wall time, each step waiting up to `couple_wait` for the couple
+      answering its state, else with the newest couple).
 
 (a) is timed after one untimed run (its compiled kernels loaded, as the simulator node loads them
 while the graph connects). For each: per-step wall milliseconds, the real-time factor (simulated / wall seconds of the
-loop), the ratio to (a), missed deadlines, and for (b)-(d) the start-up time (launcher start to
+loop), the ratio to (a), missed deadlines (the most of the runs), late couples (wall-clock mode:
+steps without their own answer; the most of the runs) and for (b)-(d) the start-up time (launcher start to
 the simulator's first step, from the launcher's `resumed` event). Loop wall times of (b)-(d)
 are the launcher's own measurement from the first state to the last. (b) and (c) must end in
 (a)'s final state bit for bit (checked). Each way runs `--repeat` times; medians are reported.
@@ -48,7 +50,7 @@ def core_only() -> dict[str, Any]:
     session = run_sampled(PAPER)
     wall = time.perf_counter() - t0
     obs = session.observe()
-    return {"wall": wall, "steps": session.k, "sim": float(obs.t), "missed": 0, "startup": None, "x": obs.x}
+    return {"wall": wall, "steps": session.k, "sim": float(obs.t), "missed": 0, "late": 0, "startup": None, "x": obs.x}
 
 
 def graph(params_file: Path, *extra: str) -> dict[str, Any]:
@@ -64,7 +66,8 @@ def graph(params_file: Path, *extra: str) -> dict[str, Any]:
     resumed = [e["time"] for e in read_events(events.read_text().splitlines()) if e["event"] == "resumed"]
     x = np.stack([s["final"]["x"], s["final"]["y"]], -1)
     return {"wall": float(s["loop_wall_time_s"]), "steps": int(s["steps"]), "sim": float(s["sim_time_s"]),
-            "missed": int(s["missed_deadlines"]), "startup": resumed[0] - t0 if resumed else None, "x": x}
+            "missed": int(s["missed_deadlines"]), "late": int(s["late_couples"]),
+            "startup": resumed[0] - t0 if resumed else None, "x": x}
 
 
 def main() -> None:
@@ -94,7 +97,7 @@ def main() -> None:
             results[name].append(run())
     core_ms = statistics.median(r["wall"] / r["steps"] for r in results["(a) core only"]) * 1e3  # (never fails)
     core_x = results["(a) core only"][0]["x"]
-    print(f"{'':28s} {'ms/step':>8s} {'RTF':>6s} {'x core':>7s} {'missed':>6s} {'start-up s':>10s}  steps")
+    print(f"{'':28s} {'ms/step':>8s} {'RTF':>6s} {'x core':>7s} {'missed':>6s} {'late':>5s} {'start-up s':>10s}  steps")
     for name, all_runs in results.items():
         runs = [r for r in all_runs if "error" not in r]
         for r in all_runs:
@@ -106,11 +109,14 @@ def main() -> None:
         rtf = statistics.median(r["sim"] / r["wall"] for r in runs)
         ups = [r["startup"] for r in runs if r["startup"] is not None]
         startup = f"{statistics.median(ups):10.2f}" if ups else f"{'-':>10s}"
-        print(f"{name:28s} {ms:8.2f} {rtf:6.2f} {ms / core_ms:7.2f} {max(r['missed'] for r in runs):6d} {startup}  "
-              f"{runs[0]['steps']}")
+        print(f"{name:28s} {ms:8.2f} {rtf:6.2f} {ms / core_ms:7.2f} {max(r['missed'] for r in runs):6d} "
+              f"{max(r['late'] for r in runs):5d} {startup}  {runs[0]['steps']}")
         if "lock-step" in name:
             same = all(np.array_equal(r["x"], core_x) for r in runs)
             print(f"{'':28s} final state equal to (a) bit for bit: {same}")
+        elif "wall clock" in name:
+            each = ", ".join("{missed}/{late}/{steps}".format(**r) for r in runs)
+            print(f"{'':28s} runs (missed / late / steps): {each}")
     print(f"load average at end {os.getloadavg()[0]:.2f}")
 
 

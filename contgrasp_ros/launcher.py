@@ -250,7 +250,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         print(json.dumps(summary))
     else:
         for key in ("mode", "settled", "settle_time_s", "sim_time_s", "steps", "wall_time_s", "loop_wall_time_s",
-                    "real_time_factor", "step_wall_ms", "missed_deadlines",
+                    "real_time_factor", "step_wall_ms", "missed_deadlines", "late_couples",
                     "mean_abs_rho_ratio_minus_1_contact", "max_abs_rho_ratio_minus_1_contact",
                     "mean_abs_alpha_minus_half_pi_contact", "max_abs_alpha_minus_half_pi_contact",
                     "contact_nodes", "contact_length",

@@ -7,7 +7,8 @@ launcher's. :class:`LockStep` is the lock-step rule itself: state k out, wait fo
 answering step k; a couple that arrives while paused is kept; after the couple timeout the
 configured fallback is applied and the miss counted, once per outage in the log.
 :class:`WallClock` is the free-running rule (``lockstep: false``): every whole control period
-the simulation falls behind the wall clock is a missed deadline.
+the simulation falls behind the wall clock is a missed deadline; :class:`CoupleWait` lets a
+free-running step wait, briefly, for the couple answering the state it starts from.
 
 The node (:mod:`contgrasp_ros.nodes.rod_simulator`) feeds them wall-clock times (``now``, s,
 monotonic) and what it sees of the graph, and performs what they return.
@@ -18,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Peers", "StartGate", "LockStep", "WallClock"]
+__all__ = ["Peers", "StartGate", "LockStep", "WallClock", "CoupleWait"]
 
 
 @dataclass(frozen=True)
@@ -193,3 +194,67 @@ class WallClock:
             self.origin += behind * self.period
         self.k += 1
         return behind
+
+
+class CoupleWait:
+    """Free-running mode's wait for the couple answering the current state (step k's couple,
+    computed from state k).
+
+    The sensor and the controller answer a state about a millisecond after it goes out. A step
+    whose tick comes before that answer and goes on at once with the older couple (the law
+    linearised about state k - 1) is harder for the rod engine: at the start of the grasp two
+    to four times the Newton iterations. It then runs past the next tick, whose step again
+    starts before its answer, and the simulation falls ever further behind the wall clock
+    (docs/ros.md, "Free-running mode"). So a step waits for its answer, up to the node's
+    ``couple_wait`` wall seconds from its tick, then goes on with the newest couple it has: a
+    late couple, counted in ``late``.
+
+    The node calls ``tick(k)`` at step k's tick (True: step now), ``couple(step)`` for every
+    valid couple (True: the awaited answer, step now), ``expired()`` when ``couple_wait`` has
+    passed since a tick that returned False (True: step now with the newest couple),
+    ``cancel()`` when the run pauses, ``reset()`` for a new run. With ``wait`` False
+    (``couple_wait`` 0) every tick steps at once (without its answer: late, counted).
+    """
+
+    def __init__(self, wait: bool) -> None:
+        self.wait = wait
+        self.reset()
+
+    def reset(self) -> None:
+        """A new run: no answer yet, nothing awaited, no late couples."""
+        self.answered = -1  # the newest step a couple answered
+        self.awaited: int | None = None  # the step whose answer a tick is waiting for
+        self.late = 0  # steps that went on with an older couple
+
+    def tick(self, k: int) -> bool:
+        """Step k's tick: True when it may step now (its answer is in; or no waiting: a late
+        couple, counted)."""
+        self.awaited = None
+        if self.answered >= k:
+            return True
+        if not self.wait:
+            self.late += 1
+            return True
+        self.awaited = k
+        return False
+
+    def couple(self, step: int) -> bool:
+        """A valid couple answering ``step``: True when it is the awaited one (step now)."""
+        self.answered = max(self.answered, step)
+        if self.awaited is not None and step >= self.awaited:
+            self.awaited = None
+            return True
+        return False
+
+    def expired(self) -> bool:
+        """The wait is over without the answer: True when a step was waiting (step now with the
+        newest couple, counted late)."""
+        if self.awaited is None:
+            return False
+        self.awaited = None
+        self.late += 1
+        return True
+
+    def cancel(self) -> None:
+        """No step waits any more (paused)."""
+        self.awaited = None

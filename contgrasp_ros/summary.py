@@ -83,7 +83,9 @@ class RunSummary:
 
     ``simulator_state``, ``settled``, ``settle_time_s`` (sim time, ``None`` if not settled),
     ``sim_time_s``, ``steps``, ``missed_deadlines`` (lock-step timeouts that applied the
-    fallback couple) and ``max_penetration`` (m) are the simulator's last ``/diagnostics``
+    fallback couple; free-running: control periods lost behind the wall clock),
+    ``late_couples`` (free-running steps that went on without the couple answering their state,
+    :class:`~contgrasp_ros.lockstep.CoupleWait`; 0 in lock-step) and ``max_penetration`` (m) are the simulator's last ``/diagnostics``
     status; ``final``, ``final_quality`` and the contact statistics
     (:class:`~contgrasp_core.tracking.ContactStats`: mean and max tracking errors over the
     ``contact_nodes`` nodes in contact, ``contact_length`` m) the last rod state, grasp
@@ -99,6 +101,7 @@ class RunSummary:
     sim_time_s: float | None
     steps: int
     missed_deadlines: int
+    late_couples: int
     max_penetration: float | None
     final: FinalState | None
     final_quality: FinalQuality | None
@@ -136,7 +139,7 @@ def build_summary(
 ) -> RunSummary:
     """The :class:`RunSummary` of a run from the simulator's last ``/diagnostics`` key/values
     (``state``, ``settled``, ``settle_time_s``, ``sim_time_s``, ``step``, ``missed_deadlines``,
-    ``max_penetration``; missing or unparsable ones give ``None``/0), the last rod state and
+    ``late_couples``, ``max_penetration``; missing or unparsable ones give ``None``/0), the last rod state and
     quality, and the contact statistics of the last contact state (:func:`contact_stats`)."""
     sim_time, steps = _num(status, "sim_time_s"), int(_num(status, "step") or 0)
     loop = loop_wall_time_s if loop_wall_time_s is not None and loop_wall_time_s > 0 else None
@@ -147,6 +150,7 @@ def build_summary(
         sim_time_s=sim_time,
         steps=steps,
         missed_deadlines=int(_num(status, "missed_deadlines") or 0),
+        late_couples=int(_num(status, "late_couples") or 0),
         max_penetration=_num(status, "max_penetration"),
         final=final,
         final_quality=final_quality,

@@ -1,9 +1,10 @@
 """The simulator's stepping rules without ROS (contgrasp_ros.lockstep): when step 0 goes out,
-the lock-step deadline, fallback and outage counting, and the free-running deadlines."""
+the lock-step deadline, fallback and outage counting, and the free-running deadlines and wait
+for the couple."""
 
 from __future__ import annotations
 
-from contgrasp_ros.lockstep import LockStep, Peers, StartGate, WallClock
+from contgrasp_ros.lockstep import CoupleWait, LockStep, Peers, StartGate, WallClock
 
 LOOP = Peers(rod_state_subscribers=1, couple_publishers=1, contact_links=1)
 
@@ -114,3 +115,32 @@ def test_wall_clock_counts_every_period_lost_once() -> None:
     w.reset()
     # the first step began 0.5 ms late, the next on its tick, then one tick was skipped
     assert [w.step(t) for t in (20.0005, 20.002, 20.006)] == [0, 0, 1] and w.missed == 1
+
+
+def test_a_free_running_step_waits_for_its_own_answer_and_counts_the_steps_that_go_without() -> None:
+    """CoupleWait: a tick whose answer is in steps at once; one without waits; an answer to an
+    older state does not end the wait, the awaited one does; a wait that runs out steps with the
+    newest couple and is counted late, once; a pause cancels the wait uncounted; reset clears."""
+    w = CoupleWait(wait=True)
+    assert w.tick(0) is False  # (no answer yet)
+    assert w.couple(0) is True and w.late == 0  # the awaited answer: step now
+    assert w.tick(1) is False
+    assert w.couple(0) is False  # (a stale answer: still waiting)
+    assert w.couple(1) is True
+    w.couple(2)  # (an answer before its tick)
+    assert w.tick(2) is True and w.expired() is False and w.late == 0
+    assert w.tick(3) is False and w.expired() is True and w.late == 1
+    assert w.expired() is False and w.late == 1  # (nothing waits any more)
+    assert w.couple(3) is False  # (its step went on without it)
+    assert w.tick(4) is False
+    w.cancel()  # paused while waiting
+    assert w.expired() is False and w.couple(4) is False and w.late == 1
+    w.reset()
+    assert (w.answered, w.awaited, w.late) == (-1, None, 0)
+
+
+def test_without_a_wait_every_tick_steps_at_once_and_counts_the_missing_answers() -> None:
+    w = CoupleWait(wait=False)
+    w.couple(0)
+    assert [w.tick(0), w.tick(1), w.tick(2)] == [True, True, True]
+    assert w.late == 2 and w.expired() is False

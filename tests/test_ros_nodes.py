@@ -284,6 +284,84 @@ def test_rod_simulator_free_running_starts_with_the_first_couple_then_runs_on_wa
     assert [m.step for m in states[-3:]] == sorted(m.step for m in states[-3:])
 
 
+def test_rod_simulator_free_running_steps_with_the_answer_to_each_state_when_it_comes_within_the_wait(graph) -> None:  # type: ignore[no-untyped-def]
+    """Free-running with ``couple_wait``: each step waits for the couple answering its own
+    state, so a controller that answers in time gives exactly the lock-step run (each state equal
+    to the core session advanced with the same couples, bit for bit) and no late couple; the
+    same answers held back make every step go on without them after the wait (each counted)."""
+    from dataclasses import replace
+
+    from rclpy.parameter import Parameter
+
+    from contgrasp_core.rod import Obstacle, RodSystem
+    from contgrasp_core.rod.session import LoopSession
+    from contgrasp_msgs.msg import CoupleControl
+    from contgrasp_ros.convert import couple_to_msg
+    from contgrasp_ros.nodes.rod_simulator import RodSimulator
+
+    ctx, ex, add = graph
+    model = _paper_model()
+    # (a period long enough for an answer on a loaded machine: 0.15 s of wait)
+    over = dict(n_elements=model.n_elements, lockstep=False, control_period=0.2, couple_wait=0.15, duration=10.0,
+                min_subscribers=1)
+    sim = add(RodSimulator(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in over.items()]))
+    probe = add(rclpy.create_node("probe", context=ctx))
+    u_pub = probe.create_publisher(CoupleControl, topics.COUPLE, qos.STREAM)
+    states: list[RodState] = []
+    answer = [True]
+
+    def on_state(m: RodState) -> None:
+        states.append(m)
+        if answer[0]:
+            u_pub.publish(couple_to_msg(model.joint_s, np.full(model.n_elements, 1e-4 * (m.step + 1)), m.header, m.step))
+
+    probe.create_subscription(RodState, topics.ROD_STATE, on_state, qos.STREAM)
+    assert spin_until(ex, lambda: len(states) >= 4, timeout=30)
+    assert sim.wait.late == 0
+    ref = LoopSession(RodSystem(model, Obstacle(PAPER.object.boundary())), replace(PAPER.loop, duration=10.0, control_period=0.2))
+    for k, m in enumerate(states[:4]):
+        assert m.step == k
+        np.testing.assert_array_equal(np.stack([m.x, m.y], -1), ref.observe().x)
+        ref.advance(np.full(model.n_elements, 1e-4 * (k + 1)))
+    answer[0] = False
+    n = len(states)
+    assert spin_until(ex, lambda: len(states) >= n + 3, timeout=30)  # (state n - 1 was answered)
+    assert sim.wait.late == 2
+
+
+def test_rod_simulator_builds_markers_only_for_a_subscriber(graph, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The markers (2.5-3.5 ms of the simulator's step in the running graph) are built and
+    published every ``marker_period`` only while something subscribes to them (RViz, Foxglove,
+    the recorder)."""
+    from rclpy.parameter import Parameter
+    from visualization_msgs.msg import MarkerArray
+
+    import contgrasp_ros.nodes.rod_simulator as sim_module
+    from contgrasp_ros.nodes.rod_simulator import RodSimulator
+
+    built: list[int] = []  # (the steps whose markers were built)
+    real = sim_module.scene_markers
+
+    def counted(*args):  # type: ignore[no-untyped-def]
+        built.append(args[1].k)
+        return real(*args)
+
+    monkeypatch.setattr(sim_module, "scene_markers", counted)
+    ctx, ex, add = graph
+    over = dict(n_elements=6, lockstep=False, control_period=0.02, couple_timeout=0.01, couple_wait=0.0,
+                marker_period=0.02, duration=100.0, min_subscribers=1)
+    add(RodSimulator(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in over.items()]))
+    probe = add(rclpy.create_node("probe", context=ctx))
+    states: list[RodState] = []
+    probe.create_subscription(RodState, topics.ROD_STATE, states.append, qos.STREAM)
+    assert spin_until(ex, lambda: len(states) >= 5, timeout=30)
+    assert built == []
+    markers: list[MarkerArray] = []
+    probe.create_subscription(MarkerArray, topics.MARKERS, markers.append, qos.STREAM)
+    assert spin_until(ex, lambda: len(markers) >= 3, timeout=30)
+    assert len(built) >= 3 and [len(m.markers) for m in markers[:3]] == [3, 3, 3]
+
+
 def test_rod_simulator_free_running_starts_without_a_couple_after_the_timeout(graph) -> None:  # type: ignore[no-untyped-def]
     ex, _, _, states = _free_running(graph, couple_timeout=0.2)
     assert spin_until(ex, lambda: len(states) >= 5, timeout=20)

@@ -15,8 +15,10 @@ couple or apply ``zero``) is used, the miss is counted and a warning logged. Fre
 advances every ``control_period`` of wall time with the latest couple, from the run's first
 couple on (the loop closed: a controller's first answer can take a few milliseconds more than
 the next ones, and stepping on without it starts the grasp on stale feedback; after
-``couple_timeout`` it starts without one); each whole period it falls behind the wall clock is a
-missed deadline (:class:`~contgrasp_ros.lockstep.WallClock`). Services: ``~/pause``
+``couple_timeout`` it starts without one); a step whose tick comes before the couple answering
+its state waits up to ``couple_wait`` wall seconds for it, then goes on with the newest couple
+(a late couple, counted: :class:`~contgrasp_ros.lockstep.CoupleWait`); each whole period it
+falls behind the wall clock is a missed deadline (:class:`~contgrasp_ros.lockstep.WallClock`). Services: ``~/pause``
 (std_srvs/SetBool: true pauses, false resumes) and ``~/reset`` (std_srvs/Trigger). The node runs
 in simulated time (``use_sim_time`` defaults to true: the ``/clock`` it publishes every
 ``clock_period`` of simulated time, before the state of that time) and, when the
@@ -60,7 +62,7 @@ from std_msgs.msg import Header
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from contgrasp_core.errors import ContgraspError
+from contgrasp_core.errors import ContgraspError, InvalidParameterError
 from contgrasp_core.rod.body import MODES
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.disturbance import KINDS, WrenchInput
@@ -72,7 +74,7 @@ from contgrasp_msgs.srv import ApplyWrench
 from contgrasp_ros import qos, topics
 from contgrasp_ros.cdr import Codec
 from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, rod_state_fields, wrench_arrays
-from contgrasp_ros.lockstep import LockStep, Peers, StartGate, WallClock
+from contgrasp_ros.lockstep import CoupleWait, LockStep, Peers, StartGate, WallClock
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import (
@@ -136,6 +138,9 @@ class RodSimulator(Node):
         declare(self, "sample_period", 0.01, f"simulated seconds between states on {topics.ROD_STATE_SAMPLED}, the "
                 "observers' stream (0 = every state; the first and the final state always)", lo=0.0, hi=1e6)
         self.lockstep = declare(self, "lockstep", True, "advance only when the couple for the current step arrived", read_only=True)
+        couple_wait = declare(self, "couple_wait", 0.001, "free-running: wall seconds a step waits after its tick for the "
+                              "couple answering its state before it goes on with the newest couple (0 = no wait; less "
+                              "than control_period)", lo=0.0, hi=10.0, read_only=True)
         declare(self, "min_subscribers", 0, "publish the first state only once this many subscribers matched the "
                 "rod state topics, per step and sampled together (a restarted simulator: its first state is not "
                 "lost while they reconnect)", lo=0, hi=1000)
@@ -149,6 +154,10 @@ class RodSimulator(Node):
         self.rule = LockStep()
         assert self.config.control_period is not None  # (declared above with lo > 0)
         self.wall = WallClock(self.config.control_period)  # (free-running mode's deadlines)
+        if not self.lockstep and couple_wait >= self.config.control_period:
+            raise InvalidParameterError(f"couple_wait ({couple_wait:g} s) must be less than control_period "
+                                        f"({self.config.control_period:g} s): the step must still fit in its period")
+        self.wait = CoupleWait(wait=not self.lockstep and couple_wait > 0)
         self.finish = FinishPolicy(self, watch_simulator=False)
         declare(self, "max_penetration_limit", 0.0,
                 "the run fails when the rod surface is deeper inside the object than this [m]; 0 = the tip radius",
@@ -189,6 +198,8 @@ class RodSimulator(Node):
         assert control_period is not None  # (LoopSession, built above, requires it)
         period = control_period if not self.lockstep else START_POLL_S
         self._tick = self.create_timer(period, self.on_tick, clock=self._steady)
+        # (free-running: armed by a tick whose couple is not in yet, see CoupleWait)
+        self._wait_over = self.create_timer(couple_wait or period, self.on_wait_over, clock=self._steady, autostart=False)
         if not self.paused:
             self._publish_first_observation()
 
@@ -231,6 +242,7 @@ class RodSimulator(Node):
         self.last_couple: np.ndarray | FeedbackExpansion = np.zeros(self.model.n_elements)
         self.rule.reset()
         self.wall.reset()
+        self.wait.reset()
         self.next_t: dict[str, float] = {}  # simulated time of the next /clock, sampled state, markers
         self.loop_closed = False  # (free-running: the run's first couple arrived)
         self.failure = ""
@@ -268,7 +280,8 @@ class RodSimulator(Node):
         if self._due("sample_period", obs.t, final=True):
             self.pub_sampled.publish(state)
         self._publish_object_motion(obs, header)
-        if self.get_parameter("marker_period").value > 0 and self._due("marker_period", obs.t, final=False):
+        if (self.get_parameter("marker_period").value > 0 and self._due("marker_period", obs.t, final=False)
+                and self.pub_markers.get_subscription_count() > 0):  # (built only for a viewer or a recorder)
             self.pub_markers.publish(scene_markers(self.boundary, obs, header, centroid))
         self.rule.published(time.monotonic())
         self.diagnostics.update(header.stamp)  # (a change of state, a missed deadline: at once)
@@ -312,6 +325,7 @@ class RodSimulator(Node):
             "settled": "true" if s.settled else "false",
             "settle_time_s": repr(float(s.settle_time)) if s.settle_time is not None else "",
             "missed_deadlines": str(self.missed),
+            "late_couples": str(self.wait.late),
             "dropped_messages": str(self.drops.total),
             "max_penetration": repr(float(s.max_penetration)),
             "message": self.failure,
@@ -382,6 +396,9 @@ class RodSimulator(Node):
         if not self.lockstep:
             self.last_couple = u
             self.loop_closed = True
+            if self.wait.couple(step) and self._can_step():
+                self._wait_over.cancel()
+                self._advance(u)
             return
         now, ended = self.rule.couple(u, self._can_step())
         if ended:
@@ -406,11 +423,18 @@ class RodSimulator(Node):
                     return  # (the schedule starts with the first couple)
                 self.get_logger().warn(f"no couple within {timeout:g} s of the first state: free-running without one")
                 self.loop_closed = True
+            if self.wait.expired():  # (a step still waiting for its couple: it goes now, this tick is lost)
+                self._wait_over.cancel()
+                self._advance(self.last_couple)
+                return
             lost = self.wall.step(time.monotonic())
             if lost and self.wall.missed == lost:  # (the first time; the status says so at once: WARN)
                 self.get_logger().warn(f"step {self.session.k} began {lost} control period(s) late: the simulation "
                                        "fell behind real time (each lost period is a missed deadline; not logged again)")
-            self._advance(self.last_couple)
+            if self.wait.tick(self.session.k):
+                self._advance(self.last_couple)
+            else:
+                self._wait_over.reset()
             return
         if self.rule.tick(time.monotonic(), self.get_parameter("couple_timeout").value):
             fallback = self.get_parameter("timeout_fallback").value
@@ -420,6 +444,13 @@ class RodSimulator(Node):
                     f"until couples arrive again ({self.missed} missed deadlines so far)"
                 )
             self._advance(self.last_couple if fallback == "hold" else np.zeros(self.model.n_elements))
+
+    @guarded("timer")
+    def on_wait_over(self) -> None:
+        """Free-running: ``couple_wait`` passed since a tick without its couple: step with the newest."""
+        self._wait_over.cancel()
+        if self.wait.expired() and self._can_step():
+            self._advance(self.last_couple)
 
     @guarded(topics.OBJECT_WRENCH)
     def on_wrench(self, msg: WrenchStamped) -> None:
@@ -456,7 +487,10 @@ class RodSimulator(Node):
     @guarded("~/pause", on_error=service_failure)
     def on_pause(self, req: SetBool.Request, resp: SetBool.Response) -> SetBool.Response:
         self.paused = bool(req.data)
-        if not self.paused:
+        if self.paused:
+            self.wait.cancel()
+            self._wait_over.cancel()
+        else:
             if not self.rule.started:
                 self._publish_first_observation()
             elif (u := self.rule.resume(time.monotonic())) is not None and self._can_step():
