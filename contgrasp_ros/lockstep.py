@@ -205,12 +205,12 @@ class CoupleWait:
     linearised about state k - 1) is harder for the rod engine: at the start of the grasp two
     to four times the Newton iterations. It then runs past the next tick, whose step again
     starts before its answer, and the simulation falls ever further behind the wall clock
-    (docs/ros.md, "Free-running mode"). So a step waits for its answer, up to the node's
-    ``couple_wait`` wall seconds from its tick, then goes on with the newest couple it has: a
-    late couple, counted in ``late``.
+    (docs/ros.md). So a step waits for its answer, up to the node's ``couple_wait`` (a part
+    of the control period) from its tick, then goes on with the newest couple it has: a late
+    couple, counted in ``late``.
 
     The node calls ``tick(k)`` at step k's tick (True: step now), ``couple(step)`` for every
-    valid couple (True: the awaited answer, step now), ``expired()`` when ``couple_wait`` has
+    valid couple (True: the awaited answer, step now), ``expired()`` when the wait has
     passed since a tick that returned False (True: step now with the newest couple),
     ``cancel()`` when the run pauses, ``reset()`` for a new run. With ``wait`` False
     (``couple_wait`` 0) every tick steps at once (without its answer: late, counted).

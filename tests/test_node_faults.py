@@ -720,7 +720,7 @@ def test_invalid_parameters_are_refused_at_run_time(make, which) -> None:  # typ
     ("simulator", {"control_period": 0.01, "dt": 0.003}),
     ("simulator", {"max_kinetic_energy": -1.0}),
     ("simulator", {"sample_period": -0.01}),
-    ("simulator", {"lockstep": False, "control_period": 0.002, "couple_wait": 0.002}),  # (the step would not fit)
+    ("simulator", {"lockstep": False, "couple_wait": 1.0}),  # (a whole period: the step would not fit)
     ("controller", {"adaptive_mu2": True, "length_unit": 1e-9}),
     ("controller", {"mu1": 0.0}),
     ("controller", {"radius_base": 0.5}),

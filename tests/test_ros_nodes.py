@@ -302,7 +302,7 @@ def test_rod_simulator_free_running_steps_with_the_answer_to_each_state_when_it_
     ctx, ex, add = graph
     model = _paper_model()
     # (a period long enough for an answer on a loaded machine: 0.15 s of wait)
-    over = dict(n_elements=model.n_elements, lockstep=False, control_period=0.2, couple_wait=0.15, duration=10.0,
+    over = dict(n_elements=model.n_elements, lockstep=False, control_period=0.2, couple_wait=0.75, duration=10.0,
                 min_subscribers=1)
     sim = add(RodSimulator(context=ctx, parameter_overrides=[Parameter(k, value=v) for k, v in over.items()]))
     probe = add(rclpy.create_node("probe", context=ctx))

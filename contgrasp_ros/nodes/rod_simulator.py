@@ -16,7 +16,7 @@ advances every ``control_period`` of wall time with the latest couple, from the 
 couple on (the loop closed: a controller's first answer can take a few milliseconds more than
 the next ones, and stepping on without it starts the grasp on stale feedback; after
 ``couple_timeout`` it starts without one); a step whose tick comes before the couple answering
-its state waits up to ``couple_wait`` wall seconds for it, then goes on with the newest couple
+its state waits up to ``couple_wait`` control periods for it, then goes on with the newest couple
 (a late couple, counted: :class:`~contgrasp_ros.lockstep.CoupleWait`); each whole period it
 falls behind the wall clock is a missed deadline (:class:`~contgrasp_ros.lockstep.WallClock`). Services: ``~/pause``
 (std_srvs/SetBool: true pauses, false resumes) and ``~/reset`` (std_srvs/Trigger). The node runs
@@ -62,7 +62,7 @@ from std_msgs.msg import Header
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from contgrasp_core.errors import ContgraspError, InvalidParameterError
+from contgrasp_core.errors import ContgraspError
 from contgrasp_core.rod.body import MODES
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.disturbance import KINDS, WrenchInput
@@ -138,9 +138,9 @@ class RodSimulator(Node):
         declare(self, "sample_period", 0.01, f"simulated seconds between states on {topics.ROD_STATE_SAMPLED}, the "
                 "observers' stream (0 = every state; the first and the final state always)", lo=0.0, hi=1e6)
         self.lockstep = declare(self, "lockstep", True, "advance only when the couple for the current step arrived", read_only=True)
-        couple_wait = declare(self, "couple_wait", 0.001, "free-running: wall seconds a step waits after its tick for the "
-                              "couple answering its state before it goes on with the newest couple (0 = no wait; less "
-                              "than control_period)", lo=0.0, hi=10.0, read_only=True)
+        couple_wait = declare(self, "couple_wait", 0.5, "free-running: the part of a control period a step waits after its "
+                              "tick for the couple answering its state before it goes on with the newest couple (0 = no "
+                              "wait; at most 0.9: the step must still fit in its period)", lo=0.0, hi=0.9, read_only=True)
         declare(self, "min_subscribers", 0, "publish the first state only once this many subscribers matched the "
                 "rod state topics, per step and sampled together (a restarted simulator: its first state is not "
                 "lost while they reconnect)", lo=0, hi=1000)
@@ -154,9 +154,6 @@ class RodSimulator(Node):
         self.rule = LockStep()
         assert self.config.control_period is not None  # (declared above with lo > 0)
         self.wall = WallClock(self.config.control_period)  # (free-running mode's deadlines)
-        if not self.lockstep and couple_wait >= self.config.control_period:
-            raise InvalidParameterError(f"couple_wait ({couple_wait:g} s) must be less than control_period "
-                                        f"({self.config.control_period:g} s): the step must still fit in its period")
         self.wait = CoupleWait(wait=not self.lockstep and couple_wait > 0)
         self.finish = FinishPolicy(self, watch_simulator=False)
         declare(self, "max_penetration_limit", 0.0,
@@ -199,7 +196,8 @@ class RodSimulator(Node):
         period = control_period if not self.lockstep else START_POLL_S
         self._tick = self.create_timer(period, self.on_tick, clock=self._steady)
         # (free-running: armed by a tick whose couple is not in yet, see CoupleWait)
-        self._wait_over = self.create_timer(couple_wait or period, self.on_wait_over, clock=self._steady, autostart=False)
+        self._wait_over = self.create_timer((couple_wait or 1.0) * control_period, self.on_wait_over, clock=self._steady,
+                                            autostart=False)
         if not self.paused:
             self._publish_first_observation()
 
@@ -447,7 +445,7 @@ class RodSimulator(Node):
 
     @guarded("timer")
     def on_wait_over(self) -> None:
-        """Free-running: ``couple_wait`` passed since a tick without its couple: step with the newest."""
+        """Free-running: ``couple_wait`` periods passed since a tick without its couple: step with the newest."""
         self._wait_over.cancel()
         if self.wait.expired() and self._can_step():
             self._advance(self.last_couple)
