@@ -113,7 +113,15 @@ def curvature_spline(s: ArrayLike, kappa: ArrayLike) -> CubicSpline:
         raise InvalidParameterError(
             f"kappa must be finite with the same shape as s {ss.shape}, got {kk.shape}"
         )
-    return CubicSpline(ss, kk, bc_type="not-a-knot" if len(ss) > 3 else "natural")
+    try:
+        with np.errstate(all="ignore"):  # (extreme spacings or values overflow: refused below)
+            spline = CubicSpline(ss, kk, bc_type="not-a-knot" if len(ss) > 3 else "natural")
+    except ValueError:  # (scipy refuses the overflowed slopes it computed itself)
+        spline = None
+    if spline is None or not np.all(np.isfinite(spline.c)):
+        raise InvalidParameterError("the curvature samples are too extreme for a cubic spline (its coefficients "
+                                    "overflow): check the units and the spacing of s")
+    return spline
 
 
 def shape_from_curvature(

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 from scipy.special import fresnel
 
-from contgrasp_core.arm import Arm, BasePose, shape_from_curvature
+from contgrasp_core.arm import Arm, BasePose, curvature_spline, shape_from_curvature
 from contgrasp_core.errors import InvalidParameterError
 
 
@@ -76,3 +78,19 @@ def test_radius_profiles_and_validation() -> None:
         BasePose(np.inf, 0.0, 0.0)
     with pytest.raises(InvalidParameterError):
         arm.grid(1)
+
+
+@pytest.mark.parametrize(("s", "kappa"), [
+    ([-1.0, 0.0, 1e300], [0.0, 0.0, 0.0]),  # a span whose square overflows
+    ([-1.0, 0.0, 5.5e-168], [0.0, 0.0, 1e300]),  # a slope that overflows
+    ([-8.5e-24, 0.0, 1e300], [0.0, 1.0, 0.0]),
+])
+def test_curvature_samples_whose_spline_overflows_are_refused(s: list[float], kappa: list[float]) -> None:
+    """Finite, increasing, but beyond what a cubic spline can hold in float64 (found by the
+    entry-point fuzz test): a clear InvalidParameterError, not an overflow warning or scipy's
+    ValueError; ordinary grids still work."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(InvalidParameterError, match="too extreme"):
+            curvature_spline(s, kappa)
+    assert np.all(np.isfinite(curvature_spline([0.0, 0.1, 0.2], [1.0, 2.0, 1.0]).c))
