@@ -1,21 +1,24 @@
 """Benchmark: the paper's closed-loop grasp with and without the ROS 2 middleware.
 
 The full paper scenario (`contgrasp_ros/config/default.yaml` = `contgrasp_core.scenario.PAPER`:
-N = 100, 2 ms control period, until settled) run four ways in one process, one after the other:
+N = 100, 2 ms control period, until settled) run six ways in one process, one after the other:
 
   (a) core only: `contgrasp_core.rod.session.run_sampled` (observe, sense, law, advance; no ROS);
   (b) the graph in one process on one executor (`contgrasp-launch --in-process`), lock-step;
   (c) the graph as separate processes (`contgrasp-launch`), lock-step: the main job;
   (d) the graph as separate processes in wall-clock mode (`lockstep: false`: the simulator steps
       every control period of wall time, each step waiting up to `couple_wait` for the couple
-      answering its state, else with the newest couple).
+      answering its state, else with the newest couple);
+  (e), (f) as (c) and (d) with the sensor, controller and quality node hosted by one process
+      (`contgrasp-launch --compose boundary_sensor,grasp_controller,grasp_quality`): two node
+      processes instead of four.
 
 (a) is timed after one untimed run (its compiled kernels loaded, as the simulator node loads them
 while the graph connects). For each: per-step wall milliseconds, the real-time factor (simulated / wall seconds of the
 loop), the ratio to (a), missed deadlines (the most of the runs), late couples (wall-clock mode:
 steps without their own answer; the most of the runs) and for (b)-(d) the start-up time (launcher start to
 the simulator's first step, from the launcher's `resumed` event). Loop wall times of (b)-(d)
-are the launcher's own measurement from the first state to the last. (b) and (c) must end in
+are the launcher's own measurement from the first state to the last. (b), (c) and (e) must end in
 (a)'s final state bit for bit (checked). Each way runs `--repeat` times; medians are reported.
 The load average is printed at start and end (the machine is shared: compare ratios).
 
@@ -43,6 +46,9 @@ from contgrasp_core.rod.session import run_sampled
 from contgrasp_core.scenario import PAPER
 from contgrasp_ros.events import read_events
 from contgrasp_ros.launcher import default_params_file
+
+
+COMPOSE = ("--compose", "boundary_sensor,grasp_controller,grasp_quality")
 
 
 def core_only() -> dict[str, Any]:
@@ -73,7 +79,7 @@ def graph(params_file: Path, *extra: str) -> dict[str, Any]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeat", type=int, default=1, help="runs of each way (medians reported)")
-    ap.add_argument("--only", default="abcd", help="the ways to run, e.g. 'c' or 'a,c' ((a) always runs)")
+    ap.add_argument("--only", default="abcdef", help="the ways to run, e.g. 'c' or 'a,c' ((a) always runs)")
     args = ap.parse_args()
     paper = default_params_file()
     wall_clock = Path(tempfile.mkdtemp()) / "wall_clock.yaml"
@@ -85,6 +91,8 @@ def main() -> None:
         "(b) in-process, lock-step": lambda: graph(paper, "--in-process"),
         "(c) processes, lock-step": lambda: graph(paper),
         "(d) processes, wall clock": lambda: graph(wall_clock),
+        "(e) composed, lock-step": lambda: graph(paper, *COMPOSE),
+        "(f) composed, wall clock": lambda: graph(wall_clock, *COMPOSE),
     }
     ways = {name: run for name, run in ways.items() if name[1] == "a" or name[1] in args.only}
     print(f"python {sys.version.split()[0]}, cores {os.cpu_count()}, paper scenario (N = {PAPER.rod.n_elements}, "

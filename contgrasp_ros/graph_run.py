@@ -20,7 +20,7 @@ import shutil
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,7 @@ from std_srvs.srv import SetBool
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros import qos, topics
+from contgrasp_ros.container import node_class
 from contgrasp_ros.convert import stamp_seconds
 from contgrasp_ros.discovery import discovery_profile_set, use_discovery_profile
 from contgrasp_ros.events import EventSink
@@ -298,6 +299,7 @@ def run_graph(
     events: EventSink | None = None,
     foxglove: int | None = None,
     allow_unrecorded: bool = False,
+    compose: Sequence[tuple[str, ...]] = (),
 ) -> tuple[dict[str, Any], int]:
     """Run the graph once (recording it when ``record`` gives an ``output``, restarting crashed
     node processes up to ``respawn`` times each); returns (summary, exit code). SIGINT/SIGTERM
@@ -305,13 +307,16 @@ def run_graph(
     ``events`` receives the node processes' ``started``/``restarted``/``exited`` events and
     ``resumed`` (:mod:`contgrasp_ros.events`). ``foxglove``: serve the run live on this WebSocket
     port (:mod:`contgrasp_ros.nodes.foxglove_bridge`, in the launcher's process; 0 = any). A
-    recording lost mid-run (the recorder died) fails the run (exit 1) unless ``allow_unrecorded``."""
+    recording lost mid-run (the recorder died) fails the run (exit 1) unless ``allow_unrecorded``.
+    ``compose``: groups of nodes each hosted by one process (:mod:`contgrasp_ros.container`, named
+    ``a+b``), the simulator not among them; the other nodes run one per process."""
     wall0 = time.perf_counter()
     sim_params = {**params["rod_simulator"], "start_paused": True}
     rclpy.init(args=[])
     executor = make_executor()
     nodes: list[Node] = []
     group = None
+    processes: list[str] = []  # (the node processes' names, in start order: stopped in that order)
     tmp: Path | None = None
     code = 0
     mon: Monitor | None = None
@@ -332,17 +337,10 @@ def run_graph(
             nodes.append(bridge)
             foxglove_url = f"ws://127.0.0.1:{bridge.port}"
         if in_process:
-            # (imported here: the node processes import their own modules, the launcher need not)
-            from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
-            from contgrasp_ros.nodes.grasp_controller import GraspController
-            from contgrasp_ros.nodes.grasp_quality import GraspQualityNode
-            from contgrasp_ros.nodes.rod_simulator import RodSimulator
-
-            for cls, name in ((RodSimulator, "rod_simulator"), (BoundarySensor, "boundary_sensor"),
-                              (GraspController, "grasp_controller"), (GraspQualityNode, "grasp_quality")):
+            for name in NODES:  # (node_class imports each module now: the node processes import their own)
                 values = sim_params if name == "rod_simulator" else params[name]
                 try:
-                    nodes.append(cls(parameter_overrides=_overrides({**values, "use_sim_time": True})))
+                    nodes.append(node_class(name)(parameter_overrides=_overrides({**values, "use_sim_time": True})))
                 except (rclpy.exceptions.ParameterException, ContgraspError, TypeError) as exc:
                     if isinstance(exc, RunFailure):  # as run_node exits: 1 for a failure, 2 for bad input
                         return {"error": f"{name}: {exc}", "exit_codes": {}, "pids": {}}, 1
@@ -384,9 +382,15 @@ def run_graph(
             on_recorder_lost = unrecorded if record is not None else None
             if record is not None:
                 group.start(RECORDER, [sys.executable, "-m", f"contgrasp_ros.nodes.{RECORDER}", "--ros-args", "--params-file", str(override_file)])
+            ros_args = ["--ros-args", "--params-file", str(params_file), "--params-file", str(override_file)]
+            hosts = {name: names for names in compose for name in names}
             for name in NODES:
-                group.start(name, [sys.executable, "-m", f"contgrasp_ros.nodes.{name}", "--ros-args",
-                                   "--params-file", str(params_file), "--params-file", str(override_file)])
+                if name not in hosts:
+                    processes.append(name)
+                    group.start(name, [sys.executable, "-m", f"contgrasp_ros.nodes.{name}", *ros_args])
+                elif name == hosts[name][0]:
+                    processes.append("+".join(hosts[name]))
+                    group.start(processes[-1], [sys.executable, "-m", "contgrasp_ros.container", *hosts[name], *ros_args])
         for n in nodes:
             executor.add_node(n)
         sup = Supervisor(start=time.monotonic(), timeout=timeout, respawn=respawn, recording=record is not None,
@@ -404,7 +408,7 @@ def run_graph(
     finally:
         summary_codes: dict[str, int] = {}
         if group is not None:
-            summary_codes.update(group.stop(names=NODES))  # the recorder last: it keeps what is still in flight
+            summary_codes.update(group.stop(names=processes))  # the recorder last: it keeps what is still in flight
             summary_codes.update(group.stop())
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -109,6 +109,24 @@ def _port(text: str) -> int:
     return port
 
 
+def _compose_groups(values: list[str], in_process: bool) -> list[tuple[str, ...]]:
+    """The ``--compose`` groups, checked: two or more of the sensor, controller and quality node
+    each, no node in two groups, separate processes only."""
+    if values and in_process:
+        raise InvalidParameterError("--compose groups node processes: it does not apply with --in-process")
+    allowed = ("boundary_sensor", "grasp_controller", "grasp_quality")
+    groups: list[tuple[str, ...]] = []
+    seen: set[str] = set()
+    for value in values:
+        names = tuple(n.strip() for n in value.split(","))
+        if len(names) < 2 or any(n not in allowed for n in names) or len(set(names)) != len(names) or seen & set(names):
+            raise InvalidParameterError(f"--compose {value!r}: give two or more of {', '.join(allowed)}, comma-separated, "
+                                        "each node in one group at most (the simulator always runs alone)")
+        seen.update(names)
+        groups.append(names)
+    return groups
+
+
 def _parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog="contgrasp-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", type=Path, default=None, help="ROS 2 YAML parameter file (default: the packaged paper scenario)")
@@ -122,6 +140,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="with --in-process: contgrasp's lean single-threaded executor (default), rclpy's "
                         "SingleThreadedExecutor or rclpy's experimental events executor "
                         "(separate node processes always use the lean executor, see docs/ros.md)")
+    p.add_argument("--compose", action="append", default=[], metavar="NODE,NODE[,...]",
+                   help="host these nodes in one process (`contgrasp_ros.container`; any two or more of "
+                        "boundary_sensor, grasp_controller, grasp_quality; the simulator always runs alone; repeatable): "
+                        "boundary_sensor,grasp_controller saves the lock-step loop a process hop per step")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
     p.add_argument("--plot", type=Path, default=None, help="write a Fig. 4-style figure of the run from the received topics")
     p.add_argument("--summary-file", type=Path, default=None, help="also write the JSON summary to this file")
@@ -224,6 +246,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
                   "log_time": args.bag_log_time or ("receive" if args.respawn else "sim"),
                   "decimate_period": args.bag_decimate, "max_bag_duration": args.max_bag_duration,
                   "max_bag_size": args.max_bag_size}
+    compose = _compose_groups(args.compose, args.in_process)
     if args.respawn < 0 or (args.respawn and args.in_process):
         raise InvalidParameterError(f"--respawn takes N >= 0 and applies to separate node processes only, got {args.respawn}"
                                     + (" with --in-process" if args.in_process else ""))
@@ -232,7 +255,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
           "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ros2 topic echo /contgrasp/quality)", file=sys.stderr, flush=True)
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
                               respawn=args.respawn, keep_history=args.plot is not None, events=events,
-                              foxglove=args.foxglove, allow_unrecorded=args.allow_unrecorded)
+                              foxglove=args.foxglove, allow_unrecorded=args.allow_unrecorded, compose=compose)
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
     if args.plot is not None and summary.get("history"):

@@ -59,6 +59,7 @@ __all__ = [
     "ObjectTracker",
     "make_executor",
     "run_node",
+    "run_nodes",
     "sim_time_by_default",
     "FinishPolicy",
     "ON_FINISH",
@@ -598,59 +599,71 @@ class GuardedSpin:
 
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
     """Init rclpy, build the node, spin until shutdown (SIGINT/SIGTERM) or until the node asks to
-    stop (:class:`FinishPolicy`, ``on_finish: exit``), clean up.
+    stop (:class:`FinishPolicy`, ``on_finish: exit``), clean up (:func:`run_nodes` of one)."""
+    return run_nodes([factory], args)
 
-    Errors are one line on stderr, ``NAME: error: ...``, and the exit code follows the error's
-    family (:func:`contgrasp_core.errors.exit_code`): a node that rejects its start-up
-    parameters (rclpy's parameter exceptions, an :class:`~contgrasp_core.errors.InputError`)
-    exits with code 2; a :class:`~contgrasp_core.errors.RunFailure` (e.g. a
-    :class:`FatalNodeError`) while starting or spinning with code 1 (after the node's own
-    clean-up). SIGINT/SIGTERM while the node is being built is a stop (exit code 0), whatever
-    rclpy raised on the shut-down context. Any other exception is a bug and propagates with its
+
+def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | None = None) -> int:
+    """Init rclpy, build the nodes (in order), spin them on one executor until shutdown
+    (SIGINT/SIGTERM) or until every one of them asks to stop (:class:`FinishPolicy`,
+    ``on_finish: exit``), clean up.
+
+    Errors are one line on stderr, ``NAME: error: ...`` (NAME the failing factory's name), and
+    the exit code follows the error's family (:func:`contgrasp_core.errors.exit_code`): a node
+    that rejects its start-up parameters (rclpy's parameter exceptions, an
+    :class:`~contgrasp_core.errors.InputError`) exits with code 2; a
+    :class:`~contgrasp_core.errors.RunFailure` (e.g. a :class:`FatalNodeError`) while starting
+    or spinning with code 1 (after the nodes' own clean-up); with several nodes the highest
+    code. SIGINT/SIGTERM while a node is being built is a stop (exit code 0), whatever rclpy
+    raised on the shut-down context. Any other exception is a bug and propagates with its
     traceback (exit code 1).
     """
-    name = getattr(factory, "__name__", "node")
+    label = "+".join(getattr(f, "__name__", "node") for f in factories)
     argv = list(args) if args is not None else sys.argv
     rclpy.init(args=argv)
-    node = None
+    nodes: list[Node] = []
     code = 0
     unknown = rclpy.utilities.remove_ros_args(argv)[1:]
     if unknown:  # (e.g. a parameter given without --ros-args: it would be silently ignored)
-        print(f"{name}: error: unrecognized arguments: {' '.join(unknown)} (parameters go after --ros-args: "
+        print(f"{label}: error: unrecognized arguments: {' '.join(unknown)} (parameters go after --ros-args: "
               "--ros-args -p NAME:=VALUE or --params-file FILE)", file=sys.stderr)
         rclpy.shutdown()
         return 2
     try:
-        try:
-            node = factory()
-        except (
-            rclpy.exceptions.InvalidParameterValueException,
-            rclpy.exceptions.ParameterException,
-            ContgraspError,
-        ) as exc:
-            code = exit_code(exc) if isinstance(exc, ContgraspError) else 2
-            print(f"{name}: error: {'invalid parameter: ' if code == 2 else ''}{one_line(exc)}", file=sys.stderr)
-            return code
-        except Exception as exc:
-            if rclpy.ok():
-                raise
-            # SIGINT/SIGTERM shut the context down while the node was being built (a launcher
-            # stopping its graph because another node failed to start): a stop, not a failure
-            raise ExternalShutdownException() from exc
+        for factory in factories:
+            try:
+                nodes.append(factory())
+            except (
+                rclpy.exceptions.InvalidParameterValueException,
+                rclpy.exceptions.ParameterException,
+                ContgraspError,
+            ) as exc:
+                code = exit_code(exc) if isinstance(exc, ContgraspError) else 2
+                name = getattr(factory, "__name__", "node")
+                print(f"{name}: error: {'invalid parameter: ' if code == 2 else ''}{one_line(exc)}", file=sys.stderr)
+                return code
+            except Exception as exc:
+                if rclpy.ok():
+                    raise
+                # SIGINT/SIGTERM shut the context down while the node was being built (a launcher
+                # stopping its graph because another node failed to start): a stop, not a failure
+                raise ExternalShutdownException() from exc
         # (always the lean executor: CONTGRASP_EXECUTOR is the launcher's choice only; an
         # EventsExecutor in a node process hung the graph after resuming and ignored SIGINT/SIGTERM)
         executor = LeanExecutor()
-        executor.add_node(node)
-        spin = GuardedSpin(executor, getattr(node, "drops", None) or DropCounter(node))
-        while not getattr(node, "stop_requested", False):  # (FinishPolicy: on_finish exit)
+        for node in nodes:
+            executor.add_node(node)
+        # (the executor's own failures are counted by the first node: contgrasp's nodes all have drops)
+        spin = GuardedSpin(executor, getattr(nodes[0], "drops", None) or DropCounter(nodes[0]))
+        while not all(getattr(node, "stop_requested", False) for node in nodes):  # (FinishPolicy: on_finish exit)
             spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ContgraspError as exc:  # a FatalNodeError from a callback, above all
-        print(f"{name}: error: {one_line(exc)}", file=sys.stderr)
+        print(f"{label}: error: {one_line(exc)}", file=sys.stderr)
         code = exit_code(exc)
     finally:
-        if node is not None:
+        for node in nodes:
             node.destroy_node()
             code = max(code, int(getattr(node, "exit_code", 0)))  # a failure during the node's own clean-up
         if rclpy.ok():

@@ -195,3 +195,32 @@ def test_a_failed_run_exits_1_with_on_finish_exit(graph: Graph) -> None:
     assert graph.procs["boundary_sensor"].returncode == 1
     assert "exiting with status 1 (on_finish: exit)" in graph.output("rod_simulator")
     assert "the simulator's run failed" in graph.output("boundary_sensor")
+
+
+def test_the_container_hosts_the_sensor_and_controller_by_hand(graph: Graph, paper_core: Any) -> None:
+    """``ros2 run contgrasp_ros container boundary_sensor grasp_controller`` beside the
+    simulator: each node reads its own section of the parameter file, the run is the paper's
+    grasp bit for bit, and the container exits 0 once both of its nodes are done."""
+    params = str(default_params_file())
+    graph.start("rod_simulator", "--ros-args", "--params-file", params, "-p", "on_finish:=exit", "-p", "min_subscribers:=3")
+    graph.start("container", "boundary_sensor", "grasp_controller", "--ros-args", "--params-file", params,
+                "-p", "on_finish:=exit")
+    assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=240), graph.status
+    assert graph.status.get("state") == "finished" and graph.status["missed_deadlines"] == "0"
+    assert graph.last is not None
+    same_as_core(graph.last, paper_core)
+    log = graph.output("container")
+    assert "[boundary_sensor]" in log and "[grasp_controller]" in log and "exiting with status 0" in log
+    assert all(code == 0 for code in graph.close().values())
+
+
+@pytest.mark.parametrize(("args", "needle"), [
+    ([], "name the nodes"),
+    (["boundary_sensor", "planner"], "unknown node(s) planner"),
+    (["grasp_controller", "grasp_controller"], "at most once"),
+    (["boundary_sensor", "grasp_controller", "--ros-args", "-p", "mu1:=0.0"], "GraspController: error: invalid parameter"),
+])
+def test_the_container_refuses_bad_usage_with_exit_2(args: list[str], needle: str) -> None:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.run([str(EXE / "container"), *args], capture_output=True, text=True, timeout=60, env=env)
+    assert proc.returncode == 2 and needle in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]

@@ -66,7 +66,7 @@ def test_ros2_run_finds_and_runs_the_executables() -> None:
 
     prefix = Path(get_package_prefix("contgrasp_ros"))
     assert (Path(get_package_share_directory("contgrasp_ros")) / "package.xml").exists()
-    for node in ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality", "mcap_recorder"):
+    for node in ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality", "mcap_recorder", "container"):
         exe = prefix / "lib" / "contgrasp_ros" / node
         assert exe.exists() and os.access(exe, os.X_OK), exe
     env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
@@ -120,6 +120,23 @@ def test_graph_as_processes_is_deterministic_and_leaves_nothing_behind(tmp_path:
         np.testing.assert_allclose(out["final"]["x"], x_core[:, 0], rtol=0, atol=1e-9)
         np.testing.assert_allclose(out["final"]["y"], x_core[:, 1], rtol=0, atol=1e-9)
     assert runs[0]["final"] == runs[1]["final"]
+
+
+def test_composed_nodes_run_the_same_graph_in_fewer_processes(tmp_path: Path) -> None:
+    """--compose: the sensor, the controller and the quality node hosted by one process
+    (contgrasp_ros.container) give the core loop's run bit for bit, the process exits 0 under
+    its composed name, and the graph still has every node (the quality node answered)."""
+    params = small_params(tmp_path)
+    proc = launch("--json", "--no-record", "--params", str(params), "--compose", "boundary_sensor,grasp_controller,grasp_quality")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout)
+    assert out["exit_codes"] == {"rod_simulator": 0, "boundary_sensor+grasp_controller+grasp_quality": 0}
+    assert not any(alive(pid) for pid in out["pids"].values())
+    x_core, k = core_run(params)
+    assert out["steps"] == k and out["missed_deadlines"] == 0
+    np.testing.assert_array_equal(out["final"]["x"], x_core[:, 0])
+    np.testing.assert_array_equal(out["final"]["y"], x_core[:, 1])
+    assert out["final_quality"] is not None
 
 
 def test_launcher_reports_a_node_that_fails_to_start(tmp_path: Path) -> None:
@@ -234,6 +251,13 @@ def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
     assert proc.returncode == 2 and "settle_hold" in json.loads(proc.stdout)["error"], proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr
     assert launch("--executor", "events").returncode == 2  # events executor: in-process only
+    for compose in (["rod_simulator,boundary_sensor"], ["boundary_sensor"], ["boundary_sensor,planner"],
+                    ["boundary_sensor,grasp_controller", "grasp_controller,grasp_quality"],
+                    ["boundary_sensor,boundary_sensor"]):
+        proc = launch(*(a for c in compose for a in ("--compose", c)))
+        assert proc.returncode == 2 and "--compose" in proc.stderr and "Traceback" not in proc.stderr, compose
+    proc = launch("--in-process", "--compose", "boundary_sensor,grasp_controller")
+    assert proc.returncode == 2 and "--in-process" in proc.stderr
     for bad_split in (["--max-bag-duration", "nan"], ["--max-bag-size", "1000"],
                       ["--bag", str(tmp_path / "one.mcap"), "--max-bag-duration", "5"]):
         proc = launch(*bad_split)

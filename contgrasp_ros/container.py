@@ -1,0 +1,62 @@
+"""``ros2 run contgrasp_ros container NODE NODE... [--ros-args ...]``: several of the graph's nodes
+in one process, on one executor (ROS 2's composition, for contgrasp's Python nodes).
+
+Each node keeps its name, its parameters (its own section of a ``--params-file``; a ``-p
+NAME:=VALUE`` applies to every node of the process that declares NAME), its topics and its
+services: to the rest of the graph the composed nodes are the nodes started alone. Only the
+process is shared, so a message between two of them crosses no process boundary: composing the
+boundary sensor with the controller saves the loop a process hop each control period (about a
+sixth of the lock-step period through processes on two cores; docs/ros.md, "Composition"), at
+the price of isolation (a crash or a fatal error of one ends all of them).
+
+The nodes are built in the order given (``NODE`` is one of :data:`NODE_CLASSES`, each at most
+once); the process spins until SIGINT/SIGTERM or until every node asks to stop (``on_finish:
+exit``), and exits as :func:`contgrasp_ros.runtime.run_nodes` says (2 for bad usage or a
+refused parameter, naming the node; 1 for a failure).
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from collections.abc import Callable, Sequence
+
+from rclpy.node import Node
+
+from contgrasp_ros.runtime import run_nodes
+
+__all__ = ["NODE_CLASSES", "node_class", "main"]
+
+# the graph's nodes (ROS name = module of contgrasp_ros.nodes) and their classes
+NODE_CLASSES = {"rod_simulator": "RodSimulator", "boundary_sensor": "BoundarySensor",
+                "grasp_controller": "GraspController", "grasp_quality": "GraspQualityNode"}
+
+
+def node_class(name: str) -> Callable[..., Node]:
+    """The class of the graph's node ``name``, built with the node's keyword arguments (its
+    module imported now: only the simulator's pulls in scipy and numba)."""
+    cls: Callable[..., Node] = getattr(importlib.import_module(f"contgrasp_ros.nodes.{name}"), NODE_CLASSES[name])
+    return cls
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """``ros2 run contgrasp_ros container NODE NODE... [--ros-args ...]``."""
+    argv = list(args) if args is not None else sys.argv
+    cut = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    names = argv[1:cut]
+    problem = ""
+    if not names:
+        problem = "name the nodes to host"
+    elif unknown := [n for n in names if n not in NODE_CLASSES]:
+        problem = f"unknown node(s) {', '.join(unknown)}"
+    elif len(set(names)) != len(names):
+        problem = "each node at most once (two nodes of one name would clash in the graph)"
+    if problem:
+        print(f"container: error: {problem}; usage: container NODE [NODE ...] [--ros-args ...] with NODE one of "
+              f"{', '.join(NODE_CLASSES)}", file=sys.stderr)
+        return 2
+    return run_nodes([node_class(n) for n in names], [argv[0], *argv[cut:]])
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
