@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -105,6 +106,27 @@ def test_controller_and_sensor_killed_and_respawned_the_loop_resumes(tmp_path: P
         ("grasp_controller", -9, "restarted"), ("boundary_sensor", -9, "restarted")]
     assert sorted(e["node"] for e in ev if e["event"] == "restarted") == ["boundary_sensor", "grasp_controller"]
     assert [e["restart"] for e in ev if e["event"] == "resumed"] == [False]
+
+
+def test_a_killed_container_is_restarted_as_one_process_and_the_loop_resumes(tmp_path: Path) -> None:
+    """--compose: the process hosting the sensor and the controller is supervised as one, under
+    its composed name: killed, it is restarted with both nodes and the loop closes again."""
+    name = "boundary_sensor+grasp_controller"
+    launch = Launch("--params", str(fault_params(tmp_path, duration=2.0)), "--no-record", "--respawn", "1",
+                    "--compose", "boundary_sensor,grasp_controller")
+    try:
+        i = running(launch)
+        launch.signal(name, signal.SIGKILL)
+        launch.wait_for(rf"'{re.escape(name)}' exited with code -9; restarting it \(1/1\)", start=i)
+        launch.wait_event("restarted", node=name)
+        code, out = launch.result()
+    finally:
+        launch.close()
+    assert code == 0, "".join(launch.lines[-40:])
+    assert out["restarts"] == {name: 1} and out["exit_codes"][name] == 0
+    assert out["simulator_state"] == "finished" and out["sim_time_s"] == pytest.approx(2.0)
+    assert any("couples are back" in line for line in launch.lines)  # both nodes came back: the loop closed again
+    assert not any(alive(pid) for pid in out["pids"].values())
 
 
 def test_a_dead_controller_without_respawn_degrades_to_the_fallback(tmp_path: Path) -> None:
