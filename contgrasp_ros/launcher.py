@@ -1,7 +1,8 @@
 """``contgrasp-launch``: run the closed-loop grasp graph (ROS 2 launch/launch_ros are not wheels).
 
 Starts ``rod_simulator``, ``boundary_sensor``, ``grasp_controller`` and ``grasp_quality`` as
-separate processes (or, with ``--in-process``, as nodes of one executor in this process) with
+separate processes (``--compose`` hosts some of the last three in one process; with
+``--in-process`` all run as nodes of one executor in this process) with
 a YAML parameter file, the ``ROS_DOMAIN_ID`` of ``--domain-id``, else the environment's,
 else a random one (printed first on stderr), and loopback-only discovery; waits until the
 graph is connected, then resumes the (paused) simulator; runs until the simulator reports it
