@@ -195,9 +195,10 @@ class RodSimulator(Node):
         assert control_period is not None  # (LoopSession, built above, requires it)
         period = control_period if not self.lockstep else START_POLL_S
         self._tick = self.create_timer(period, self.on_tick, clock=self._steady)
-        # (free-running: armed by a tick whose couple is not in yet, see CoupleWait)
-        self._wait_over = self.create_timer((couple_wait or 1.0) * control_period, self.on_wait_over, clock=self._steady,
-                                            autostart=False)
+        # (free-running with a wait: armed by a tick whose couple is not in yet, see CoupleWait;
+        # no timer otherwise: every timer joins every wait of the executor)
+        self._wait_over = (self.create_timer(couple_wait * control_period, self.on_wait_over, clock=self._steady,
+                                             autostart=False) if self.wait.wait else None)
         if not self.paused:
             self._publish_first_observation()
 
@@ -395,7 +396,7 @@ class RodSimulator(Node):
             self.last_couple = u
             self.loop_closed = True
             if self.wait.couple(step) and self._can_step():
-                self._wait_over.cancel()
+                self._end_wait()
                 self._advance(u)
             return
         now, ended = self.rule.couple(u, self._can_step())
@@ -422,7 +423,7 @@ class RodSimulator(Node):
                 self.get_logger().warn(f"no couple within {timeout:g} s of the first state: free-running without one")
                 self.loop_closed = True
             if self.wait.expired():  # (a step still waiting for its couple: it goes now, this tick is lost)
-                self._wait_over.cancel()
+                self._end_wait()
                 self._advance(self.last_couple)
                 return
             lost = self.wall.step(time.monotonic())
@@ -432,6 +433,7 @@ class RodSimulator(Node):
             if self.wait.tick(self.session.k):
                 self._advance(self.last_couple)
             else:
+                assert self._wait_over is not None  # (a tick waits only with couple_wait > 0)
                 self._wait_over.reset()
             return
         if self.rule.tick(time.monotonic(), self.get_parameter("couple_timeout").value):
@@ -446,9 +448,14 @@ class RodSimulator(Node):
     @guarded("timer")
     def on_wait_over(self) -> None:
         """Free-running: ``couple_wait`` periods passed since a tick without its couple: step with the newest."""
-        self._wait_over.cancel()
+        self._end_wait()
         if self.wait.expired() and self._can_step():
             self._advance(self.last_couple)
+
+    def _end_wait(self) -> None:
+        """Disarm the couple wait's timer (the step goes, or the run pauses)."""
+        if self._wait_over is not None:
+            self._wait_over.cancel()
 
     @guarded(topics.OBJECT_WRENCH)
     def on_wrench(self, msg: WrenchStamped) -> None:
@@ -487,7 +494,7 @@ class RodSimulator(Node):
         self.paused = bool(req.data)
         if self.paused:
             self.wait.cancel()
-            self._wait_over.cancel()
+            self._end_wait()
         else:
             if not self.rule.started:
                 self._publish_first_observation()
