@@ -44,6 +44,10 @@ def main(args: Sequence[str] | None = None) -> int:
     argv = list(args) if args is not None else sys.argv
     cut = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
     names = argv[1:cut]
+    usage = f"usage: container NODE [NODE ...] [--ros-args ...] with NODE one of {', '.join(NODE_CLASSES)}"
+    if names and names[0] in ("-h", "--help"):
+        print(f"{usage}\n\n{__doc__}")
+        return 0
     problem = ""
     if not names:
         problem = "name the nodes to host"
@@ -52,8 +56,7 @@ def main(args: Sequence[str] | None = None) -> int:
     elif len(set(names)) != len(names):
         problem = "each node at most once (two nodes of one name would clash in the graph)"
     if problem:
-        print(f"container: error: {problem}; usage: container NODE [NODE ...] [--ros-args ...] with NODE one of "
-              f"{', '.join(NODE_CLASSES)}", file=sys.stderr)
+        print(f"container: error: {problem}; {usage}", file=sys.stderr)
         return 2
     return run_nodes([node_class(n) for n in names], [argv[0], *argv[cut:]])
 

@@ -224,3 +224,8 @@ def test_the_container_refuses_bad_usage_with_exit_2(args: list[str], needle: st
     env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     proc = subprocess.run([str(EXE / "container"), *args], capture_output=True, text=True, timeout=60, env=env)
     assert proc.returncode == 2 and needle in proc.stderr and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+
+
+def test_the_container_help() -> None:
+    proc = subprocess.run([str(EXE / "container"), "--help"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and proc.stdout.startswith("usage: container NODE") and "grasp_quality" in proc.stdout
