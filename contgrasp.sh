@@ -6,16 +6,61 @@
 #                            # (extra arguments go to pytest: bash contgrasp.sh test -k boundary)
 #   bash contgrasp.sh setup  # only set up
 #
-# Set-up creates .venv/ inside the checkout with Python 3.11, installs the project with its
-# dependencies (numpy, scipy, numba, matplotlib, pinned ros-jazzy-* wheels), the test extras and
-# the benchmarks' reference simulator (pyelastica, extra "bench"),
-# re-installs only when pyproject.toml changed, and warms numba's cache of the compiled kernels.
-# Everything talks over loopback only.
+# Set-up creates a virtual environment inside the checkout, installs the project with its
+# dependencies (numpy, scipy, numba, matplotlib), the ROS layer with the pinned ros-jazzy-* wheels
+# (extras ros, ros-wheels), the test extras and the benchmarks' reference simulator (pyelastica,
+# extra "bench"), re-installs only when pyproject.toml changed, and warms numba's cache of the
+# compiled kernels. Everything talks over loopback only.
+#
+# Python 3.11, 3.12 or 3.13: by default the first of python3.11, python3.12, python3.13, python3
+# that runs, in .venv/; PYTHON=python3.12 bash contgrasp.sh test picks one (a command, a path, or a
+# version pyenv has installed but not selected), in .venv-3.12/.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 cd "$here"
-venv="$here/.venv"
+
+supported() {  # the interpreter runs and is one of the supported versions
+    "$1" -c 'import sys; sys.exit(not (3, 11) <= sys.version_info[:2] <= (3, 13))' 2>/dev/null
+}
+
+resolve_python() {  # a command or path that runs; pyenv's shims run only its selected versions
+    local cand="$1" dir
+    if supported "$cand"; then
+        echo "$cand"
+        return 0
+    fi
+    if [[ "$cand" =~ ^python(3\.[0-9]+)$ ]] && command -v pyenv >/dev/null 2>&1; then
+        for dir in $(ls -d "$(pyenv root)/versions/${BASH_REMATCH[1]}".* 2>/dev/null | sort -rV); do
+            if supported "$dir/bin/$cand"; then
+                echo "$dir/bin/$cand"
+                return 0
+            fi
+        done
+    fi
+    return 1
+}
+
+find_python() {
+    local cand
+    if [ -n "${PYTHON:-}" ]; then
+        resolve_python "$PYTHON" && return 0
+        echo "contgrasp.sh: PYTHON=$PYTHON is not a Python 3.11, 3.12 or 3.13 that runs here" >&2
+        return 1
+    fi
+    for cand in python3.11 python3.12 python3.13 python3; do
+        resolve_python "$cand" && return 0
+    done
+    echo "contgrasp.sh: Python 3.11, 3.12 or 3.13 is required (python3.11, python3.12, python3.13 or python3)" >&2
+    return 1
+}
+
+if [ -n "${PYTHON:-}" ]; then
+    base_python="$(find_python)"
+    venv="$here/.venv-$("$base_python" -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
+else
+    venv="$here/.venv"
+fi
 py="$venv/bin/python"
 stamp="$venv/.contgrasp-setup"
 
@@ -25,22 +70,10 @@ export MPLBACKEND=Agg
 # the ament index search path (what sourcing a ROS 2 setup script provides): this venv
 export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
 
-find_python() {
-    for cand in python3.11 python3; do
-        if command -v "$cand" >/dev/null 2>&1 &&
-            "$cand" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null; then
-            echo "$cand"
-            return 0
-        fi
-    done
-    echo "contgrasp.sh: Python 3.11 is required (python3.11 or python3 must be 3.11)" >&2
-    return 1
-}
-
 setup() {
     if [ ! -x "$py" ]; then
         local base
-        base="$(find_python)"
+        base="${base_python:-$(find_python)}"
         if ! "$base" -m venv "$venv" 2>/dev/null; then
             # Debian ships venv/ensurepip separately
             if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
@@ -56,10 +89,16 @@ setup() {
     local want
     want="$(sha256sum pyproject.toml | cut -d' ' -f1)"
     if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-        echo "== installing contgrasp and its dependencies into .venv"
-        # (pip's warnings about this machine's unused local index folders are filtered out)
-        "$py" -m pip install --quiet --upgrade pip 2> >(grep -v "is ignored" >&2)
-        "$py" -m pip install --quiet -e ".[test,msgs,bench]" 2> >(grep -v "is ignored\|!!\|wheel_obj" >&2)
+        echo "== installing contgrasp and its dependencies into ${venv#"$here"/}"
+        # (pip's own messages, the build backend's warnings among them, are kept in the venv's
+        # pip-install.log and shown only when the install fails)
+        local log="$venv/pip-install.log"
+        if ! { "$py" -m pip install --quiet --upgrade pip &&
+            "$py" -m pip install --quiet -e ".[ros,ros-wheels,test,msgs,bench]"; } >"$log" 2>&1; then
+            cat "$log" >&2
+            echo "contgrasp.sh: installing the project failed (log: $log)" >&2
+            exit 1
+        fi
         echo "$want" >"$stamp"
     fi
     # The interface package is compiled with the machine's cmake and C/C++ compilers.

@@ -33,6 +33,7 @@ __all__ = [
     "SelfIntersectionError",
     "DegenerateBoundaryError",
     "ContactValidityError",
+    "MissingDependencyError",
     "WriteError",
     "IntegrationError",
     "output_error",
@@ -101,6 +102,12 @@ class ContactValidityError(InputError):
         super().__init__(message)
         self.s = float(s)
         self.condition = condition
+
+
+class MissingDependencyError(InputError):
+    """A command needs an optional dependency that is not installed (the ROS layer, Dask); the
+    message names the missing module and what to install. An input error: the same command fails
+    again until the environment changes, and the command-line tools exit with code 2."""
 
 
 class IntegrationError(RunFailure):

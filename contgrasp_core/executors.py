@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
 
-from .errors import InvalidParameterError
+from .errors import InvalidParameterError, MissingDependencyError
 
 __all__ = ["EXECUTORS", "run_tasks"]
 
@@ -52,10 +52,17 @@ def _results(task: Callable[[Any], T], items: Sequence[Any], executor: str, work
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
 
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork")) as pool:
+        # fork where the platform has it (the workers inherit the loaded modules); spawn on Windows
+        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
+        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method)) as pool:
             yield from pool.map(task, items)
     else:
-        from distributed import Client
+        try:
+            from distributed import Client
+        except ModuleNotFoundError as exc:
+            raise MissingDependencyError(
+                f"the dask executor needs dask.distributed (module {exc.name!r} is missing): pip install 'contgrasp[dist]'"
+            ) from exc
 
         with Client(scheduler) as client:
             futures = client.map(task, list(items), pure=False)

@@ -1,21 +1,22 @@
-"""The ``contgrasp`` command: the core subcommands plus the recording ones.
+"""The recording subcommands of ``contgrasp``: ``bag info BAG``, ``bag recover IN OUT``,
+``replay BAG`` and ``analyze BAG``.
 
-``contgrasp bag info BAG``, ``contgrasp bag recover IN OUT``, ``contgrasp replay BAG`` and
-``contgrasp analyze BAG`` are registered here so :mod:`contgrasp_core` stays free of ROS; only
-``replay`` needs rclpy (imported when it runs).
+:mod:`contgrasp_core.cli` finds :func:`register` through the ``contgrasp.cli`` entry point, so
+the core never imports this layer. Nothing here is imported before a subcommand runs: without
+the layer's dependencies (mcap for the recordings, rclpy for ``replay``) the subcommand says in
+one line what to install (exit 2, :mod:`contgrasp_ros.layer`).
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from contgrasp_core import cli as core_cli
+from contgrasp_ros import cli_analyze
+from contgrasp_ros.layer import guarded
 
-__all__ = ["main"]
+__all__ = ["register", "qos_text"]
 
 
 def _info_text(result: dict[str, Any]) -> str:
@@ -65,12 +66,14 @@ def qos_text(profiles: Any) -> str:
     return f" | QoS ({n} publisher{'s' if n != 1 else ''}): " + "; ".join(parts)
 
 
+@guarded
 def _bag_info(args: argparse.Namespace) -> dict[str, Any]:
     from contgrasp_ros.bag.reader import info, open_recording
 
     return info(open_recording(args.bag))
 
 
+@guarded
 def _bag_recover(args: argparse.Namespace) -> dict[str, Any]:
     from contgrasp_ros.bag.reader import recover
 
@@ -79,14 +82,15 @@ def _bag_recover(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
+@guarded
 def _replay(args: argparse.Namespace) -> dict[str, Any]:
     from contgrasp_ros.replay import replay
 
     return replay(args.bag, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start, end=args.end, delay=args.delay)
 
 
-def add_bag_parsers(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
-    """``bag info``, ``bag recover`` and ``replay``."""
+def register(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
+    """Add ``bag info``, ``bag recover``, ``replay`` and ``analyze`` to the ``contgrasp`` parser."""
     bag = sub.add_parser("bag", help="inspect or repair recordings (MCAP, rosbag2 layout)")
     bag_sub = bag.add_subparsers(dest="bag_command", metavar="BAG_COMMAND", required=True)
     p = bag_sub.add_parser("info", parents=parents, help="topics, types, counts, duration, QoS (like ros2 bag info)")
@@ -106,14 +110,4 @@ def add_bag_parsers(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--end", type=float, default=None, help="seconds after the first message to stop at")
     p.add_argument("--delay", type=float, default=1.0, help="wall seconds to let subscribers connect first")
     p.set_defaults(func=_replay)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``contgrasp`` console script."""
-    from contgrasp_ros import cli_analyze
-
-    return core_cli.main(argv, extra=[add_bag_parsers, cli_analyze.add_parser])
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    cli_analyze.add_parser(sub, parents)

@@ -1,8 +1,9 @@
 """``contgrasp analyze BAG``: offline analysis of a recorded graph run, without ROS.
 
-Wire-up (in ``contgrasp_ros/cli.py``): ``contgrasp_core.cli.main(argv, extra=[cli_analyze.add_parser])``;
-the parsed namespace has ``func=cli_analyze.run``, which returns the JSON-able result
-(:func:`contgrasp_ros.analysis.analyze`; keys in docs/analysis.md). Imports no ROS package.
+Registered by :func:`contgrasp_ros.cli.register`; the parsed namespace has
+``func=cli_analyze.run``, which returns the JSON-able result
+(:func:`contgrasp_ros.analysis.analyze`; keys in docs/analysis.md). Imports no ROS package, and
+the recording stack (mcap) only when it runs.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_ros.analysis import analyze, check
+from contgrasp_ros.layer import guarded
 
 __all__ = ["add_parser", "run"]
 
@@ -38,6 +39,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser] | None = None) -
     p.set_defaults(func=run)
 
 
+@guarded
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Analyse ``args.bag``; the result dict (see :func:`contgrasp_ros.analysis.summarize`), or
     :class:`~contgrasp_ros.analysis.RecomputeMismatchError` (exit 1, the result printed first)
@@ -53,6 +55,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 if not d.is_dir():
                     raise InvalidParameterError(f"--csv {args.csv}: {d} exists and is not a directory")
                 break
+    from contgrasp_ros.analysis import analyze, check
+
     out = analyze(args.bag, csv_dir=args.csv, plot=args.plot)
     check(out)  # exit 1 (after printing the result) when the recording does not recompute
     return out

@@ -4,19 +4,24 @@ Run with the venv's interpreter (``.venv/bin/python msgs_schema/build_into_venv.
 project's set-up does it. Steps (docs/design.md, section 1):
 
 1. point the ROS wheels' exported CMake files, which hard-code the wheel builder's Python and
-   numpy include directories, at this interpreter's (idempotent text replacement);
+   numpy include directories (``/opt/python/cp3XY-cp3XY/...``, one per Python version of the
+   wheels), at this interpreter's (idempotent text replacement; any Python the wheels exist for);
 2. plain ``cmake`` configure / build / install with ``CMAKE_INSTALL_PREFIX`` and
    ``CMAKE_PREFIX_PATH`` set to the venv and ``BUILD_TESTING=OFF``;
 3. import the generated Python messages in a fresh interpreter to prove the install.
 
 The package stays buildable unchanged with ``colcon build`` in an ordinary ROS 2 workspace.
-A stamp with the hash of the interface sources makes a second run a no-op.
+A stamp with the hash of the interface sources makes a second run a no-op. The CMake build
+folder is inside the environment (``<venv>/build/contgrasp_msgs``), so environments of different
+Pythons built from one checkout do not share it, and a ROS 2 workspace that holds this checkout
+under ``src/`` finds no stray package files in it.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import subprocess
 import sys
 import sysconfig
@@ -26,8 +31,11 @@ import numpy
 
 HERE = Path(__file__).resolve().parent
 PREFIX = Path(sys.prefix)
-WHEEL_PY_INCLUDE = "/opt/python/cp311-cp311/include/python3.11"
-WHEEL_NUMPY_INCLUDE = "/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include"
+# the wheel builder's interpreter prefix (manylinux's /opt/python/<tag>) and, under it, the
+# numpy include directory (numpy/_core/include since numpy 2, numpy/core/include before)
+WHEEL_PYTHON = r"/opt/python/cp3\d+-cp3\d+t?"
+WHEEL_NUMPY_INCLUDE = re.compile(WHEEL_PYTHON + r"/lib/python3\.\d+t?/site-packages/numpy/_?core/include")
+WHEEL_PY_INCLUDE = re.compile(WHEEL_PYTHON + r"/include/python3\.\d+t?")
 
 
 def source_hash() -> str:
@@ -44,10 +52,9 @@ def fix_wheel_cmake_paths() -> int:
     fixed = 0
     for path in (PREFIX / "share").rglob("*.cmake"):
         text = path.read_text(errors="surrogateescape")
-        if WHEEL_PY_INCLUDE in text or WHEEL_NUMPY_INCLUDE in text:
-            # numpy first: the Python include path is a prefix of neither, but keep order explicit
-            text = text.replace(WHEEL_NUMPY_INCLUDE, np_inc).replace(WHEEL_PY_INCLUDE, py_inc)
-            path.write_text(text, errors="surrogateescape")
+        new = WHEEL_PY_INCLUDE.sub(lambda _: py_inc, WHEEL_NUMPY_INCLUDE.sub(lambda _: np_inc, text))
+        if new != text:
+            path.write_text(new, errors="surrogateescape")
             fixed += 1
     return fixed
 
@@ -65,7 +72,7 @@ def main() -> int:
         return 0
     n = fix_wheel_cmake_paths()
     print(f"contgrasp_msgs: corrected {n} wheel CMake files")
-    build = HERE.parent / "build" / "contgrasp_msgs"
+    build = PREFIX / "build" / "contgrasp_msgs"
     build.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, PATH=f"{PREFIX / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}")
     run(

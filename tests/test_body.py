@@ -227,7 +227,7 @@ def test_simulate_object_mode_reports_the_object_and_rejects_bad_input() -> None
     import subprocess
     import sys
 
-    cmd = [sys.executable, "-m", "contgrasp_ros.cli", "simulate", "--nodes", "21", "--duration", "1.2", "--json"]
+    cmd = [sys.executable, "-m", "contgrasp_core.cli", "simulate", "--nodes", "21", "--duration", "1.2", "--json"]
     fixed = json.loads(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)
     free = json.loads(subprocess.run(cmd + ["--object-mode", "free"], capture_output=True, text=True, check=True).stdout)
     assert fixed["object_mode"] == "fixed" and "object_displacement" not in fixed

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from contgrasp_ros.cli import main
+from contgrasp_core.cli import main
 
 BIN = Path(sys.executable).parent
 SAMPLE_BAG = Path(__file__).resolve().parents[1] / "bags" / "paper_grasp.mcap"

@@ -21,7 +21,7 @@ Accepted, and therefore not fuzzed:
 * :func:`contgrasp_ros.analysis.analyze` is fuzzed through its recording path, and its
   overrides of the wrong type are checked in :func:`test_analyze_overrides_of_the_wrong_type`.
 
-CLI property: ``contgrasp_ros.cli.main(argv)`` (in-process) with argument lists in which at
+CLI property: ``contgrasp_core.cli.main(argv)`` (in-process) with argument lists in which at
 least one option value is bad (negative/zero/NaN/Inf/huge/non-numeric numbers, unknown object
 names, nonexistent, empty, binary or corrupt files, unwritable outputs) returns 2 and writes
 exactly one line, ``contgrasp COMMAND: error: ...``, to stderr, nothing to stdout, no
@@ -616,7 +616,7 @@ def test_bag_writer_options(files, layout, compression, chunk_size, max_bag_dura
 # ----------------------------------------------------------------------------- the CLI
 def run_cli(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
     """``contgrasp ARGV`` must fail with exit code 2 and one line on stderr (module docstring)."""
-    from contgrasp_ros.cli import main
+    from contgrasp_core.cli import main
 
     capsys.readouterr()
     with warnings.catch_warnings(record=True) as caught:

@@ -123,7 +123,7 @@ def test_library_raises_run_failures_and_input_errors_for_real() -> None:
 # ----------------------------------------------------------------------------- contgrasp
 def run_cli(capsys: pytest.CaptureFixture[str], argv: list[str]) -> tuple[int, str]:
     """``contgrasp ARGV`` in-process: (exit code, the one stderr line)."""
-    from contgrasp_ros.cli import main
+    from contgrasp_core.cli import main
 
     capsys.readouterr()
     try:
@@ -166,7 +166,7 @@ def test_usage_errors_are_one_line_with_exit_2(capsys: pytest.CaptureFixture[str
 
 
 def test_help_still_works(capsys: pytest.CaptureFixture[str]) -> None:
-    from contgrasp_ros.cli import main
+    from contgrasp_core.cli import main
 
     with pytest.raises(SystemExit) as info:
         main(["grasp", "--help"])
@@ -191,7 +191,7 @@ def _limited(size: int) -> Callable[[], None]:
     return limit
 
 
-def _child(argv: list[str], *, fsize: int | None = None, module: str = "contgrasp_ros.cli",
+def _child(argv: list[str], *, fsize: int | None = None, module: str = "contgrasp_core.cli",
            timeout: float = 300) -> subprocess.CompletedProcess[str]:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]), MPLBACKEND="Agg")
     return subprocess.run([sys.executable, "-m", module, *argv], capture_output=True, text=True, timeout=timeout, env=env,

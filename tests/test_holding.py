@@ -71,7 +71,7 @@ def test_bad_hold_settings_are_clear_errors() -> None:
 
 
 def test_hold_command_reports_stiffness_capacity_and_quality() -> None:
-    cmd = [sys.executable, "-m", "contgrasp_ros.cli", "hold", "--nodes", "51", "--directions", "2", "--ramp-time", "1.5"]
+    cmd = [sys.executable, "-m", "contgrasp_core.cli", "hold", "--nodes", "51", "--directions", "2", "--ramp-time", "1.5"]
     out = json.loads(subprocess.run(cmd + ["--json"], capture_output=True, text=True, check=True).stdout)
     assert np.asarray(out["stiffness"]).shape == (3, 3) and len(out["stiffness_eigenvalues"]) == 3
     assert len(out["capacity"]) == 4

@@ -5,7 +5,9 @@ stdout (keys documented in docs/cli.md). Errors become one line on stderr,
 ``contgrasp COMMAND: error: MESSAGE``: exit code 2 for bad usage or input (argparse errors,
 :class:`~contgrasp_core.errors.InputError`), 1 for a failed run
 (:class:`~contgrasp_core.errors.RunFailure`, any other exception); ``--debug`` shows the
-traceback instead.
+traceback instead. Other packages add subcommands through the ``contgrasp.cli`` entry point
+group (the ROS layer's recordings: ``bag``, ``replay``, ``analyze``); this package never imports
+them by name. ``python -m contgrasp_core.cli`` is the same command.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import argparse
 import json
 import sys
 from collections.abc import Callable, Sequence
+from importlib.metadata import entry_points
 from typing import Any, NoReturn
 
 import numpy as np
@@ -75,9 +78,15 @@ def report(prog: str, exc: BaseException) -> int:
 Registrar = Callable[[Any, list[argparse.ArgumentParser]], None]
 
 
-def build_parser(extra: Sequence[Registrar] = ()) -> argparse.ArgumentParser:
-    """The argument parser with every subcommand registered; ``extra`` registrars add more
-    (the recording commands of :mod:`contgrasp_ros.cli`, which keeps this package free of ROS)."""
+def registrars() -> list[Registrar]:
+    """The subcommand registrars other installed packages offer in the ``contgrasp.cli`` entry
+    point group (the ROS layer's recording commands), by entry point name."""
+    return [ep.load() for ep in sorted(entry_points(group="contgrasp.cli"), key=lambda ep: ep.name)]
+
+
+def build_parser(extra: Sequence[Registrar] | None = None) -> argparse.ArgumentParser:
+    """The argument parser with every subcommand registered: the core's and those of ``extra``
+    registrars (default: :func:`registrars`, what installed packages add)."""
     # (the subcommands import matplotlib and scipy: not at import time, so that the launcher,
     # which only needs this module's parser class, starts its node processes sooner)
     from . import grasp, hold, holding_study, kinematics, quality, simulate
@@ -97,7 +106,7 @@ def build_parser(extra: Sequence[Registrar] = ()) -> argparse.ArgumentParser:
     simulate.add_parser(sub, [common])
     hold.add_parser(sub, [common])
     holding_study.add_parser(sub, [common])
-    for register in extra:
+    for register in registrars() if extra is None else extra:
         register(sub, [common])
     return parser
 
@@ -168,7 +177,7 @@ def _summary(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> int:
+def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] | None = None) -> int:
     """Entry point of the ``contgrasp`` command; returns the process exit code."""
     parser = build_parser(extra)
     args, unknown = parser.parse_known_args(argv)
@@ -191,6 +200,3 @@ def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] = ()) -> 
     print(text)
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

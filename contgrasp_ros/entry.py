@@ -1,0 +1,43 @@
+"""The ROS layer's console scripts (``contgrasp-launch``, ``contgrasp-simulator``, ...).
+
+Each imports its module only when run, so that where the layer's dependencies are missing (a
+library-only install, README "Install") it prints one line naming what to install and exits
+with code 2 instead of an import traceback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from collections.abc import Callable
+
+from contgrasp_ros.layer import missing
+
+__all__ = ["launcher", "rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality",
+           "foxglove_bridge", "mcap_recorder", "container"]
+
+
+def _entry(module: str) -> Callable[[], int]:
+    def main() -> int:
+        try:
+            code: int = importlib.import_module(module).main()
+        except ModuleNotFoundError as exc:  # at import, or a dependency the command imports later
+            error = missing(exc)
+            if error is None:
+                raise
+            print(f"{sys.argv[0].rsplit('/', 1)[-1]}: error: {error}", file=sys.stderr)
+            return 2
+        return code
+
+    main.__doc__ = f"Run ``{module}.main()``."
+    return main
+
+
+launcher = _entry("contgrasp_ros.launcher")
+rod_simulator = _entry("contgrasp_ros.nodes.rod_simulator")
+boundary_sensor = _entry("contgrasp_ros.nodes.boundary_sensor")
+grasp_controller = _entry("contgrasp_ros.nodes.grasp_controller")
+grasp_quality = _entry("contgrasp_ros.nodes.grasp_quality")
+foxglove_bridge = _entry("contgrasp_ros.nodes.foxglove_bridge")
+mcap_recorder = _entry("contgrasp_ros.nodes.mcap_recorder")
+container = _entry("contgrasp_ros.container")
