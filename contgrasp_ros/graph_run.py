@@ -40,6 +40,9 @@ from contgrasp_ros.container import node_class
 from contgrasp_ros.convert import stamp_seconds
 from contgrasp_ros.discovery import discovery_profile_set, use_discovery_profile
 from contgrasp_ros.events import EventSink
+from contgrasp_ros.graph import LOOP as NODES
+from contgrasp_ros.graph import processes as graph_processes
+from contgrasp_ros.graph import recorder_params
 from contgrasp_ros.runtime import DropCounter, GuardedSpin, make_executor
 from contgrasp_ros.supervision import (
     RECORDER,
@@ -60,8 +63,6 @@ from contgrasp_ros.summary import FinalQuality, FinalState, RunSummary, build_su
 
 __all__ = ["Monitor", "run_graph"]
 
-NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
-DECIMATED_STREAMS = (topics.ROD_STATE, topics.CONTACT, topics.COUPLE)  # the bulky per-step topics
 RECORDED_STREAMS = (topics.OBJECT, topics.ROD_STATE, topics.CONTACT, topics.COUPLE, topics.QUALITY, topics.CLOCK)
 OBJECT_STREAMS = (topics.OBJECT_POSE, topics.OBJECT_TWIST)  # (published when the object moves)
 
@@ -239,25 +240,6 @@ def _drive(mon: Monitor, sup: Supervisor, executor: Executor, group: Any,
             raise ExternalShutdownException() from exc
 
 
-def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
-    """The recorder's parameters for a launcher run: output, layout, run_info (a JSON string), the
-    log-time clock (``sim`` by default: lock-step runs are stamped with simulated time), and the
-    optional exclusion, decimation and file splitting."""
-    log_time = record.get("log_time", "sim")
-    out = {"output": str(record["output"]), "layout": record.get("layout", "folder"), "run_info": json.dumps(record.get("run_info", {})),
-           "log_time": log_time, "use_sim_time": log_time == "sim"}
-    if record.get("exclude_regex"):
-        out["exclude_regex"] = record["exclude_regex"]
-    if record.get("decimate_period"):
-        out["decimate_topics"] = list(DECIMATED_STREAMS)
-        out["decimate_period"] = float(record["decimate_period"])
-    if record.get("max_bag_duration"):
-        out["max_bag_duration"] = float(record["max_bag_duration"])
-    if record.get("max_bag_size"):
-        out["max_bag_size"] = int(record["max_bag_size"])
-    return out
-
-
 def bag_summary(path: Path) -> dict[str, Any]:
     """What the finished recording holds: size, the clock of its log times and the time from the
     first to the last recorded message in it (``sim_time_s`` or ``wall_time_s``, the other
@@ -380,17 +362,13 @@ def run_graph(
                 override_file.write_text(yaml.safe_dump(overrides))
 
             on_recorder_lost = unrecorded if record is not None else None
-            if record is not None:
-                group.start(RECORDER, [sys.executable, "-m", f"contgrasp_ros.nodes.{RECORDER}", "--ros-args", "--params-file", str(override_file)])
-            ros_args = ["--ros-args", "--params-file", str(params_file), "--params-file", str(override_file)]
-            hosts = {name: names for names in compose for name in names}
-            for name in NODES:
-                if name not in hosts:
-                    processes.append(name)
-                    group.start(name, [sys.executable, "-m", f"contgrasp_ros.nodes.{name}", *ros_args])
-                elif name == hosts[name][0]:
-                    processes.append("+".join(hosts[name]))
-                    group.start(processes[-1], [sys.executable, "-m", "contgrasp_ros.container", *hosts[name], *ros_args])
+            for proc in graph_processes(NODES, compose, record=record is not None):
+                # (the recorder reads only the overrides: its own section holds all it needs)
+                files = [override_file] if proc.name == RECORDER else [params_file, override_file]
+                ros_args = ["--ros-args", *(a for f in files for a in ("--params-file", str(f)))]
+                if proc.name != RECORDER:
+                    processes.append(proc.name)
+                group.start(proc.name, [sys.executable, "-m", proc.module, *proc.arguments, *ros_args])
         for n in nodes:
             executor.add_node(n)
         sup = Supervisor(start=time.monotonic(), timeout=timeout, respawn=respawn, recording=record is not None,

@@ -22,64 +22,21 @@ import random
 import sys
 import tempfile
 from collections.abc import Sequence
-from dataclasses import replace
-from importlib import resources
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-import yaml
 
 from contgrasp_core.cli import ArgumentParser, report
 from contgrasp_core.cli.common import add_object_arguments, object_from_args
 from contgrasp_core.errors import InvalidParameterError, exit_code, one_line
-from contgrasp_core.objects import ROD_SCALE, ObjectSpec
-from contgrasp_core.scenario import CONTROLLER, NODES, QUALITY, SIMULATOR, Scenario
+from contgrasp_core.objects import ROD_SCALE
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
 from contgrasp_ros.events import EventWriter, open_events
+from contgrasp_ros.graph import compose_groups, default_params_file, load_params, object_parameters, parameter_file
 
 
 __all__ = ["main", "default_params_file", "load_params"]
-
-
-def default_params_file() -> Path:
-    """The packaged default parameter file (paper scenario)."""
-    return Path(str(resources.files("contgrasp_ros") / "config" / "default.yaml"))
-
-
-def load_params(path: Path) -> dict[str, dict[str, Any]]:
-    """Parameters per node from a ROS 2 YAML file (``/**`` entries apply to every node)."""
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise InvalidParameterError(f"cannot read parameter file {path}: {exc}") from exc
-    if not isinstance(data, dict):
-        raise InvalidParameterError(f"{path} is not a ROS 2 parameter file (expected a mapping)")
-    try:
-        common = (data.get("/**") or {}).get("ros__parameters", {})
-        out = {}
-        for node in NODES:
-            section = data.get(node) or data.get(f"/{node}") or {}
-            out[node] = {**common, **section.get("ros__parameters", {})}
-    except AttributeError as exc:
-        raise InvalidParameterError(f"{path} is not a ROS 2 parameter file (node sections need 'ros__parameters' mappings)") from exc
-    return out
-
-
-def _with_object(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> Path:
-    """Put ``obj`` into ``params`` (the simulator's object, the controller's adaptive-gain radius,
-    the quality evaluator's wrench reference) and write them to a parameter file for the nodes."""
-    if obj.shape == "outline":
-        obj = ObjectSpec.from_outline(Path(obj.source).resolve())  # the nodes may run elsewhere
-    scenario = Scenario.from_ros_parameters(params)
-    scenario = replace(scenario.with_object(obj), sensing=replace(scenario.sensing, reference=None))
-    new = scenario.to_ros_parameters()
-    for node in (SIMULATOR, CONTROLLER, QUALITY):
-        params[node].update(new[node])
-    path = Path(tempfile.mkdtemp(prefix="contgrasp_params_")) / "params.yaml"
-    path.write_text(yaml.safe_dump({node: {"ros__parameters": values} for node, values in params.items()}))
-    return path
 
 
 def _domain_id(given: int | None) -> int:
@@ -111,21 +68,13 @@ def _port(text: str) -> int:
 
 
 def _compose_groups(values: list[str], in_process: bool) -> list[tuple[str, ...]]:
-    """The ``--compose`` groups, checked: two or more of the sensor, controller and quality node
-    each, no node in two groups, separate processes only."""
+    """The ``--compose`` groups (:func:`contgrasp_ros.graph.compose_groups`), separate processes only."""
     if values and in_process:
         raise InvalidParameterError("--compose groups node processes: it does not apply with --in-process")
-    allowed = ("boundary_sensor", "grasp_controller", "grasp_quality")
-    groups: list[tuple[str, ...]] = []
-    seen: set[str] = set()
-    for value in values:
-        names = tuple(n.strip() for n in value.split(","))
-        if len(names) < 2 or any(n not in allowed for n in names) or len(set(names)) != len(names) or seen & set(names):
-            raise InvalidParameterError(f"--compose {value!r}: give two or more of {', '.join(allowed)}, comma-separated, "
-                                        "each node in one group at most (the simulator always runs alone)")
-        seen.update(names)
-        groups.append(names)
-    return groups
+    try:
+        return compose_groups(values)
+    except InvalidParameterError as exc:
+        raise InvalidParameterError(f"--compose: {exc}") from None
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -209,6 +158,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventWriter | None = None) -> int:
+    if not (np.isfinite(args.timeout) and args.timeout > 0):
+        raise InvalidParameterError(f"--timeout must be a finite number > 0 (wall-clock seconds), got {args.timeout}")
     params_file = args.params or default_params_file()
     params = load_params(params_file)
     if args.duration is not None:
@@ -216,7 +167,9 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
             raise InvalidParameterError(f"--duration must be a finite number > 0 (simulated seconds), got {args.duration}")
         params["rod_simulator"]["duration"] = float(args.duration)
     if args.object is not None or args.outline is not None:
-        params_file = _with_object(params, object_from_args(args, ROD_SCALE))
+        for node, values in object_parameters(params, object_from_args(args, ROD_SCALE)).items():
+            params[node].update(values)
+        params_file = parameter_file(Path(tempfile.mkdtemp(prefix="contgrasp_params_")) / "params.yaml", params)
     domain = _domain_id(args.domain_id)
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     if events is not None:

@@ -258,6 +258,10 @@ def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
         assert proc.returncode == 2 and "--compose" in proc.stderr and "Traceback" not in proc.stderr, compose
     proc = launch("--in-process", "--compose", "boundary_sensor,grasp_controller")
     assert proc.returncode == 2 and "--in-process" in proc.stderr
+    for timeout in ("0", "-5", "nan", "inf"):  # (issue 31: --timeout 0 ran and failed with 68 lines; -5, nan accepted)
+        proc = launch("--timeout", timeout)
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1 and "--timeout" in lines[0], (timeout, proc.stderr[-2000:])
     for bad_split in (["--max-bag-duration", "nan"], ["--max-bag-size", "1000"],
                       ["--bag", str(tmp_path / "one.mcap"), "--max-bag-duration", "5"]):
         proc = launch(*bad_split)

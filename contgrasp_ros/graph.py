@@ -1,0 +1,150 @@
+"""The graph's one description: which node processes run, what each executes, and their parameters.
+
+``contgrasp-launch`` (:mod:`contgrasp_ros.graph_run`) and the launch files
+(``launch/paper_grasp.launch.py``, ``launch/plant.launch.py``) both build their processes from
+:func:`processes` and their parameter files from :func:`load_params`, :func:`object_parameters`
+and :func:`recorder_params`, so there is no second list of nodes and parameters to drift.
+No rclpy here: the launch files are loaded by ``ros2 launch`` before any node exists.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.objects import ObjectSpec
+from contgrasp_core.scenario import CONTROLLER, NODES, QUALITY, SIMULATOR, Scenario
+from contgrasp_ros import topics
+from contgrasp_ros.supervision import RECORDER
+
+__all__ = ["PACKAGE", "RECORDER", "CONTAINER", "LOOP", "PLANT", "COMPOSABLE", "DECIMATED_STREAMS", "Process",
+           "compose_groups", "processes", "default_params_file", "load_params", "object_parameters", "recorder_params",
+           "parameter_file"]
+
+PACKAGE = "contgrasp_ros"
+CONTAINER = "container"
+LOOP = NODES
+"""The closed loop: simulator, boundary sensor, controller, quality evaluator (in start order)."""
+PLANT = (SIMULATOR, "boundary_sensor", QUALITY)
+"""The plant without the paper's controller, for a user's own (``plant.launch.py``)."""
+COMPOSABLE = ("boundary_sensor", CONTROLLER, QUALITY)
+"""The nodes one container process may host (the simulator always runs alone)."""
+DECIMATED_STREAMS = (topics.ROD_STATE, topics.CONTACT, topics.COUPLE)
+"""The bulky per-step topics a recording may decimate (``--bag-decimate``)."""
+
+
+@dataclass(frozen=True)
+class Process:
+    """One node process: ``executable`` in ``lib/contgrasp_ros/`` (what ``ros2 run`` runs; also
+    ``python -m`` :attr:`module`) with ``arguments`` before ``--ros-args``; ``name`` labels it
+    (a container's is its nodes joined by ``+``)."""
+
+    name: str
+    executable: str
+    arguments: tuple[str, ...] = ()
+
+    @property
+    def module(self) -> str:
+        """The Python module the executable runs."""
+        return f"{PACKAGE}.{CONTAINER}" if self.executable == CONTAINER else f"{PACKAGE}.nodes.{self.executable}"
+
+
+def compose_groups(texts: Sequence[str], nodes: Sequence[str] = LOOP) -> list[tuple[str, ...]]:
+    """The container groups named by ``texts`` (``"boundary_sensor,grasp_controller"`` each),
+    checked: two or more of :data:`COMPOSABLE` among ``nodes`` per group, each node in one group
+    at most. The error names the offending group."""
+    allowed = [n for n in COMPOSABLE if n in nodes]
+    groups: list[tuple[str, ...]] = []
+    seen: set[str] = set()
+    for text in texts:
+        names = tuple(n.strip() for n in text.split(",") if n.strip())
+        if len(names) < 2 or any(n not in allowed for n in names) or len(set(names)) != len(names) or seen & set(names):
+            raise InvalidParameterError(f"compose group {text!r}: give two or more of {', '.join(allowed)}, comma-separated, "
+                                        "each node in one group at most (the simulator always runs alone)")
+        seen.update(names)
+        groups.append(names)
+    return groups
+
+
+def processes(nodes: Sequence[str] = LOOP, compose: Sequence[tuple[str, ...]] = (), record: bool = False) -> list[Process]:
+    """The node processes of a graph of ``nodes``, in start order: the recorder first when
+    ``record`` (it must hear the first state), then each node alone, except that each group of
+    ``compose`` (:func:`compose_groups`) runs as one container process, started where its first
+    node would be."""
+    hosts = {name: group for group in compose for name in group}
+    out = [Process(RECORDER, RECORDER)] if record else []
+    for name in nodes:
+        group = hosts.get(name)
+        if group is None:
+            out.append(Process(name, name))
+        elif name == group[0]:
+            out.append(Process("+".join(group), CONTAINER, group))
+    return out
+
+
+def default_params_file() -> Path:
+    """The packaged default parameter file (the paper's scenario)."""
+    return Path(str(resources.files(PACKAGE) / "config" / "default.yaml"))
+
+
+def load_params(path: Path) -> dict[str, dict[str, Any]]:
+    """Parameters per node from a ROS 2 YAML file (``/**`` entries apply to every node)."""
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise InvalidParameterError(f"cannot read parameter file {path}: {exc}") from exc
+    if not isinstance(data, dict):
+        raise InvalidParameterError(f"{path} is not a ROS 2 parameter file (expected a mapping)")
+    try:
+        common = (data.get("/**") or {}).get("ros__parameters", {})
+        out = {}
+        for node in NODES:
+            section = data.get(node) or data.get(f"/{node}") or {}
+            out[node] = {**common, **section.get("ros__parameters", {})}
+    except AttributeError as exc:
+        raise InvalidParameterError(f"{path} is not a ROS 2 parameter file (node sections need 'ros__parameters' mappings)") from exc
+    return out
+
+
+def object_parameters(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> dict[str, dict[str, Any]]:
+    """The parameters ``obj`` changes: the simulator's object, the controller's adaptive-gain
+    radius, the quality evaluator's wrench reference (an outline by its absolute path: the nodes
+    may run elsewhere)."""
+    if obj.shape == "outline":
+        obj = ObjectSpec.from_outline(Path(obj.source).resolve())
+    scenario = Scenario.from_ros_parameters(params)
+    scenario = replace(scenario.with_object(obj), sensing=replace(scenario.sensing, reference=None))
+    new = scenario.to_ros_parameters()
+    return {node: new[node] for node in (SIMULATOR, CONTROLLER, QUALITY)}
+
+
+def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
+    """The recorder's parameters for a run: output, layout, run_info (a JSON string), the
+    log-time clock (``sim`` by default: lock-step runs are stamped with simulated time), and the
+    optional exclusion, decimation and file splitting."""
+    log_time = record.get("log_time", "sim")
+    out = {"output": str(record["output"]), "layout": record.get("layout", "folder"), "run_info": json.dumps(record.get("run_info", {})),
+           "log_time": log_time, "use_sim_time": log_time == "sim"}
+    if record.get("exclude_regex"):
+        out["exclude_regex"] = record["exclude_regex"]
+    if record.get("decimate_period"):
+        out["decimate_topics"] = list(DECIMATED_STREAMS)
+        out["decimate_period"] = float(record["decimate_period"])
+    if record.get("max_bag_duration"):
+        out["max_bag_duration"] = float(record["max_bag_duration"])
+    if record.get("max_bag_size"):
+        out["max_bag_size"] = int(record["max_bag_size"])
+    return out
+
+
+def parameter_file(path: Path, params: dict[str, dict[str, Any]]) -> Path:
+    """Write ``params`` (per node) to ``path`` as a ROS 2 parameter file; returns ``path``."""
+    path.write_text(yaml.safe_dump({node: {"ros__parameters": values} for node, values in params.items()}))
+    return path

@@ -1,0 +1,17 @@
+"""The plant alone, on the wall clock: simulator, boundary sensor, quality node (and the recorder
+with record:=true), for your own controller on /contgrasp/contact -> /contgrasp/couple.
+
+    ros2 launch contgrasp_ros plant.launch.py [object:=...] [record:=true] [rviz:=true] ...
+
+The simulator waits for a couple publisher before step 0 (peer_timeout); the arguments are those
+of paper_grasp.launch.py (lockstep:=false by default here).
+"""
+
+from launch import LaunchDescription
+
+from contgrasp_ros.graph import PLANT
+from contgrasp_ros.ros_launch import graph_description
+
+
+def generate_launch_description() -> LaunchDescription:
+    return graph_description(PLANT, lockstep=False)

@@ -1,0 +1,110 @@
+"""The graph as ROS 2 launch entities, for ``launch/paper_grasp.launch.py`` and ``launch/plant.launch.py``.
+
+The nodes, their executables and parameters come from :mod:`contgrasp_ros.graph`, as those of
+``contgrasp-launch`` do. Needs ``launch`` and ``launch_ros`` (part of every ROS 2 install; not
+published as wheels, so the pip-only set-up has no ``ros2 launch``; docs/ros.md, "In a ROS 2
+workspace").
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from launch import LaunchContext, LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+from launch_ros.substitutions import FindPackageShare
+
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+from contgrasp_core.scenario import SIMULATOR
+from contgrasp_ros.graph import (
+    COMPOSABLE,
+    PACKAGE,
+    RECORDER,
+    compose_groups,
+    default_params_file,
+    load_params,
+    object_parameters,
+    parameter_file,
+    processes,
+    recorder_params,
+)
+
+__all__ = ["graph_description"]
+
+
+def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
+    return [
+        DeclareLaunchArgument("params_file", default_value="",
+                              description="ROS 2 parameter file of the scenario (default: the package's config/default.yaml, the paper's)"),
+        DeclareLaunchArgument("object", default_value="",
+                              description="built-in object NAME[:PARAMS] in metres: circle[:R], ellipse[:a,b], "
+                                          "deformed[:R,amplitude,lobes,phase] (default: the parameter file's)"),
+        DeclareLaunchArgument("outline", default_value="", description="your own object: a CSV outline, rows x, y in metres"),
+        DeclareLaunchArgument("lockstep", default_value=str(lockstep).lower(), choices=["true", "false"],
+                              description="true: lock-step simulated time, deterministic; false: the wall clock (real time)"),
+        DeclareLaunchArgument("duration", default_value="", description="simulated seconds at most (default: the parameter file's)"),
+        DeclareLaunchArgument("compose", default_value="false", choices=["true", "false"],
+                              description=f"host {', '.join(COMPOSABLE)} (those launched) in one process"),
+        DeclareLaunchArgument("record", default_value="false", choices=["true", "false"],
+                              description="record the run to MCAP with the mcap_recorder node"),
+        DeclareLaunchArgument("bag", default_value="", description="record: the bag folder (default bags/run_<date>_<time>)"),
+        DeclareLaunchArgument("on_finish", default_value="idle", choices=["idle", "exit"],
+                              description="when the run is over: every node stays up (idle) or exits (exit), ending the launch"),
+        DeclareLaunchArgument("rviz", default_value="false", choices=["true", "false"],
+                              description="open RViz with the package's rviz/contgrasp.rviz"),
+    ]
+
+
+def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node]:
+    """The graph's node processes with the launch arguments applied (the launcher's rules:
+    an override file beside the scenario's parameter file)."""
+    arg = {name: LaunchConfiguration(name).perform(context) for name in
+           ("params_file", "object", "outline", "lockstep", "duration", "compose", "record", "bag", "on_finish")}
+    params_file = Path(arg["params_file"]) if arg["params_file"] else default_params_file()
+    params = load_params(params_file)
+    record = arg["record"] == "true"
+    overrides: dict[str, dict[str, Any]] = {name: {"use_sim_time": True, "on_finish": arg["on_finish"]} for name in nodes}
+    if arg["object"] or arg["outline"]:
+        obj = ObjectSpec.from_cli(arg["object"] or None, arg["outline"] or None, ROD_SCALE)
+        for name, values in object_parameters(params, obj).items():
+            if name in overrides:
+                overrides[name].update(values)
+    sim = overrides[SIMULATOR]
+    sim["lockstep"] = arg["lockstep"] == "true"
+    if arg["duration"]:
+        try:
+            sim["duration"] = float(arg["duration"])
+        except ValueError:
+            raise InvalidParameterError(f"duration:={arg['duration']!r} is not a number of seconds") from None
+    if record:
+        sim["min_subscribers"] = 2  # the sensor and the recorder hear the first state
+        from contgrasp_ros.nodes.mcap_recorder import default_output
+
+        overrides[RECORDER] = {**recorder_params({"output": arg["bag"] or default_output()}), "on_finish": arg["on_finish"]}
+    compose = compose_groups([",".join(n for n in COMPOSABLE if n in nodes)], nodes) if arg["compose"] == "true" else []
+    override_file = parameter_file(Path(tempfile.mkdtemp(prefix="contgrasp_launch_")) / "overrides.yaml", overrides)
+    return [
+        Node(package=PACKAGE, executable=proc.executable, arguments=list(proc.arguments), output="screen",
+             parameters=[str(override_file)] if proc.name == RECORDER else [str(params_file), str(override_file)])
+        for proc in processes(nodes, compose, record=record)
+    ]
+
+
+def graph_description(nodes: Sequence[str], *, lockstep: bool) -> LaunchDescription:
+    """The launch description of a graph of ``nodes`` (:data:`contgrasp_ros.graph.LOOP` or
+    :data:`~contgrasp_ros.graph.PLANT`), lock-step by default when ``lockstep``, with RViz on
+    ``rviz:=true``."""
+    rviz_config = PathJoinSubstitution([FindPackageShare(PACKAGE), "rviz", "contgrasp.rviz"])
+    return LaunchDescription([
+        *_arguments(lockstep),
+        OpaqueFunction(function=_nodes, args=[tuple(nodes)]),
+        Node(package="rviz2", executable="rviz2", arguments=["-d", rviz_config], output="screen",
+             condition=IfCondition(LaunchConfiguration("rviz"))),
+    ])

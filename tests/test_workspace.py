@@ -1,0 +1,98 @@
+"""The repository as a ROS 2 user builds it: under ``src/`` of a workspace, ``colcon build`` on
+top of this venv (its pinned ROS 2 Jazzy wheels are the underlay, as /opt/ros/jazzy would be),
+``source install/setup.bash``, then the four graph nodes started from ``install/`` by hand
+(what ``ros2 run contgrasp_ros <node>`` executes) give the paper's grasp bit for bit as the core
+loop does (docs/ros.md, "In a ROS 2 workspace")."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("rclpy")
+pytest.importorskip("contgrasp_msgs.msg")
+if shutil.which("colcon", path=os.pathsep.join([str(Path(sys.prefix) / "bin"), os.environ.get("PATH", "")])) is None:
+    pytest.skip("colcon is not installed (the set-up's test extra installs colcon-common-extensions)", allow_module_level=True)
+
+import test_by_hand as by_hand  # noqa: E402 - the by-hand graph and its fixtures
+
+Graph = by_hand.Graph
+graph = by_hand.graph
+paper_core = by_hand.paper_core
+
+ROOT = Path(__file__).resolve().parents[1]
+PROGRAMS = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality", "mcap_recorder", "foxglove_bridge",
+            "container")
+
+
+def _underlay_env() -> dict[str, str]:
+    """This venv as the ROS underlay, activated: its interpreter first on PATH, its prefix in the
+    ament and CMake search paths."""
+    venv = Path(sys.prefix)
+    return dict(os.environ, VIRTUAL_ENV=str(venv), PATH=os.pathsep.join([str(venv / "bin"), os.environ.get("PATH", "")]),
+                AMENT_PREFIX_PATH=str(venv), CMAKE_PREFIX_PATH=str(venv), PYTHONUNBUFFERED="1")
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """A workspace holding this checkout's files under src/contgrasp, built with colcon; the
+    environment ``source install/setup.bash`` gives."""
+    ws = tmp_path_factory.mktemp("ws")
+    names = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
+                           capture_output=True, check=True).stdout.decode().split("\0")
+    for name in (n for n in names if n and (ROOT / n).is_file()):
+        (ws / "src" / "contgrasp" / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / name, ws / "src" / "contgrasp" / name)
+    env = _underlay_env()
+    listed = subprocess.run(["colcon", "list", "--names-only"], cwd=ws, env=env, capture_output=True, text=True, check=True)
+    build = subprocess.run(["colcon", "build", "--event-handlers", "console_direct-", "--cmake-args", "-DBUILD_TESTING=OFF"],
+                           cwd=ws, env=env, capture_output=True, text=True, timeout=900)
+    assert build.returncode == 0, build.stdout[-4000:] + build.stderr[-4000:]
+    sourced = subprocess.run(["bash", "-c", "source install/setup.bash && env -0"], cwd=ws, env=env, capture_output=True,
+                             check=True).stdout.decode()
+    return {"ws": ws, "packages": listed.stdout.split(), "build": build.stdout,
+            "env": dict(line.split("=", 1) for line in sourced.split("\0") if "=" in line)}
+
+
+def test_colcon_builds_both_packages_and_installs_what_a_ros_package_installs(workspace: dict[str, Any]) -> None:
+    assert sorted(workspace["packages"]) == ["contgrasp_msgs", "contgrasp_ros"]
+    prefix = workspace["ws"] / "install" / "contgrasp_ros"
+    assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "contgrasp_ros").is_file()
+    share = prefix / "share" / "contgrasp_ros"
+    for name in ("package.xml", "config/default.yaml", "launch/paper_grasp.launch.py", "launch/plant.launch.py",
+                 "rviz/contgrasp.rviz"):
+        assert (share / name).is_file(), name
+    for program in PROGRAMS:
+        assert os.access(prefix / "lib" / "contgrasp_ros" / program, os.X_OK), program
+    where = subprocess.run(["python3", "-c", "import contgrasp_core, contgrasp_msgs, contgrasp_ros; "
+                            "print(contgrasp_core.__file__, contgrasp_ros.__file__, contgrasp_msgs.__file__)"],
+                           env=workspace["env"], cwd=workspace["ws"], capture_output=True, text=True, check=True).stdout.split()
+    assert all(path.startswith(str(workspace["ws"] / "install")) for path in where), where
+
+
+def test_the_nodes_from_install_give_the_paper_grasp_bitwise(workspace: dict[str, Any], graph: Graph, paper_core: Any) -> None:
+    """The four nodes started by hand from the workspace's install/ (no parameter file, no
+    launcher) settle as the core loop does, bit for bit."""
+    graph.env = dict(workspace["env"], ROS_DOMAIN_ID=str(graph.domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    exe = workspace["ws"] / "install" / "contgrasp_ros" / "lib" / "contgrasp_ros"
+    for node in ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"):
+        # (min_subscribers 3: the sensor's two rod-state subscriptions and this test's probe)
+        extra = ["-p", "min_subscribers:=3"] if node == "rod_simulator" else []
+        # (in the workspace, as a user would be: python -m puts the working directory first on sys.path)
+        graph.procs[node] = subprocess.Popen([str(exe / node), "--ros-args", "-p", "on_finish:=exit", *extra], env=graph.env,
+                                             cwd=workspace["ws"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        time.sleep(0.5)
+    assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.status
+    assert graph.spin_until(lambda: graph.last is not None and graph.last.step == int(graph.status["step"]), timeout=10)
+    _, session = paper_core
+    assert graph.status["missed_deadlines"] == "0" and float(graph.status["settle_time_s"]) == session.settle_time
+    assert graph.last is not None
+    by_hand.same_as_core(graph.last, paper_core)
+    assert all(code == 0 for code in graph.close().values())
