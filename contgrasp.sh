@@ -115,7 +115,7 @@ setup() {
     # Compile the rod engine's numba kernels once (a tiny simulation; numba caches the machine code
     # in contgrasp_core/rod/__pycache__), so the first real run does not pay ~10-17 s of compilation;
     # when the cache is current this only loads it (under a second).
-    "$py" -c "from contgrasp_core.rod._kernels import warm; warm()"
+    "$py" -m contgrasp_core.warmup
     mkdir -p "$ROS_LOG_DIR"
 }
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -34,8 +34,35 @@ from .boundary import Boundary
 from .errors import ContactValidityError, IntegrationError, InvalidParameterError
 from .rod import _kernels
 
-if TYPE_CHECKING:  # (imported in sense() when needed: the ROS boundary sensor never needs it)
-    from .rod.obstacle import Obstacle
+
+class ClosestPoints(Protocol):
+    """The fields of a fast projection's closest points that sensing reads."""
+
+    @property
+    def foot(self) -> NDArray[np.float64]: ...
+    @property
+    def s_o(self) -> NDArray[np.float64]: ...
+    @property
+    def phi(self) -> NDArray[np.float64]: ...
+    @property
+    def kappa_o(self) -> NDArray[np.float64]: ...
+    @property
+    def signed_distance(self) -> NDArray[np.float64]: ...
+    @property
+    def normal_out(self) -> NDArray[np.float64]: ...
+
+
+class Obstacle(Protocol):
+    """A fast projection onto the object's boundary, as the rod engine keeps one
+    (:class:`contgrasp_core.rod.obstacle.Obstacle`, which satisfies this): closest points of many
+    points and, for a circle, the compiled closed form's ``(R, cx, cy)``. Named here by what
+    sensing needs, so this module (below the rod engine) imports nothing of it."""
+
+    @property
+    def compiled_circle(self) -> tuple[float, float, float] | None: ...
+    @property
+    def length(self) -> float: ...
+    def project(self, points: NDArray[np.float64]) -> ClosestPoints: ...
 
 __all__ = [
     "ContactState",
@@ -188,11 +215,9 @@ def sense(
     sampled ROS loop and its core twin call this function on the same arrays and agree bitwise.
     """
     instance("shape", shape, ArmShape)
-    if not isinstance(boundary, Boundary):
-        from .rod.obstacle import Obstacle  # (a process that senses Boundary objects only never imports scipy.spatial)
-
-        if not isinstance(boundary, Obstacle):
-            raise InvalidParameterError(f"boundary must be a Boundary or an Obstacle, got {type(boundary).__name__}")
+    if not isinstance(boundary, Boundary) and not (callable(getattr(boundary, "project", None))
+                                                   and hasattr(type(boundary), "compiled_circle")):
+        raise InvalidParameterError(f"boundary must be a Boundary or an Obstacle, got {type(boundary).__name__}")
     tol = real("contact tolerance", tol, lo=0.0)
     r = float_array("arm shape r", shape.r)
     theta = float_array("arm shape theta", shape.theta)

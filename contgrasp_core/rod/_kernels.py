@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ENABLED", "f64", "load", "warm"]  # and, loaded on first use, the kernels of _kernels_jit
+__all__ = ["ENABLED", "f64", "load"]  # and, loaded on first use, the kernels of _kernels_jit
 
 ENABLED: bool = os.environ.get("CONTGRASP_KERNELS", "1").strip().lower() not in ("0", "false", "no", "off")
 """Use the kernels (True) or the numpy reference code (False). Read at every call, so it can be
@@ -65,31 +65,3 @@ def __getattr__(name: str) -> Any:
             globals()[n] = getattr(mod, n)
         return globals()[name]
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def warm() -> float:
-    """Compile (or load from numba's on-disk cache) every kernel by running a tiny closed-loop
-    simulation through the code paths that use them (the lock-step loop with the held expansion
-    and the continuous loop, both around a circle, with contact); returns the seconds it took.
-    ``contgrasp.sh setup`` runs it, so the first real run does not pay the compilation (~10-17 s
-    on 2 cores; loading the cache afterwards takes well under a second)."""
-    import time
-    from dataclasses import replace
-
-    from contgrasp_core.control import paper_gains
-    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
-    from contgrasp_core.rod.integrator import RodSystem
-    from contgrasp_core.rod.obstacle import Obstacle
-    from contgrasp_core.rod.session import run_sampled
-    from contgrasp_core.scenario import PAPER
-
-    from contgrasp_core.boundary import ellipse
-
-    t0 = time.perf_counter()
-    ellipse(2.0, 1.0).project(np.array([[0.5, 0.25]]))  # contgrasp_core._geometry
-    rod = replace(PAPER.rod, n_elements=12)
-    run_sampled(replace(PAPER, rod=rod, loop=replace(PAPER.loop, duration=0.01)))
-    system = RodSystem(rod, Obstacle(PAPER.object.boundary()))
-    run_closed_loop(system, paper_gains(rod, 0.025), ClosedLoopConfig(duration=0.02, dt=0.01))
-    return time.perf_counter() - t0
-
