@@ -22,7 +22,8 @@ T = TypeVar("T")
 def run_tasks(task: Callable[[Any], T], items: Sequence[Any], executor: str = "serial", *, workers: int | None = None,
               scheduler: str | None = None, progress: str | None = None, unit: str = "task") -> Iterator[T]:
     """``task(item)`` for each item, yielded in order as they complete in order: ``serial``,
-    ``processes`` (a fork-based pool of ``workers``) or ``dask`` (the cluster at ``scheduler``).
+    ``processes`` (a pool of ``workers``, forked where the platform can; interrupted or failed,
+    it ends its workers at once) or ``dask`` (the cluster at ``scheduler``).
     ``progress``: the description of a progress bar (None: no bar)."""
     if executor not in EXECUTORS:
         raise InvalidParameterError(f"unknown executor {executor!r}: serial, processes or dask")
@@ -43,6 +44,14 @@ def run_tasks(task: Callable[[Any], T], items: Sequence[Any], executor: str = "s
             bar.close()
 
 
+def _ignore_interrupts() -> None:
+    """A pool worker leaves SIGINT to its parent (a terminal's Ctrl-C reaches the whole process
+    group): the parent stops them, and no worker prints a KeyboardInterrupt traceback."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _results(task: Callable[[Any], T], items: Sequence[Any], executor: str, workers: int | None,
              scheduler: str | None) -> Iterator[T]:
     if executor == "serial":
@@ -50,12 +59,21 @@ def _results(task: Callable[[Any], T], items: Sequence[Any], executor: str, work
             yield task(item)
     elif executor == "processes":
         import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
 
         # fork where the platform has it (the workers inherit the loaded modules); spawn on Windows
         method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context(method)) as pool:
-            yield from pool.map(task, items)
+        pool = mp.get_context(method).Pool(workers, initializer=_ignore_interrupts)
+        try:
+            yield from pool.imap(task, items)
+        except BaseException:
+            # Ctrl-C (or a failed task, or the consumer stopping): end the workers now; a pool
+            # that waits for its busy workers is what made the study hang on the first Ctrl-C
+            pool.terminate()
+            raise
+        else:
+            pool.close()
+        finally:
+            pool.join()
     else:
         try:
             from distributed import Client

@@ -117,3 +117,48 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
     fig = study_figure(qm, expand_symmetric(spec, rows))
     titles = [ax.get_title() for ax in fig.axes if ax.get_title()]
     assert any("static Q1" in t for t in titles) and any("capacity" in t for t in titles)
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
+    except OSError:
+        return []
+    return [int(c) for c in text.split()]
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads the process tree from /proc (Linux)")
+def test_ctrl_c_stops_a_study_with_two_workers_at_once(tmp_path: Path) -> None:
+    """SIGINT to the study's process group (a terminal's Ctrl-C) while two workers compute:
+    the command ends within 10 s with one line and exit code 130, and no process of it is left
+    (issue 31: it printed two tracebacks and hung in the pool's shutdown for minutes)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    cmd = [sys.executable, "-m", "contgrasp_core.cli", "holding-study", "--object", "ellipse", "--psi-steps", "8",
+           "--d-steps", "2", "--nodes", "31", "--executor", "processes", "--workers", "2", "--out", str(tmp_path / "s.jsonl")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env=dict(os.environ, MPLBACKEND="Agg"))
+    try:
+        end = time.monotonic() + 120
+        while len(_children(proc.pid)) < 2 and proc.poll() is None and time.monotonic() < end:
+            time.sleep(0.1)
+        workers = _children(proc.pid)
+        assert len(workers) >= 2 and proc.poll() is None, (workers, proc.poll())
+        time.sleep(1.0)  # inside the tasks
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=10)
+        assert time.monotonic() - t0 < 10
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err[-2000:]
+    lines = [line for line in err.splitlines() if line.strip() and "%|" not in line and "\r" not in line]
+    assert lines == ["contgrasp holding-study: interrupted"], err[-2000:]
+    time.sleep(0.5)
+    assert not [w for w in workers if Path(f"/proc/{w}").exists() and "zombie" not in Path(f"/proc/{w}/status").read_text()]

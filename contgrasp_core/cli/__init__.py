@@ -190,6 +190,9 @@ def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] | None = 
             text = json.dumps(_to_jsonable(result), allow_nan=False)
         else:
             text = getattr(args, "format_text", _summary)(result)
+    except KeyboardInterrupt:  # Ctrl-C: one line, the shell's code for SIGINT
+        print(f"contgrasp {command}: interrupted", file=sys.stderr)
+        return 130
     except Exception as exc:  # noqa: BLE001 - the CLI turns every failure into one line
         if args.debug:
             raise
