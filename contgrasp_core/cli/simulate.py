@@ -188,7 +188,8 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
         t=arr["t"], x=arr["x"], theta=arr["theta"], rho=arr["rho"], alpha=arr["alpha"], couple=arr["couple"],
         penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=session.settled,
         settle_time=session.settle_time, wall_time=time.perf_counter() - wall0, newton_iterations=session.iterations,
-        final_state=session.state, model=m, gains=gains, config=config)
+        final_state=session.state, model=m, gains=gains, config=config, steps=session.k,
+        integrator_steps=session.k * config.substeps)
 
 
 MAX_NODES = 10_001
