@@ -123,7 +123,10 @@ class McapRecorder(Node):
     """Records raw messages of the selected topics; see the module docstring."""
 
     def __init__(self, **node_kwargs: Any) -> None:
-        super().__init__("mcap_recorder", **node_kwargs)
+        # (no /rosout: the recorder's last words, the closed file, come after SIGINT has shut the
+        # context down, and rcl would print that it cannot publish them there; they go to the
+        # console and the log file as before)
+        super().__init__("mcap_recorder", **{"enable_rosout": False, **node_kwargs})
         out = declare(self, "output", "", "bag folder, or .mcap file with layout 'file' ('' = bags/run_<time>)", read_only=True)
         layout = declare(self, "layout", "folder", f"one of {LAYOUTS}", read_only=True)
         compression = declare(self, "compression", "zstd", f"chunk compression, one of {tuple(COMPRESSIONS)}", read_only=True)
