@@ -482,7 +482,10 @@ class FinishPolicy:
             values = {kv.key: kv.value for kv in st.values}
             state = values.get("state")
             if state in ("finished", "failed"):
-                detail = f"at t = {values.get('sim_time_s', '?')} s"
+                try:  # (the simulator's own wording: 4 significant digits, not the status text's 17)
+                    detail = f"at t = {float(values['sim_time_s']):.4g} s"
+                except (KeyError, ValueError):
+                    detail = "(its simulated time unknown)"
                 self.done(state == "failed", f"the simulator's run {state} {detail}")
             elif state == "running":
                 self._ended = False
