@@ -21,6 +21,7 @@ import os
 import random
 import sys
 import tempfile
+import traceback
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -137,7 +138,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     An error of the launcher itself is one line on stderr, ``contgrasp-launch: error: ...``:
     exit code 2 for bad usage or input (argparse, :class:`~contgrasp_core.errors.InputError`),
     1 otherwise (:class:`~contgrasp_core.errors.RunFailure`, any other exception); ``--debug``
-    shows the traceback."""
+    shows the traceback, with the same code."""
     args = _parser().parse_args(argv)
     events: EventWriter | None = None
     try:
@@ -149,8 +150,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback (--debug shows it)
         if events is not None:
             events("finished", exit_code=exit_code(exc), error=one_line(exc) or type(exc).__name__)
-        if args.debug:
-            raise
+        if args.debug:  # the whole traceback, and the same exit code as without --debug
+            traceback.print_exc()
+            return exit_code(exc)
         return report("contgrasp-launch", exc)
     finally:
         if events is not None:

@@ -250,7 +250,7 @@ def test_replay_of_a_type_that_is_not_installed_exits_1(tmp_path: Path) -> None:
 def test_core_main_maps_the_family_to_the_exit_code(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
                                                     exc: Exception, code: int) -> None:
     """contgrasp_core.cli.main: a RunFailure (or any other exception) raised inside a
-    subcommand exits 1, an InputError 2; one line; --debug re-raises."""
+    subcommand exits 1, an InputError 2; one line; --debug prints the traceback, same code."""
     from contgrasp_core import cli
     from contgrasp_core.cli import kinematics as cli_kinematics
 
@@ -263,8 +263,9 @@ def test_core_main_maps_the_family_to_the_exit_code(monkeypatch: pytest.MonkeyPa
     err = capsys.readouterr().err
     prefix = "" if isinstance(exc, ContgraspError) else f"{type(exc).__name__}: "
     assert err == f"contgrasp kinematics: error: {prefix}{exc}\n"
-    with pytest.raises(type(exc)):
-        cli.main(["kinematics", "--debug"])
+    assert cli.main(["kinematics", "--debug"]) == code  # (issue 31: an input error exited 1 with --debug)
+    err = capsys.readouterr().err
+    assert err.startswith("Traceback (most recent call last):") and f"{type(exc).__name__}: {exc}" in err
 
 
 # ----------------------------------------------------------------------------- contgrasp-launch

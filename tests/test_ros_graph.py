@@ -172,7 +172,7 @@ def test_launcher_keeps_running_when_the_recorder_cannot_write(tmp_path: Path) -
                                                     (InvalidParameterError("n_elements must be >= 2"), 2, "error: ")])
 def test_launcher_turns_unexpected_errors_into_one_line(monkeypatch, capsys, exc, code, prefix) -> None:  # type: ignore[no-untyped-def]
     """An exception out of the graph run is one line on stderr (exit 1, or 2 for bad input);
-    --debug shows the traceback instead."""
+    --debug shows the traceback instead, with the same code."""
     import contgrasp_ros.graph_run
     from contgrasp_ros import launcher
 
@@ -185,8 +185,8 @@ def test_launcher_turns_unexpected_errors_into_one_line(monkeypatch, capsys, exc
     assert launcher.main(["--no-record", "--domain-id", str(fresh_domain_id())]) == code
     err = [line for line in capsys.readouterr().err.strip().splitlines() if not line.startswith("[launcher] ")]
     assert err == [f"contgrasp-launch: {prefix}{' | '.join(str(exc).splitlines())}"]
-    with pytest.raises(type(exc)):
-        launcher.main(["--no-record", "--debug"])
+    assert launcher.main(["--no-record", "--debug", "--domain-id", str(fresh_domain_id())]) == code
+    assert "Traceback (most recent call last):" in capsys.readouterr().err
 
 
 def test_node_processes_get_the_discovery_profile_and_the_launcher_keeps_its_environment(monkeypatch, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]

@@ -5,7 +5,7 @@ stdout (keys documented in docs/cli.md). Errors become one line on stderr,
 ``contgrasp COMMAND: error: MESSAGE``: exit code 2 for bad usage or input (argparse errors,
 :class:`~contgrasp_core.errors.InputError`), 1 for a failed run
 (:class:`~contgrasp_core.errors.RunFailure`, any other exception); ``--debug`` shows the
-traceback instead. Other packages add subcommands through the ``contgrasp.cli`` entry point
+whole traceback instead, with the same exit code. Other packages add subcommands through the ``contgrasp.cli`` entry point
 group (the ROS layer's recordings: ``bag``, ``replay``, ``analyze``); this package never imports
 them by name. ``python -m contgrasp_core.cli`` is the same command.
 """
@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import traceback
 from collections.abc import Callable, Sequence
 from importlib.metadata import entry_points
 from typing import Any, NoReturn
@@ -194,8 +195,9 @@ def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] | None = 
         print(f"contgrasp {command}: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - the CLI turns every failure into one line
-        if args.debug:
-            raise
+        if args.debug:  # the whole traceback, and the same exit code as without --debug
+            traceback.print_exc()
+            return exit_code(exc)
         result = getattr(exc, "result", None)  # a failed check that has a result: print it too
         if isinstance(result, dict):
             print(json.dumps(_to_jsonable(result), allow_nan=False) if args.json else getattr(args, "format_text", _summary)(result))
