@@ -70,3 +70,19 @@ def test_argparse_usage_error_is_exit_2() -> None:
     proc = run_cli("kinematics", "--nodes", "many")
     assert proc.returncode == 2
     assert "invalid int value" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("header", ["", "s,kappa\n", "# the profile\ns,kappa\n"])
+def test_a_curvature_file_may_have_a_header_as_an_outline_may(tmp_path, header: str) -> None:  # type: ignore[no-untyped-def]
+    """(issue 31: an ``s,kappa`` header was refused while outline files take one)"""
+    from contgrasp_core.boundary import circle
+    from contgrasp_core.cli.kinematics import curvature_profile
+    from contgrasp_core.errors import InvalidParameterError
+
+    csv = tmp_path / "kappa.csv"
+    csv.write_text(header + "\n".join(f"{s:.3f},{0.5 + s:.3f}" for s in np.linspace(0.0, 2.0, 21)))
+    s = np.linspace(0.0, 2.0, 9)
+    np.testing.assert_allclose(curvature_profile(str(csv), circle(1.0), s, 0.5, 0.0), 0.5 + s)
+    csv.write_text("s,kappa\n0,1\nnot,numbers\n")  # garbage after the data is still an error
+    with pytest.raises(InvalidParameterError, match="cannot parse curvature file"):
+        curvature_profile(str(csv), circle(1.0), s, 0.5, 0.0)

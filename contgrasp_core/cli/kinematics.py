@@ -30,6 +30,26 @@ __all__ = ["add_parser", "curvature_profile", "run"]
 DEFAULT_PROFILE = "parallel:0.01"
 
 
+
+def _header_lines(path: str) -> int:
+    """How many lines to skip before the numbers: through the first line that is neither a
+    comment nor numbers (a header such as ``s,kappa``, as outline files may have), else none."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for n, line in enumerate(fh, start=1):
+                fields = line.split("#", 1)[0].replace(",", " ").split()
+                if not fields:
+                    continue
+                try:
+                    [float(f) for f in fields]
+                except ValueError:
+                    return n
+                return 0
+    except (OSError, UnicodeDecodeError):
+        return 0  # (np.loadtxt reports it)
+    return 0
+
+
 def curvature_profile(
     spec: str, boundary: Boundary, s: NDArray[np.float64], rho0: float, s_o0: float
 ) -> NDArray[np.float64]:
@@ -63,7 +83,8 @@ def curvature_profile(
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # an empty file is reported below, not warned about
-                data = np.loadtxt(spec, delimiter=None if spec.endswith(".txt") else ",", comments="#", ndmin=2)
+                data = np.loadtxt(spec, delimiter=None if spec.endswith(".txt") else ",", comments="#", ndmin=2,
+                                  skiprows=_header_lines(spec))
         except ValueError as exc:
             raise InvalidParameterError(f"cannot parse curvature file {spec!r}: {exc}") from exc
         except OSError as exc:
