@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import functools
 import os
+import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -600,6 +602,13 @@ class GuardedSpin:
             self.streak = 0
 
 
+def _ignore_stop_signals() -> None:
+    """From here on SIGINT and SIGTERM do nothing (the process is already stopping)."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
+
+
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
     """Init rclpy, build the node, spin until shutdown (SIGINT/SIGTERM) or until the node asks to
     stop (:class:`FinishPolicy`, ``on_finish: exit``), clean up (:func:`run_nodes` of one)."""
@@ -666,6 +675,9 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
         print(f"{label}: error: {one_line(exc)}", file=sys.stderr)
         code = exit_code(exc)
     finally:
+        # A second SIGINT must not cut the clean-up short (a recorder finalising its file): a
+        # terminal's Ctrl-C reaches every process and ros2 launch forwards one more to each child.
+        _ignore_stop_signals()
         for node in nodes:
             node.destroy_node()
             code = max(code, int(getattr(node, "exit_code", 0)))  # a failure during the node's own clean-up

@@ -619,6 +619,34 @@ def test_replay_window_and_loop(tmp_path: Path) -> None:
     assert bad.returncode == 2 and "rate" in bad.stderr
 
 
+def test_recorder_finalises_through_repeated_ctrl_c(tmp_path: Path) -> None:
+    """Ctrl-C under ros2 launch reaches a node twice (the terminal's and the one launch forwards):
+    later SIGINTs during the clean-up are ignored, so the node exits 0 with no traceback and the
+    recording is complete (before: a KeyboardInterrupt traceback mid-clean-up, exit -2)."""
+    env = ros_env(fresh_domain_id())
+    rec = _recorder(tmp_path / "bag", env)
+    pub = subprocess.Popen([sys.executable, "-c", PUBLISHER, "300", "-1"], env=env, stdout=subprocess.PIPE, text=True)
+    try:
+        assert pub.stdout is not None
+        while int(pub.stdout.readline().split()[0]) < 299:
+            pass
+        time.sleep(0.5)
+        for _ in range(20):  # a burst that covers the recorder's clean-up
+            if rec.poll() is not None:
+                break
+            rec.send_signal(signal.SIGINT)
+            time.sleep(0.01)
+        out, _ = rec.communicate(timeout=30)
+    finally:
+        for p in (pub, rec):
+            if p.poll() is None:
+                p.kill()
+                p.wait(timeout=30)
+    assert rec.returncode == 0 and "Traceback" not in out and "KeyboardInterrupt" not in out, out[-3000:]
+    steps = [m.step for _, m in iter_decoded(open_recording(tmp_path / "bag"), ["/contgrasp/rod_state"])]
+    assert steps == list(range(300))
+
+
 def test_recorder_finalises_on_sigterm(tmp_path: Path) -> None:
     """(With a split every 0.2 s: the messages span several files, none lost at the splits.)"""
     env = ros_env(fresh_domain_id())
