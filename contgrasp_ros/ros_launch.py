@@ -8,14 +8,16 @@ workspace").
 
 from __future__ import annotations
 
+import shutil
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from launch import LaunchContext, LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import DeclareLaunchArgument, OpaqueFunction, RegisterEventHandler
 from launch.conditions import IfCondition
+from launch.event_handlers import OnShutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
@@ -62,9 +64,9 @@ def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
     ]
 
 
-def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node]:
+def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node | RegisterEventHandler]:
     """The graph's node processes with the launch arguments applied (the launcher's rules:
-    an override file beside the scenario's parameter file)."""
+    an override file beside the scenario's parameter file, removed when the launch ends)."""
     arg = {name: LaunchConfiguration(name).perform(context) for name in
            ("params_file", "object", "outline", "lockstep", "duration", "compose", "record", "bag", "on_finish")}
     params_file = Path(arg["params_file"]) if arg["params_file"] else default_params_file()
@@ -89,12 +91,17 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node]:
 
         overrides[RECORDER] = {**recorder_params({"output": arg["bag"] or default_output()}), "on_finish": arg["on_finish"]}
     compose = compose_groups([",".join(n for n in COMPOSABLE if n in nodes)], nodes) if arg["compose"] == "true" else []
-    override_file = parameter_file(Path(tempfile.mkdtemp(prefix="contgrasp_launch_")) / "overrides.yaml", overrides)
-    return [
+    folder = Path(tempfile.mkdtemp(prefix="contgrasp_launch_"))
+    override_file = parameter_file(folder / "overrides.yaml", overrides)
+    remove = RegisterEventHandler(OnShutdown(on_shutdown=lambda *_: shutil.rmtree(folder, ignore_errors=True)))
+    return [remove, *(
+        # (sigterm_timeout: a node's clean-up takes seconds on a busy machine, the recorder's
+        # finalises the bag; launch's 5 s default then escalated to SIGTERM)
         Node(package=PACKAGE, executable=proc.executable, arguments=list(proc.arguments), output="screen",
-             parameters=[str(override_file)] if proc.name == RECORDER else [str(params_file), str(override_file)])
+             parameters=[str(override_file)] if proc.name == RECORDER else [str(params_file), str(override_file)],
+             sigterm_timeout="20")
         for proc in processes(nodes, compose, record=record)
-    ]
+    )]
 
 
 def graph_description(nodes: Sequence[str], *, lockstep: bool) -> LaunchDescription:
