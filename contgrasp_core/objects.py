@@ -86,7 +86,8 @@ class ObjectSpec:
 
     def __post_init__(self) -> None:
         if self.shape != OUTLINE and self.shape not in SHAPES:
-            raise InvalidParameterError(f"unknown object {self.shape!r}; use {_SYNTAX} or an outline file (--outline FILE.csv)")
+            raise InvalidParameterError(f"unknown object {self.shape!r}; use {_SYNTAX}, or an outline "
+                                        "(a CSV file of x, y rows: --outline FILE.csv, or outline:=FILE.csv in a launch file)")
         object.__setattr__(self, "params", tuple(float(v) for v in self.params))
         object.__setattr__(self, "center", _pair("object centre", self.center))
         object.__setattr__(self, "angle", float(self.angle))
@@ -117,7 +118,8 @@ class ObjectSpec:
             raise InvalidParameterError(f"--object must be NAME[:PARAMS], got {text!r}")
         name, _, arg = text.strip().partition(":")
         if name == OUTLINE:
-            raise InvalidParameterError("an outline is given as a file: --outline FILE.csv")
+            raise InvalidParameterError("an outline is given as a CSV file of x, y rows, not by name: --outline FILE.csv "
+                                        "(outline:=FILE.csv in a launch file)")
         if name not in SHAPES:
             cls(name)  # raises the unknown-object error
         try:
