@@ -15,12 +15,16 @@ sampled loop, :func:`contgrasp_core.rod.session.drive`):
    over the element centres with the penalty force ``f_i = h k max(pen_i, 0)`` in place of the
    arclength weights (:func:`force_weighted_quality`).
 2. **Release.** The object becomes a rigid body on a soft support (:class:`HoldSettings`
-   ``support``: a spring-damper to its pose in the grasp, mass and inertia from ``areal_density``),
-   friction ``mu`` turns stick-slip, and the loop runs on for ``release_time``: the object comes
-   to rest where grasp and support hold it (``released_displacement``). The support stands for
-   what keeps a real object in place while it is grasped (a table, a fixture): released entirely
-   free, the paper's settled grasp pushes the object out (the law presses the arm onto it and
-   nothing balances the net force; docs/holding.md).
+   ``support``: a spring-damper to its pose in the grasp, mass and inertia from ``areal_density``;
+   ``support = 0``: entirely free), friction ``mu`` turns stick-slip, and the loop runs on for
+   ``release_time``: the object comes to rest where grasp and support hold it
+   (``released_displacement``). The support stands for what keeps a real object in place while
+   it is grasped (a table, a fixture): released entirely free, the paper's settled grasp pushes
+   the object out (the law presses the arm onto it and nothing balances the net force;
+   docs/holding.md). The grasp holds when, at the end of the release, the object has not
+   escaped (step 4's thresholds: in contact, moved less than ``escape_distance``, turned less
+   than ``escape_angle``); a grasp that does not hold is a result (``held`` False, no
+   stiffness, capacity 0 in every direction).
 3. **Stiffness.** From the released state, wrench steps of ``+-probe`` along each axis (force x,
    force y, torque), each held ``hold_time``: the compliance ``C[:, j] = (q+ - q-) / (2 probe_j)``
    (the half difference cancels the released grasp's slow drift, ~1e-3 rad/s without load),
@@ -40,6 +44,7 @@ sampled loop, :func:`contgrasp_core.rod.session.drive`):
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
@@ -52,7 +57,7 @@ from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.quality import GraspQuality, quality_of_state
 from contgrasp_core.rod.body import BodyState, ObjectDynamics, mass_properties
 from contgrasp_core.rod.integrator import RodState
-from contgrasp_core.rod.session import LoopSession, Observation, drive, run_sampled
+from contgrasp_core.rod.session import LoopSession, Observation, drive, run_sampled, sensed_shape
 from contgrasp_core.scenario import Scenario
 
 __all__ = ["HoldSettings", "Capacity", "HoldResult", "HoldExperiment", "GraspFailure", "measure_holding",
@@ -70,7 +75,9 @@ class HoldSettings:
     wrench (fx, fy, torque) and ``hold_time``, the capacity ramp's ``rate`` (N/s in the scaled
     wrench space) and ``ramp_time``, the number of force ``directions`` (plus the two pure
     torques), the escape thresholds (``escape_distance`` in object radii), and how long the
-    grasp may go without touching the object (``contact_wait``, s) before it counts as failed."""
+    grasp may go without touching the object (``contact_wait``, s; the holding law's cage counts
+    as touching within its clearance and band) before it counts as failed. ``support = 0``
+    releases the object entirely free."""
 
     areal_density: float = 10.0
     support: float = 2.0
@@ -89,7 +96,9 @@ class HoldSettings:
     def dynamics(self, scale: float, area: float, polar: float) -> ObjectDynamics:
         """The released object on the support spring-damper (``scale`` the object's radius, m;
         ``area`` and ``polar`` moment of its region, m^2 and m^4, for mass, inertia and the
-        damping ratio)."""
+        damping ratio); entirely free when ``support`` is 0."""
+        if self.support == 0:
+            return ObjectDynamics(mode="free", areal_density=self.areal_density)
         k = np.array([self.support, self.support, self.support * scale**2])
         inertia = self.areal_density * np.array([area, area, polar])
         c = 2.0 * self.support_damping_ratio * np.sqrt(k * inertia)
@@ -99,8 +108,9 @@ class HoldSettings:
         for name in ("areal_density", "support", "support_damping_ratio", "mu", "release_time", "hold_time", "rate",
                      "ramp_time", "escape_distance", "escape_angle", "contact_wait"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise InvalidParameterError(f"hold {name} must be a finite number > 0, got {v!r}")
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and (v >= 0 if name == "support" else v > 0)):
+                raise InvalidParameterError(f"hold {name} must be a finite number {'>=' if name == 'support' else '>'} 0, "
+                                            f"got {v!r}")
         p = np.asarray(self.probe, dtype=float)
         if p.shape != (3,) or not np.all(np.isfinite(p)) or np.any(p <= 0):
             raise InvalidParameterError(f"hold probe must be three finite numbers > 0 (fx, fy, torque), got {self.probe!r}")
@@ -123,11 +133,13 @@ class Capacity:
 
 @dataclass(frozen=True)
 class HoldResult:
-    """A grasp's measured holding (module docstring)."""
+    """A grasp's measured holding (module docstring): ``held`` whether the released object stayed
+    (``release_reason`` why not, '' if it did; then ``stiffness`` and ``stiffness_eigenvalues``
+    are None and every capacity is 0)."""
 
-    stiffness: Array
+    stiffness: Array | None
     support: Array
-    stiffness_eigenvalues: Array
+    stiffness_eigenvalues: Array | None
     capacity: list[Capacity]
     Q1: float
     Q2: float
@@ -136,6 +148,8 @@ class HoldResult:
     scale: float
     released_displacement: Array
     settle_time: float | None
+    held: bool = True
+    release_reason: str = ""
 
     @property
     def capacity_min(self) -> float:
@@ -145,9 +159,11 @@ class HoldResult:
     def to_dict(self) -> dict[str, Any]:
         """The JSON-able result (``contgrasp hold --json``)."""
         return {
-            "stiffness": self.stiffness.tolist(),
+            "held": self.held,
+            "release_reason": self.release_reason,
+            "stiffness": None if self.stiffness is None else self.stiffness.tolist(),
             "support_stiffness": self.support.tolist(),
-            "stiffness_eigenvalues": self.stiffness_eigenvalues.tolist(),
+            "stiffness_eigenvalues": None if self.stiffness_eigenvalues is None else self.stiffness_eigenvalues.tolist(),
             "capacity": [{"direction": list(c.direction), "wrench": list(c.wrench), "magnitude": c.magnitude,
                           "held": c.held, "reason": c.reason} for c in self.capacity],
             "capacity_min": self.capacity_min,
@@ -219,8 +235,12 @@ class HoldExperiment:
                             dynamics=self.dynamics)
         self.system = self.held.system()
         self.escape = replace(settings, escape_distance=settings.escape_distance * self.scale)
+        self.law = scenario.controller()
+        h = scenario.hold_law
+        self.reach = max(scenario.sensing.contact_tolerance, h.clearance + h.band if scenario.law == "hold" else 0.0)
         self.grasped: LoopSession | None = None
         self.released: RodState | None = None
+        self.release_reason = ""
 
     def grasp(self) -> tuple[GraspQuality, GraspQuality]:
         """The scenario's closed loop with the object fixed, until settled; Q1-Q3 of its contact,
@@ -230,11 +250,11 @@ class HoldExperiment:
         touched = [0.0]  # when a node last touched the object (the start counts as a touch)
 
         def out_of_reach(o: Observation, c: ContactState) -> bool:
-            if c.in_contact.any():
+            if (c.delta >= -self.reach).any():
                 touched[0] = o.t
             return o.t - touched[0] >= wait
 
-        grasp = run_sampled(self.scenario, until=out_of_reach)
+        grasp = run_sampled(self.scenario, until=out_of_reach, law=self.law)
         obs = grasp.observe()
         contact = sense(obs.shape, self.boundary, obs.radius, tol=tol)
         if not grasp.settled:
@@ -249,15 +269,19 @@ class HoldExperiment:
                 force_weighted_quality(self.scenario, grasp.state.theta))
 
     def release(self) -> Array:
-        """Release the grasped object onto its support; its displacement once at rest (3,)."""
+        """Release the grasped object onto its support; its displacement at the end of the
+        release (3,). ``release_reason`` says why the grasp does not hold it ('' if it does: the
+        object has not escaped, :func:`_escape`)."""
         if self.grasped is None:
             self.grasp()
         assert self.grasped is not None
         st = self.grasped.state
-        released, _, failed = self.load(RodState(0.0, st.theta, st.omega, body=BodyState.rest()),
-                                        self.settings.release_time, lambda t: np.zeros(3))
-        if failed or released.body is None:
-            raise RunFailure(f"the released object is not held: {failed}")
+        released, last, failed = self.load(RodState(0.0, st.theta, st.omega, body=BodyState.rest()),
+                                           self.settings.release_time, lambda t: np.zeros(3))
+        assert released.body is not None  # (the released object is a body)
+        contact = sense(sensed_shape(self.system, last), self.boundary, last.radius,
+                        tol=self.scenario.sensing.contact_tolerance)
+        self.release_reason = failed or _escape(last, contact, np.zeros(3), self.escape)
         self.released = released
         return released.body.q
 
@@ -265,6 +289,8 @@ class HoldExperiment:
         if self.released is None:
             self.release()
         assert self.released is not None
+        if self.release_reason:
+            raise RunFailure(f"the released object is not held ({self.release_reason}): nothing to load")
         return self.released
 
     def load(self, state: RodState, duration: float, wrench: Callable[[float], Array],
@@ -274,8 +300,8 @@ class HoldExperiment:
         the simulation failed ('' if it did not: a tear-out that breaks the run is a result)."""
         loop = replace(self.held.loop, duration=duration, min_time=duration + 1.0)  # (never "settled")
         session = LoopSession(self.system, loop, replace(state, t=0.0))
-        try:
-            last = drive(session, self.held, wrench, until)
+        try:  # (each load goes on from the grasp's law: a copy of its state at the end of the grasp)
+            last = drive(session, self.held, wrench, until, copy.deepcopy(self.law))
         except RunFailure as exc:
             return session.state, session.observe(), f"simulation failed ({exc})"
         return session.state, last, ""
@@ -331,6 +357,16 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
     quality, forced = exp.grasp()
     say("release")
     q0 = exp.release()
+    assert exp.grasped is not None
+    if exp.release_reason:
+        return HoldResult(stiffness=None, support=np.diag(exp.dynamics.stiffness), stiffness_eigenvalues=None,
+                          capacity=[Capacity(direction=tuple(float(x) for x in d),  # type: ignore[arg-type]
+                                             wrench=(0.0, 0.0, 0.0), magnitude=0.0, held=False,
+                                             reason=f"not held after the release ({exp.release_reason})")
+                                    for d in wrench_directions(settings.directions)],
+                          Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, force_weighted=forced, scale=exp.scale,
+                          released_displacement=q0, settle_time=exp.grasped.settle_time, held=False,
+                          release_reason=exp.release_reason)
     say("stiffness")
     stiffness, _ = exp.stiffness()
     d = np.diag([1.0, 1.0, 1.0 / exp.scale])
@@ -340,7 +376,6 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
     for direction in wrench_directions(settings.directions):
         say(f"capacity along {np.round(direction, 3).tolist()}")
         capacity.append(exp.capacity(direction))
-    assert exp.grasped is not None
     return HoldResult(stiffness=stiffness, support=np.diag(exp.dynamics.stiffness), stiffness_eigenvalues=eig,
                       capacity=capacity, Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, force_weighted=forced,
                       scale=exp.scale,

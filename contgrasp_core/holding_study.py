@@ -137,6 +137,9 @@ def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float]
         out.update(status=f"{type(exc).__name__}: {exc}", outcome=outcome, seconds=time.perf_counter() - t0)
         return out
     d = result.to_dict()
+    if result.stiffness_eigenvalues is None:
+        out.update(status=f"not held: {result.release_reason}", outcome="not held", seconds=time.perf_counter() - t0)
+        return out
     eig = np.asarray(result.stiffness_eigenvalues)
     out.update(status="ok", outcome="held", seconds=time.perf_counter() - t0, Q1=result.Q1, Q2=result.Q2, Q3=result.Q3,
                Q1_force=d["Q1_force"], Q2_force=d["Q2_force"], Q3_force=d["Q3_force"],

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from contgrasp_core.control.gains import FeedbackGains, paper_gains
+from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, PaperLaw
 from contgrasp_core.control.law import CENTIMETRE
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
@@ -88,7 +89,8 @@ class SensingSettings:
 class Scenario:
     """A closed-loop grasp: rod, object (its shape and how it moves: ``dynamics``, fixed by
     default, as in the paper), loop, gains and sensing (SI units); a scripted ``disturbance``
-    on a movable object (None: none)."""
+    on a movable object (None: none); the ``law`` (:data:`~contgrasp_core.control.hold_law.LAWS`:
+    ``paper``, eq. (19), the default, or ``hold``, docs/holding.md (H1)-(H6), with ``hold_law``)."""
 
     rod: RodModel
     object: ObjectSpec
@@ -97,10 +99,15 @@ class Scenario:
     sensing: SensingSettings = field(default_factory=SensingSettings)
     dynamics: ObjectDynamics = field(default_factory=ObjectDynamics)
     disturbance: Disturbance | None = None
+    law: str = "paper"
+    hold_law: HoldLawSettings = field(default_factory=HoldLawSettings)
 
     def __post_init__(self) -> None:
+        if self.law not in LAWS:
+            raise InvalidParameterError(f"unknown law {self.law!r}; the laws are {', '.join(LAWS)}")
         for name, cls in (("rod", RodModel), ("object", ObjectSpec), ("loop", ClosedLoopConfig),
-                          ("gains", GainSettings), ("sensing", SensingSettings), ("dynamics", ObjectDynamics)):
+                          ("gains", GainSettings), ("sensing", SensingSettings), ("dynamics", ObjectDynamics),
+                          ("hold_law", HoldLawSettings)):
             if not isinstance(getattr(self, name), cls):
                 raise InvalidParameterError(f"Scenario.{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
         if self.disturbance is not None and not isinstance(self.disturbance, Disturbance):
@@ -111,6 +118,16 @@ class Scenario:
     def feedback_gains(self) -> FeedbackGains:
         """The gains at the rod's joints (:meth:`GainSettings.gains`)."""
         return self.gains.gains(self.rod, self.object)
+
+    def controller(self) -> Law:
+        """A fresh controller of the scenario's law: the paper's fixed gains
+        (:attr:`feedback_gains`), or the holding law's state at its start (the adaptive gain's
+        object radius as the paper's)."""
+        if self.law == "paper":
+            return PaperLaw(self.feedback_gains)
+        g = self.gains
+        return HoldController(self.rod, self.object.radius if g.object_radius is None else g.object_radius,
+                              self.hold_law, g.length_unit)
 
     def system(self) -> RodSystem:
         """The rod engine of this scenario: the rod, the object's obstacle and, unless the object
@@ -125,7 +142,10 @@ class Scenario:
     # ------------------------------------------------------------------ ROS parameters
     def to_ros_parameters(self) -> dict[str, dict[str, Any]]:
         """Parameters per node, plain types: ``{"/**": rod, "rod_simulator": object + loop, ...}``
-        (the layout of a ROS 2 parameter file; ``/**`` applies to every node)."""
+        (the layout of a ROS 2 parameter file; ``/**`` applies to every node). The graph runs the
+        paper's law only: a scenario with another ``law`` is refused."""
+        if self.law != "paper":
+            raise InvalidParameterError(f"the ROS graph's controller runs the paper's law only, not law {self.law!r}")
         m = self.rod
         rod = {name: _plain(getattr(m, name)) for name in ROD_PARAMETERS if name not in ("base_x", "base_y")}
         rod["base_x"], rod["base_y"] = float(m.base_position[0]), float(m.base_position[1])

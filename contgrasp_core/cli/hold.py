@@ -1,9 +1,11 @@
-"""``contgrasp hold``: how firmly the paper's closed loop holds the object (beyond the paper).
+"""``contgrasp hold``: how firmly a closed loop holds the object (beyond the paper).
 
-Grasps the object with the scenario's closed loop (object fixed, as in the paper), releases it
-onto a soft support with stick-slip friction, and measures the grasp stiffness matrix K and the
-holding capacity per wrench direction (:func:`contgrasp_core.holding.measure_holding`), beside
-Q1-Q3 of the settled contact (paper Sec. IV).
+Grasps the object with the scenario's closed loop (object fixed, as in the paper; ``--law``
+the paper's eq. (19) or the holding law of docs/holding.md), releases it onto a soft support
+(``--support 0``: entirely free) with stick-slip friction, and measures the grasp stiffness
+matrix K and the holding capacity per wrench direction
+(:func:`contgrasp_core.holding.measure_holding`), beside Q1-Q3 of the settled contact (paper
+Sec. IV). A grasp that lets the released object go is reported as not held (a result).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from ..holding import HoldSettings, measure_holding
 from ..objects import ROD_SCALE
 from ..scenario import PAPER
 from .common import add_object_arguments, object_from_args
+from .simulate import add_law_arguments, hold_law_from_args
 
 __all__ = ["add_parser", "run", "format_text"]
 
@@ -36,7 +39,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
                    help="the arm's base position (m) and heading (rad) (default: the scenario's, 0 0 0)")
     p.add_argument("--mu", type=float, default=d.mu, help=f"friction coefficient, stick-slip (default {d.mu:g})")
     p.add_argument("--support", type=float, default=d.support,
-                   help=f"stiffness of the released object's support, N/m (default {d.support:g})")
+                   help=f"stiffness of the released object's support, N/m; 0: released entirely free (default {d.support:g})")
     p.add_argument("--density", type=float, default=d.areal_density,
                    help=f"the object's areal density, kg/m^2 (default {d.areal_density:g})")
     p.add_argument("--directions", type=int, default=d.directions,
@@ -47,15 +50,23 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
                    help=f"escaped beyond this displacement, in object radii (default {d.escape_distance:g})")
     p.add_argument("--escape-angle", type=float, default=d.escape_angle,
                    help=f"escaped beyond this rotation, rad (default {d.escape_angle:g})")
+    add_law_arguments(p)
     p.set_defaults(func=run, format_text=format_text)
 
 
 def format_text(out: dict[str, Any]) -> str:
-    """The text result: K's eigenvalues, the capacity per direction and its minimum, Q1-Q3."""
+    """The text result: K's eigenvalues, the capacity per direction and its minimum, Q1-Q3 (or
+    why the released object was not held)."""
+    moved = (f"{1e3 * float(np.hypot(*out['released_displacement'][:2])):.2f} mm / "
+             f"{out['released_displacement'][2]:.4f} rad away")
+    head = [f"object: {out['object']}, base {out['base']}, law {out['law']}, support {out['support']:g} N/m"]
+    tail = [f"Q1 {out['Q1']:.4g}, Q2 {out['Q2']:.4g}, Q3 {out['Q3']:.4g}", f"wall time {out['wall_time_s']:.1f} s"]
+    if not out["held"]:
+        return "\n".join([*head, f"grasp settled at {out['settle_time_s']:.3f} s; not holding: the released object "
+                           f"got away ({out['release_reason']}), {moved}", "capacity_min 0 N", *tail])
     k = np.asarray(out["stiffness"])
-    lines = [f"object: {out['object']}, base {out['base']}",
-             f"grasp settled at {out['settle_time_s']:.3f} s; released object came to rest "
-             f"{1e3 * float(np.hypot(*out['released_displacement'][:2])):.2f} mm / {out['released_displacement'][2]:.4f} rad away",
+    lines = [*head,
+             f"grasp settled at {out['settle_time_s']:.3f} s; released object came to rest {moved}",
              "grasp stiffness K (fx, fy, torque by x, y, rotation):",
              *("  " + "  ".join(f"{v:11.4g}" for v in row) for row in k),
              "eigenvalues of its symmetric part, torque and rotation scaled by the object radius (N/m): "
@@ -65,9 +76,7 @@ def format_text(out: dict[str, Any]) -> str:
         state = "held to the ramp's end" if c["held"] else c["reason"]
         lines.append(f"  ({c['direction'][0]:+.2f}, {c['direction'][1]:+.2f}, {c['direction'][2]:+.0f}): "
                      f"{c['magnitude']:.4g} ({state})")
-    lines += [f"capacity_min {out['capacity_min']:.4g} N",
-              f"Q1 {out['Q1']:.4g}, Q2 {out['Q2']:.4g}, Q3 {out['Q3']:.4g}",
-              f"wall time {out['wall_time_s']:.1f} s"]
+    lines += [f"capacity_min {out['capacity_min']:.4g} N", *tail]
     return "\n".join(lines)
 
 
@@ -84,9 +93,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     settings = HoldSettings(areal_density=args.density, support=args.support, mu=args.mu, rate=args.rate,
                             ramp_time=args.ramp_time, directions=args.directions,
                             escape_distance=args.escape_distance, escape_angle=args.escape_angle)
-    scenario = replace(PAPER.with_object(obj), rod=rod)
+    scenario = replace(PAPER.with_object(obj), rod=rod, law=args.law, hold_law=hold_law_from_args(args))
     t0 = time.perf_counter()
     progress = None if args.json else (lambda phase: print(f"contgrasp hold: {phase}", file=sys.stderr, flush=True))
     result = measure_holding(scenario, settings, progress)
     return {"object": obj.text(), "base": [float(rod.base_position[0]), float(rod.base_position[1]), float(rod.base_angle)],
-            **result.to_dict(), "wall_time_s": time.perf_counter() - t0}
+            "law": args.law, "support": settings.support, **result.to_dict(), "wall_time_s": time.perf_counter() - t0}

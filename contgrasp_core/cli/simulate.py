@@ -16,6 +16,7 @@ import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.control import FeedbackGains, paper_gains
+from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.rod import Obstacle, RodModel, RodSystem
 from contgrasp_core.rod.body import MODES, ObjectDynamics
@@ -26,7 +27,7 @@ from contgrasp_core.tracking import contact_stats
 
 from .common import add_object_arguments, object_from_args
 
-__all__ = ["add_parser", "run", "summarize", "loop_config"]
+__all__ = ["add_parser", "run", "summarize", "loop_config", "add_law_arguments", "hold_law_from_args"]
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = None) -> argparse.ArgumentParser:
@@ -64,10 +65,37 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
                    help="spring to the start pose: N/m, N/m, N m/rad (spring mode; default 50 50 0.05)")
     g.add_argument("--object-damping", type=float, nargs=3, metavar=("CX", "CY", "CPSI"), default=None,
                    help="damper to the start pose: N s/m, N s/m, N m s/rad (spring mode; default 1 1 0.001)")
+    p.add_argument("--friction", type=float, default=PAPER.rod.friction,
+                   help="Coulomb friction coefficient of the contact, stick-slip (docs/rod.md; default: the "
+                   f"paper's frictionless contact, {PAPER.rod.friction:g})")
+    add_law_arguments(p)
     p.add_argument("--plot", metavar="FILE", help="write the paper's Fig. 4 (PNG/PDF/SVG)")
     p.add_argument("--animate", metavar="FILE.gif", help="write an animation of the grasp")
     p.set_defaults(func=run)
     return p
+
+
+def add_law_arguments(p: argparse.ArgumentParser) -> None:
+    """``--law`` and the holding law's parameters (docs/holding.md (H1)-(H6))."""
+    d = HoldLawSettings()
+    g = p.add_argument_group("the closed loop's law (docs/holding.md, 'A law that holds')")
+    g.add_argument("--law", choices=LAWS, default="paper",
+                   help="paper: eq. (19) with rho_d = r (default); hold: cage at a clearance, close, hold the "
+                   "shape and squeeze (beyond the paper)")
+    g.add_argument("--clearance", type=float, default=d.clearance,
+                   help=f"hold: the cage's gap to the object, m (default {d.clearance:g})")
+    g.add_argument("--close-gap", type=float, default=d.close_gap,
+                   help=f"hold: the gap at which the shape is latched, m, below the clearance (default {d.close_gap:g})")
+    g.add_argument("--squeeze", type=float, default=d.squeeze,
+                   help=f"hold: how deep the held shape presses into the object, m (default {d.squeeze:g})")
+    g.add_argument("--hold-gain", type=float, default=d.stiffness_gain,
+                   help=f"hold: the held shape's stiffness gain G >= 0 (default {d.stiffness_gain:g})")
+
+
+def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
+    """The holding law's parameters of the command line (refused with an input error when out of range)."""
+    return HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
+                           stiffness_gain=args.hold_gain)
 
 
 def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_tolerance, hold: str = "zoh") -> dict[str, Any]:
@@ -152,14 +180,16 @@ def _tip_rate(model: RodModel) -> float:
     return float(np.sqrt(ei / (model.density * np.pi * r**2)) / model.h**2)
 
 
-def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig) -> ClosedLoopResult:
+def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig,
+                    law: Law | None = None) -> ClosedLoopResult:
     """The sampled loop with the couple held to first order in the state between samples
     (:class:`~contgrasp_core.control.HeldExpansion`, stepped by :class:`~contgrasp_core.rod.session.LoopSession`
-    exactly as the ROS graph steps it), recorded like :func:`run_closed_loop`."""
+    exactly as the ROS graph steps it), recorded like :func:`run_closed_loop`; with a ``law``
+    its command each period (the holding law's hold applied exactly)."""
     import time
 
     from contgrasp_core.contact import sense
-    from contgrasp_core.control import feedback_at_joints
+    from contgrasp_core.control import FeedbackExpansion, feedback_at_joints
     from contgrasp_core.rod import chain
     from contgrasp_core.rod.session import LoopSession
 
@@ -169,15 +199,23 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     rec: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
     wall0 = time.perf_counter()
     session = LoopSession(system, config)
+    period = config.control_period
     while True:
-        obs = session.observe()
+        obs = session.observe(True if law is None else law.holding)
         sn = sense(obs.shape, obstacle, obs.radius)
-        expansion = feedback_at_joints(m, gains, sn.rho, sn.alpha)
+        command = gains if law is None else law.command(sn.rho, sn.alpha, obs.theta, obs.kappa[:-1], period)
+        expansion: FeedbackExpansion | ShapeHold
+        if isinstance(command, ShapeHold):
+            expansion = command
+            couple = command.couple + command.couple_and_jacobian(session.state.theta, jacobian=False)[0]
+        else:
+            expansion = feedback_at_joints(m, command, sn.rho, sn.alpha)
+            couple = expansion.u
         if session.k % rec_every == 0 or session.finished:
             pen_c = m.r_centres - obstacle.project(chain.centres(m, session.state.theta)).signed_distance
             ratio = max(float((sn.delta / obs.radius).max()), float((pen_c / m.r_centres).max()), 0.0)
             for key, val in (("t", obs.t), ("x", obs.x), ("theta", obs.theta), ("rho", sn.rho), ("alpha", sn.alpha),
-                             ("couple", expansion.u), ("pen", obs.penetration), ("ratio", ratio),
+                             ("couple", couple), ("pen", obs.penetration), ("ratio", ratio),
                              ("speed", obs.max_speed)):
                 rec[key].append(val)
         if session.finished:
@@ -242,8 +280,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         _check_animation_path(args.animate)
     obj = object_from_args(args, ROD_SCALE)
     boundary, r_obj = obj.boundary(), obj.radius
-    overrides = {} if args.damping is None else {"damping": args.damping}
+    if not (np.isfinite(args.friction) and args.friction >= 0.0):
+        raise InvalidParameterError(f"--friction must be a finite number >= 0, got {args.friction}")
+    overrides: dict[str, Any] = {} if args.damping is None else {"damping": args.damping}
+    if args.friction > 0:
+        overrides.update(friction=args.friction, friction_model="stick")
     model = replace(PAPER.rod, n_elements=args.nodes - 1, **overrides)
+    hold_law = hold_law_from_args(args)
     if args.hold != "zero-order" and args.control_period is None:
         raise InvalidParameterError(f"--hold {args.hold} holds a sampled couple: give --control-period too")
     cfg = loop_config(args)
@@ -252,12 +295,15 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         print(f"contgrasp simulate: {warning}", file=sys.stderr)
     system = RodSystem(model, Obstacle(boundary), body=object_dynamics(args).body(boundary))
     gains = paper_gains(model, r_obj)
+    law = HoldController(model, r_obj, hold_law) if args.law == "hold" else None
     if args.hold == "first-order":
-        res = run_first_order(system, gains, cfg)
+        res = run_first_order(system, gains, cfg, law)
     else:
-        res = run_closed_loop(system, gains, cfg)
+        res = run_closed_loop(system, gains, cfg, law=law)
     out = summarize(res, args.contact_tol, "zoh" if args.hold == "zero-order" else "first-order hold")
-    out["object_mode"] = args.object_mode
+    out.update(object_mode=args.object_mode, law=args.law, friction=model.friction)
+    if law is not None:
+        out["law_phase"] = law.phase
     if args.plot:
         plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" else None)
     if args.animate:

@@ -34,6 +34,7 @@ from contgrasp_core.rod import chain
 from contgrasp_core.rod.model import RodModel
 
 if TYPE_CHECKING:  # (imported by the runner: the scenario's ClosedLoopConfig comes without the engine)
+    from contgrasp_core.control.hold_law import Law
     from contgrasp_core.rod.integrator import RodState, RodSystem
     from contgrasp_core.rod.obstacle import Obstacle
 
@@ -127,16 +128,19 @@ def _speeds(system: RodSystem, st: RodState) -> float:
 
 
 def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig = ClosedLoopConfig(),
-                    state: RodState | None = None) -> ClosedLoopResult:
+                    state: RodState | None = None, law: Law | None = None) -> ClosedLoopResult:
     """Run the feedback loop (eq. (19) on the rod of eq. (17)) from ``state``
-    (default: straight at rest) until settled or ``config.duration``."""
+    (default: straight at rest) until settled or ``config.duration``. With a ``law``
+    (:mod:`contgrasp_core.control.hold_law`) its command is asked once per period (``gains``
+    then only names the run's paper gains in the result)."""
     if system.obstacle is None:
         raise InvalidParameterError("the closed loop needs an obstacle to sense (RodSystem.obstacle is None)")
-    return _run(system, system.obstacle, gains, config, state)
+    return _run(system, system.obstacle, gains, config, state, law)
 
 
 def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: ClosedLoopConfig,
-         state: RodState | None) -> ClosedLoopResult:
+         state: RodState | None, law: Law | None) -> ClosedLoopResult:
+    from contgrasp_core.control.hold_law import ShapeHold
     from contgrasp_core.rod.integrator import RodLoads
 
     m = system.model
@@ -160,10 +164,16 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
             obstacle = system.obstacle_at(st)
         shape = chain.arm_shape(m, st.theta)
         sn = sense(shape, obstacle, r_nodes)
-        u = feedback_couple(sn.rho[:-1], sn.alpha[:-1], ei, gains.mu1, gains.mu2, length_unit=gains.length_unit)
+        command = gains if law is None else law.command(sn.rho, sn.alpha, shape.theta, m.joint_curvature(st.theta),
+                                                        period)
+        if isinstance(command, ShapeHold):
+            u = command.couple + command.couple_and_jacobian(st.theta, jacobian=False)[0]
+        else:
+            u = feedback_couple(sn.rho[:-1], sn.alpha[:-1], ei, command.mu1, command.mu2,
+                                length_unit=command.length_unit)
         speed = _speeds(system, st)
         done = False
-        if speed < config.settle_speed:
+        if speed < config.settle_speed and (law is None or law.holding):
             quiet_since = st.t if quiet_since is None else quiet_since
             done = st.t >= config.min_time and st.t - quiet_since >= config.settle_hold
         else:
@@ -181,7 +191,10 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
             break
         if k == n_ctrl:
             break
-        loads = RodLoads(feedback=StateFeedback(m, obstacle, gains)) if continuous else RodLoads(couple=u)
+        if isinstance(command, ShapeHold):
+            loads = RodLoads(couple=command.couple, feedback=command)
+        else:
+            loads = RodLoads(feedback=StateFeedback(m, obstacle, command)) if continuous else RodLoads(couple=u)
         st, info = system.advance(st, period, loads, dt_try=dt_next)
         dt_next = min(info["dt_next"], dt)
         iters += info["iterations"]

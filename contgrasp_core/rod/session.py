@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from contgrasp_core.arm import ArmShape
 from contgrasp_core.contact import ContactState, sense
+from contgrasp_core.control.hold_law import Law, ShapeHold
 from contgrasp_core.control.rod_feedback import FeedbackExpansion, HeldExpansion
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.scenario import Scenario
@@ -111,9 +112,10 @@ class SettleDetector:
     quiet_since: float | None = None
     settled: bool = False
 
-    def update(self, t: float, max_speed: float) -> bool:
-        """Account for the state at time ``t`` with the given largest node speed; returns settled."""
-        if max_speed < self.settle_speed:
+    def update(self, t: float, max_speed: float, ready: bool = True) -> bool:
+        """Account for the state at time ``t`` with the given largest node speed; returns settled.
+        A state that is not ``ready`` (a law still in transition) does not count as quiet."""
+        if ready and max_speed < self.settle_speed:
             self.quiet_since = t if self.quiet_since is None else self.quiet_since
             if t >= self.min_time and t - self.quiet_since >= self.settle_hold:
                 self.settled = True
@@ -163,8 +165,10 @@ class LoopSession:
     def settle_time(self) -> float | None:
         return self.settle.settle_time
 
-    def observe(self) -> Observation:
-        """Arrays of the current state; updates the settle/finish status (idempotent per step)."""
+    def observe(self, ready: bool = True) -> Observation:
+        """Arrays of the current state; updates the settle/finish status (idempotent per step: the
+        first call of a step decides). ``ready`` False (the law still in transition, e.g. the
+        holding law before its hold) keeps the state from counting as settled."""
         if self._observed is not None and self._observed.k == self.k:
             return self._observed
         m, st = self.system.model, self.state
@@ -194,7 +198,7 @@ class LoopSession:
             max_speed=speed,
             body=st.body,
         )
-        self.settle.update(float(st.t), speed)
+        self.settle.update(float(st.t), speed, ready)
         self.finished = self.settled or self.k >= self.n_control
         self._observed = obs
         return obs
@@ -217,13 +221,18 @@ class LoopSession:
                 f"beyond the limit {limits.max_penetration:.3g} m (max_penetration_limit)")
         return obs
 
-    def advance(self, couple: Array | FeedbackExpansion, wrench: Array | None = None) -> None:
+    def advance(self, couple: Array | FeedbackExpansion | ShapeHold, wrench: Array | None = None) -> None:
         """Hold the couple at the joints for one control period (integrator substeps).
 
         A plain array (N,) is a zero-order hold; a :class:`FeedbackExpansion` is held to first
         order in the state (:class:`HeldExpansion`), sensed against the object where it is at
-        the start of the period. ``wrench`` (3,) is held on a movable object.
+        the start of the period; a :class:`~contgrasp_core.control.hold_law.ShapeHold` (the holding
+        law's hold, linear in the state) is applied exactly. ``wrench`` (3,) is held on a movable
+        object.
         """
+        if isinstance(couple, ShapeHold):
+            self._step(RodLoads(couple=couple.couple, feedback=couple, wrench=wrench))
+            return
         expansion = couple if isinstance(couple, FeedbackExpansion) else None
         u = np.asarray(expansion.u if expansion is not None else couple, dtype=float)
         n = self.system.model.n_elements
@@ -233,11 +242,14 @@ class LoopSession:
             parts = (expansion.rho_ref, expansion.alpha_ref, expansion.g_rho, expansion.g_alpha)
             if any(np.shape(p) != (n,) for p in parts) or not np.isfinite(parts).all():
                 raise InvalidParameterError(f"the feedback expansion needs {n} finite values per field")
-        if self.finished:
-            raise InvalidParameterError("the run is finished; reset to start again")
         obstacle = self.system.obstacle_at(self.state)
         held = None if expansion is None else HeldExpansion(self.system.model, obstacle, expansion)
-        loads = RodLoads(couple=u, feedback=held, wrench=wrench)
+        self._step(RodLoads(couple=u, feedback=held, wrench=wrench))
+
+    def _step(self, loads: RodLoads) -> None:
+        """One control period of integrator substeps under ``loads``."""
+        if self.finished:
+            raise InvalidParameterError("the run is finished; reset to start again")
         st = self.state
         for _ in range(self.config.substeps):
             st, info = self.system.step(st, self.dt, loads)
@@ -269,35 +281,43 @@ def sensed_shape(system: RodSystem, obs: Observation) -> ArmShape:
 
 
 def run_sampled(scenario: Scenario, system: RodSystem | None = None,
-                until: Callable[[Observation, ContactState], bool] | None = None) -> LoopSession:
+                until: Callable[[Observation, ContactState], bool] | None = None,
+                law: Law | None = None) -> LoopSession:
     """The scenario's sampled loop with the core functions only, stepped exactly as the ROS nodes
     step it (:func:`drive`, with the scenario's disturbance): a lock-step ROS run of the same
     scenario ends in the same state bit for bit. Returns the session, finished or stopped early
-    by ``until(observation, contact)`` (:func:`drive`)."""
+    by ``until(observation, contact)`` (:func:`drive`); ``law`` as :func:`drive`'s."""
     system = scenario.system() if system is None else system
     session = LoopSession(system, scenario.loop)
-    drive(session, scenario, None if scenario.disturbance is None else scenario.disturbance.wrench_at, until)
+    drive(session, scenario, None if scenario.disturbance is None else scenario.disturbance.wrench_at, until, law)
     return session
 
 
 def drive(session: LoopSession, scenario: Scenario, wrench: Callable[[float], Array] | None = None,
-          until: Callable[[Observation, ContactState], bool] | None = None) -> Observation:
+          until: Callable[[Observation, ContactState], bool] | None = None,
+          law: Law | None = None) -> Observation:
     """Step ``session`` as the ROS nodes do until it finishes or ``until(observation, contact)``
     holds: observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
     :class:`~contgrasp_core.boundary.Boundary` and the sensor's tolerance (``contact``, which
-    ``until`` gets too), :func:`~contgrasp_core.control.feedback_at_joints`, advance with
-    ``wrench(t)`` on the object (t the period's start). Returns the last observation."""
+    ``until`` gets too), the law's command for the period (``law``, default a fresh
+    :meth:`Scenario.controller`; the paper's gains go through
+    :func:`~contgrasp_core.control.feedback_at_joints`), advance with ``wrench(t)`` on the object
+    (t the period's start). Returns the last observation."""
     from contgrasp_core.control import feedback_at_joints
 
     boundary = scenario.object.boundary()
-    gains = scenario.feedback_gains
+    law = scenario.controller() if law is None else law
+    period = session.config.control_period
+    assert period is not None  # (LoopSession refuses a loop without one)
     system = session.system
     while True:
-        obs = session.observe()
+        obs = session.observe(law.holding)
         if session.finished:
             return obs
         c = sense(sensed_shape(system, obs), boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
         if until is not None and until(obs, c):
             return obs
-        session.advance(feedback_at_joints(scenario.rod, gains, c.rho, c.alpha),
+        command = law.command(c.rho, c.alpha, obs.theta, obs.kappa[:-1], period)
+        session.advance(command if isinstance(command, ShapeHold) else
+                        feedback_at_joints(scenario.rod, command, c.rho, c.alpha),
                         None if wrench is None else wrench(obs.t))

@@ -1,0 +1,214 @@
+"""A holding law next to the paper's (beyond the paper; docs/holding.md, "A law that holds",
+eqs. (H1)-(H6)).
+
+The paper's law (eq. (19)) places the arm relative to the object: it drives ``rho`` to the
+arm's radius wherever the object is. Released free, the object is pushed and the arm follows
+it (docs/holding.md). This law wraps the object without touching it, then holds a shape
+anchored at the arm's base:
+
+1. **Cage** (H1): eq. (19) with the desired distance ``rho_d(s) = r(s) + g``, a clearance
+   ``g`` over the arm's surface (``mu2`` from eq. (A-2) with ``rho_d``, as Appendix IV does for
+   ``rho_d = r``). Equilibrium (Prop. 5.1, unchanged: ``mu2 > -kbar``): ``rho = rho_d``,
+   ``alpha = pi/2``: the arm at the gap ``g`` from the object, no contact force.
+2. **Close** (H2): once the wrap angle (H3) sensed on the enclosing band reaches
+   ``wrap_angle`` (pi: the arm then surrounds more than half of the object), ``g`` decreases at
+   ``close_rate`` from ``clearance`` to ``close_gap``; the law stays eq. (19) with (H1).
+3. **Hold** (H4)-(H6): at ``g = close_gap`` the arm's own curvature ``kappa*`` (its shape,
+   proprioception) is latched, and the couple becomes
+   ``u = -EI kappa_ref + G EI (kappa - kappa_ref)``: the total couple ``EI kappa + u =
+   (1 + G) EI (kappa - kappa_ref)`` is an elastic rod's of stiffness ``(1 + G) EI`` and rest
+   curvature ``kappa_ref``. ``kappa_ref`` moves from ``kappa*`` to the parallel curve (H5)
+   offset by ``close_gap + squeeze`` towards the object on the enclosing band, over
+   ``squeeze_time``: the wrapped part closes onto the object and presses it ``squeeze`` deep.
+   The hold is a potential: with the rod's damping, drag and the contact's damping and
+   friction the rod + object energy (H6) cannot increase, and a rest state has a zero net
+   contact wrench on the object.
+
+What it senses: ``(rho, alpha)`` at the arm's nodes (eq. (4), as the paper's law) for the cage
+and the wrap angle, and the arm's own curvature for the hold; never the object's pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+from numpy.typing import NDArray
+
+from contgrasp_core.control.gains import FeedbackGains
+from contgrasp_core.control.law import CENTIMETRE, adaptive_mu2
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.rod.model import RodModel
+
+__all__ = ["LAWS", "HoldLawSettings", "ShapeHold", "PaperLaw", "HoldController", "Law", "wrap_angle",
+           "parallel_curvature"]
+
+Array = NDArray[np.float64]
+
+LAWS = ("paper", "hold")
+"""The closed loop's laws: the paper's eq. (19) and this module's holding law."""
+
+
+@dataclass(frozen=True)
+class HoldLawSettings:
+    """The holding law's parameters (SI; module docstring): the cage's ``clearance`` (m, the
+    gap ``g`` of (H1)), ``band`` (m: nodes within ``g + band`` of the object's surface form the
+    enclosing band of (H3)), the ``wrap_angle`` (rad) that starts the close, the ``close_rate``
+    (m/s) and the ``close_gap`` (m) at which the shape is latched, the ``squeeze`` depth (m)
+    and the ``squeeze_time`` (s) of (H5), the hold's stiffness gain ``stiffness_gain`` (G of
+    (H4), dimensionless) and the paper's ``mu1``."""
+
+    clearance: float = 0.006
+    band: float = 0.001
+    wrap_angle: float = float(np.pi)
+    close_rate: float = 0.003
+    close_gap: float = 0.0025
+    squeeze: float = 0.0005
+    squeeze_time: float = 1.0
+    stiffness_gain: float = 3000.0
+    mu1: float = 1.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)):
+                raise InvalidParameterError(f"hold law {f.name} must be a finite number, got {v!r}")
+        for name in ("clearance", "band", "close_rate", "squeeze_time", "mu1"):
+            if getattr(self, name) <= 0:
+                raise InvalidParameterError(f"hold law {name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("squeeze", "stiffness_gain"):
+            if getattr(self, name) < 0:
+                raise InvalidParameterError(f"hold law {name} must be >= 0, got {getattr(self, name)!r}")
+        if not 0 < self.close_gap < self.clearance:
+            raise InvalidParameterError(f"hold law close_gap must be in (0, clearance = {self.clearance!r}) m, "
+                                        f"got {self.close_gap!r}")
+        if not np.pi <= self.wrap_angle < 2 * np.pi:
+            raise InvalidParameterError(f"hold law wrap_angle must be in [pi, 2 pi) rad (a cage surrounds more than "
+                                        f"half of the object), got {self.wrap_angle!r}")
+
+
+def wrap_angle(theta: Array, alpha: Array, band: NDArray[np.bool_]) -> float:
+    """The wrap angle (H3): the turn of the object's tangent ``phi = theta + alpha - pi/2`` (eq.
+    (4)) from the first to the last node of the enclosing ``band`` (N+1 booleans), summed over
+    the nodes between as wrapped increments in (-pi, pi]; 0 with fewer than two band nodes."""
+    idx = np.flatnonzero(band)
+    if idx.size < 2:
+        return 0.0
+    phi = np.asarray(theta, dtype=float)[idx[0]:idx[-1] + 1] + np.asarray(alpha, dtype=float)[idx[0]:idx[-1] + 1]
+    return float(np.sum(np.mod(np.diff(phi) + np.pi, 2.0 * np.pi) - np.pi))
+
+
+def parallel_curvature(kappa: Array, offset: float) -> Array:
+    """Curvature of the parallel curve ``offset`` (m) towards the centre of curvature (H5):
+    ``kappa / (1 - offset |kappa|)`` (a circle of radius ``1/|kappa|`` becomes one of radius
+    ``1/|kappa| - offset``). :class:`InvalidParameterError` where ``offset |kappa| >= 1`` (the
+    parallel curve does not exist there)."""
+    k = np.asarray(kappa, dtype=float)
+    den = 1.0 - offset * np.abs(k)
+    if np.any(den <= 0):
+        raise InvalidParameterError(f"no parallel curve at offset {offset!r} m where the radius of curvature is "
+                                    f"below it (largest |kappa| {float(np.abs(k).max())!r} 1/m)")
+    return np.asarray(k / den, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class ShapeHold:
+    """The hold's couple (H4) at the joints: the held part ``couple = -EI kappa_ref`` (N,) and the
+    state feedback ``G EI (kappa(theta) - kappa_ref)``, linear in the element angles (so its
+    first-order hold is exact) with the bidiagonal Jacobian ``G EI_k / D_k`` (k, k) and
+    ``-G EI_k / D_k`` (k, k-1) (``kappa_k = (theta_k - theta_{k-1}) / D_k``)."""
+
+    model: RodModel
+    kappa_ref: Array
+    gain: float
+    couple: Array = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "couple", -self.model.joint_ei * self.kappa_ref)
+
+    def couple_and_jacobian(self, theta: Array, *, jacobian: bool = True, nodes: Array | None = None,
+                            normals: Array | None = None) -> tuple[Array, Array | None]:
+        """``G EI (kappa - kappa_ref)`` (N,) and its derivative in ``theta`` (N, N)."""
+        m = self.model
+        stiffness = self.gain * m.joint_ei / m.joint_len
+        u = self.gain * m.joint_ei * (m.joint_curvature(theta) - self.kappa_ref)
+        if not jacobian:
+            return u, None
+        du = np.diag(stiffness)
+        k = np.arange(1, m.n_elements)
+        du[k, k - 1] = -stiffness[1:]
+        return u, du
+
+
+@dataclass(frozen=True)
+class PaperLaw:
+    """The paper's law (eq. (19)) with fixed gains, behind the same :meth:`command` as
+    :class:`HoldController` (it keeps no state)."""
+
+    fixed: FeedbackGains
+
+    @property
+    def holding(self) -> bool:
+        """Always True: the paper's law has no phases."""
+        return True
+
+    def command(self, rho: Array, alpha: Array, theta: Array, kappa: Array, period: float) -> FeedbackGains:
+        """The gains, whatever is sensed."""
+        return self.fixed
+
+
+class HoldController:
+    """The holding law's state across control periods (module docstring): ``phase`` ``cage``,
+    ``close`` or ``hold``, the current gap ``gap`` (m), and in the hold the latched reference.
+    :meth:`command` is called once per control period with what the arm senses."""
+
+    def __init__(self, model: RodModel, object_radius: float, settings: HoldLawSettings = HoldLawSettings(),
+                 length_unit: float = CENTIMETRE) -> None:
+        self.model, self.settings, self.length_unit = model, settings, length_unit
+        self.object_radius = float(object_radius)
+        self.phase = "cage"
+        self.gap = settings.clearance
+        self.progress = 0.0
+        self._radius = model.radius(model.s_nodes)
+        self._kappa_star: Array | None = None
+        self._kappa_step: Array | None = None
+
+    @property
+    def holding(self) -> bool:
+        """The hold is complete: the reference has reached the squeezed shape."""
+        return self.phase == "hold" and self.progress >= 1.0
+
+    def gains(self) -> FeedbackGains:
+        """Eq. (19)'s gains for the current gap (H1): ``mu2`` of eq. (A-2) with ``rho_d = r + g``."""
+        m = self.model
+        return FeedbackGains(mu1=self.settings.mu1, length_unit=self.length_unit,
+                             mu2=adaptive_mu2(m.radius(m.joint_s) + self.gap, self.object_radius,
+                                              length_unit=self.length_unit))
+
+    def command(self, rho: Array, alpha: Array, theta: Array, kappa: Array, period: float) -> FeedbackGains | ShapeHold:
+        """The law for the next ``period`` (s) from ``rho``, ``alpha`` and the node angles ``theta``
+        at the N+1 nodes and the curvature ``kappa`` at the N joints: eq. (19)'s gains (cage,
+        close) or the hold's :class:`ShapeHold`."""
+        s = self.settings
+        band = np.asarray(rho, dtype=float) - self._radius <= self.gap + s.band
+        if self.phase == "cage" and wrap_angle(theta, alpha, band) >= s.wrap_angle:
+            self.phase = "close"
+        if self.phase == "close":
+            self.gap = max(self.gap - s.close_rate * period, s.close_gap)
+            if self.gap <= s.close_gap:
+                k = np.asarray(kappa, dtype=float)
+                target = k.copy()
+                offset = s.close_gap + s.squeeze
+                on = band[:-1] & (offset * np.abs(k) < 1.0)  # (where the parallel curve exists)
+                target[on] = parallel_curvature(k[on], offset)
+                self._kappa_star, self._kappa_step = k, target - k
+                self.phase = "hold"
+        if self.phase == "hold":
+            assert self._kappa_star is not None and self._kappa_step is not None
+            self.progress = min(1.0, self.progress + period / s.squeeze_time)
+            return ShapeHold(self.model, self._kappa_star + self.progress * self._kappa_step, s.stiffness_gain)
+        return self.gains()
+
+
+Law = PaperLaw | HoldController
+"""A closed loop's law: what :meth:`command` gives for each control period."""
