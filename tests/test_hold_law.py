@@ -220,7 +220,7 @@ def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
         replace(PAPER, law="grip")
     with pytest.raises(InvalidParameterError, match="paper's law only"):
         replace(PAPER, law="hold").to_ros_parameters()
-    cli = [sys.executable, "-m", "contgrasp_ros.cli"]
+    cli = [sys.executable, "-m", "contgrasp_core.cli"]
     for args in (["simulate", "--law", "hold", "--hold-gain", "-1"], ["hold", "--law", "hold", "--squeeze", "-0.001"],
                  ["simulate", "--law", "grip"], ["simulate", "--friction", "-0.5"]):
         proc = subprocess.run(cli + args, capture_output=True, text=True)
@@ -229,7 +229,7 @@ def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
 
 def test_hold_command_reports_the_paper_law_released_free_as_not_holding() -> None:
     """``contgrasp hold --law paper --support 0``: a result (exit 0), held false, capacity 0."""
-    cmd = [sys.executable, "-m", "contgrasp_ros.cli", "hold", "--law", "paper", "--support", "0", "--nodes", "51",
+    cmd = [sys.executable, "-m", "contgrasp_core.cli", "hold", "--law", "paper", "--support", "0", "--nodes", "51",
            "--directions", "1", "--json"]
     out = json.loads(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)
     assert out["held"] is False and out["release_reason"] and out["capacity_min"] == 0.0
