@@ -1,10 +1,12 @@
 """The simulator's stepping rules without ROS (contgrasp_ros.lockstep): when step 0 goes out,
-the lock-step deadline, fallback and outage counting, and the free-running deadlines and wait
-for the couple."""
+the lock-step deadline, fallback and outage counting, the re-sends until the loop closes and
+the answers to a message taken again, and the free-running deadlines and wait for the couple."""
 
 from __future__ import annotations
 
-from contgrasp_ros.lockstep import CoupleWait, LockStep, Peers, StartGate, WallClock
+from types import SimpleNamespace
+
+from contgrasp_ros.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock, loop_key
 
 LOOP = Peers(rod_state_subscribers=1, couple_publishers=1, contact_links=1)
 
@@ -99,6 +101,59 @@ def test_stop_and_reset() -> None:
     rule.couple("u", can_step=False)
     rule.reset()
     assert (rule.started, rule.missed, rule.outage, rule.pending, rule.waiting_since) == (False, 0, 0, None, None)
+
+
+def test_an_unanswered_state_is_sent_again_until_the_loop_closes() -> None:
+    """A peer whose reader matched after a state went out never gets it: until the run's first
+    couple the awaited state goes out again every ``resend`` seconds (from its last sending);
+    the re-sends do not move the couple's deadline; after the first couple, nothing again."""
+    rule = LockStep(resend=1.0)
+    assert rule.resend_due(100.0) is False  # nothing published
+    rule.published(0.0)
+    assert rule.resend_due(0.99) is False
+    assert rule.resend_due(1.0) is True and rule.resent == 1
+    assert rule.resend_due(1.5) is False  # (a period from the re-send)
+    assert rule.resend_due(2.0) is True and rule.resent == 2
+    assert rule.tick(10.01, 10.0) is True  # the deadline still counts from the first sending
+    assert rule.resend_due(20.0) is False  # (the fallback moves on: the next state is published)
+    rule.published(20.0)  # step 1 after the fallback: the loop is still open
+    assert rule.resend_due(21.0) is True and rule.resent == 3
+    assert rule.couple("u1", can_step=True) == ("u1", 1) and rule.closed
+    rule.published(21.1)
+    assert rule.resend_due(1e6) is False and rule.resent == 3  # closed: every hop has delivered
+    rule.reset()  # a new run: open again
+    assert not rule.closed and rule.resent == 0
+    rule.published(0.0)
+    assert rule.resend_due(1.0) is True
+
+
+def test_a_couple_kept_while_paused_closes_the_loop_and_a_stopped_run_sends_nothing() -> None:
+    rule = LockStep(resend=1.0)
+    rule.published(0.0)
+    rule.couple("u0", can_step=False)
+    assert rule.closed and rule.resend_due(5.0) is False
+    rule.reset()
+    rule.published(0.0)
+    rule.stop()  # (finished or failed)
+    assert rule.resend_due(5.0) is False
+
+
+def test_answered_recognises_the_same_message_by_step_and_stamp() -> None:
+    def header(sec: int, nanosec: int) -> SimpleNamespace:
+        return SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec))
+
+    key = loop_key(1, header(0, 2_000_000))
+    assert key == (1, 0, 2_000_000)
+    answered = Answered()
+    assert not answered.again(key)
+    answered.keep(key, b"contact 1")
+    assert answered.again(loop_key(1, header(0, 2_000_000))) and answered.answer == b"contact 1"
+    assert not answered.again(loop_key(1, header(0, 4_000_000)))  # same step, another stamp: another message
+    assert not answered.again(loop_key(2, header(0, 2_000_000)))
+    answered.keep(loop_key(2, header(0, 4_000_000)), b"contact 2")
+    assert not answered.again(key)  # only the newest is kept
+    answered.reset()
+    assert not answered.again(loop_key(2, header(0, 4_000_000))) and answered.answer == b""
 
 
 def test_wall_clock_counts_every_period_lost_once() -> None:
