@@ -5,7 +5,9 @@ core-only closed loop calls, so a lock-step ROS run reproduces it exactly. Gains
 the adaptive mu2 of Appendix IV, the law's length unit) are parameters; a change takes effect
 at the next contact message (a set that gives unusable gains is refused). The rod geometry
 parameters (read-only) must match the simulator's. Malformed contact states, bad stamps and
-states of another rod size are dropped and counted (``/diagnostics``).
+states of another rod size are dropped and counted (``/diagnostics``). A contact state taken
+again (the answer to a rod state the simulator re-sent; same step and stamp) is answered again
+with the couple published for it, not computed twice (:class:`~contgrasp_ros.lockstep.Answered`).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros import qos, topics
 from contgrasp_ros.cdr import Codec
 from contgrasp_ros.convert import MessageError, contact_arrays, couple_fields, require_finite
+from contgrasp_ros.lockstep import Answered, loop_key
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import (
     Diagnostics,
@@ -62,6 +65,7 @@ class GraspController(Node):
         # the loop's messages go in and out serialized (contgrasp_ros.cdr); a typed message
         # passed to on_contact directly works too
         self.contact_codec, self.couple_codec = Codec(ContactState), Codec(CoupleControl)
+        self.answered = Answered()  # (the contact state answered last and its couple)
         self.pub = self.create_publisher(CoupleControl, topics.COUPLE, qos.STREAM)
         self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM, raw=True)
 
@@ -98,12 +102,18 @@ class GraspController(Node):
                     reason="wrong node count",
                 )
             self.stamps.admit(topics.CONTACT, msg.header, c.step)
+            key = loop_key(c.step, msg.header)
+            if self.answered.again(key):  # (the answer to a state sent again: the simulator may not have had the couple)
+                self.pub.publish(self.answered.answer)
+                return
             u = feedback_at_joints(self.model, self.gains, c.rho, c.alpha)
             require_finite("the couple", u.u, u.g_rho, u.g_alpha)
         except ContgraspError as exc:
             self.drops.drop_error(topics.CONTACT, exc)
             return
-        self.pub.publish(self.couple_codec.encode(couple_fields(self.model.joint_s, u, msg.header, c.step)))
+        out = self.couple_codec.encode(couple_fields(self.model.joint_s, u, msg.header, c.step))
+        self.pub.publish(out)
+        self.answered.keep(key, out)
 
 
 def main(args: list[str] | None = None) -> int:
