@@ -9,7 +9,7 @@ sent again every ``resend`` seconds, for a peer whose reader matched too late to
 that arrives while paused is kept; after the couple timeout the configured fallback is applied
 and the miss counted, once per outage in the log. :class:`Answered` lets the sensor and the
 controller answer a state sent twice with the answer they gave it, and the simulator ignore a
-second answer, by the messages' :func:`loop_key`.
+second answer.
 :class:`WallClock` is the free-running rule (``lockstep: false``): every whole control period
 the simulation falls behind the wall clock is a missed deadline; :class:`CoupleWait` lets a
 free-running step wait, briefly, for the couple answering the state it starts from.
@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Peers", "StartGate", "LockStep", "Key", "loop_key", "Answered", "WallClock", "CoupleWait"]
+__all__ = ["Peers", "StartGate", "LockStep", "Answered", "WallClock", "CoupleWait"]
 
 # Wall seconds between two sendings of a state that waits for its couple before the loop has
 # closed (LockStep): far above the loop's first round trip (milliseconds; a re-send whose
@@ -192,37 +192,30 @@ class LockStep:
         return self.outage == 1
 
 
-Key = tuple[int, int, int]
-
-
-def loop_key(step: int, header: Any) -> Key:
-    """A loop message's identity: its step and stamp (``header.stamp``). A state sent again has
-    the key it had, and so has every answer to it (the sensor and the controller echo both)."""
-    return int(step), int(header.stamp.sec), int(header.stamp.nanosec)
-
-
 class Answered:
-    """The newest loop message a node took (its :func:`loop_key`) and what the node published
-    in answer (serialized), so the same message taken again - a state that
-    :class:`LockStep` re-sent, or an answer to it - is recognised: the sensor and the controller
-    publish their answer again (a hop after theirs may be the one that lost it) without
-    computing it twice, the simulator ignores a second couple for a step it took one for."""
+    """The loop message a node took last, as it came (serialized, or a typed message), and what
+    the node published in answer (serialized), so the same message taken again - equal, byte
+    for byte: a state :class:`LockStep` re-sent, or an answer to it, which carries its step and
+    stamp - is recognised: the sensor and the controller publish their answer again (a hop
+    after theirs may be the one that lost it) without computing it twice; the simulator ignores
+    a second couple equal to the one it took. A different message with the same step and stamp
+    (another controller's couple, a restarted simulator's other rod) is no repeat."""
 
     def __init__(self) -> None:
         self.reset()
 
     def reset(self) -> None:
         """Nothing taken yet."""
-        self.key: Key | None = None
+        self.message: Any = None
         self.answer = b""
 
-    def again(self, key: Key) -> bool:
-        """Whether the message with ``key`` is the one taken last."""
-        return key == self.key
+    def again(self, message: Any) -> bool:
+        """Whether ``message`` is the one taken last."""
+        return self.message is not None and message == self.message
 
-    def keep(self, key: Key, answer: bytes = b"") -> None:
-        """The message with ``key`` was taken (and answered with ``answer``)."""
-        self.key, self.answer = key, answer
+    def keep(self, message: Any, answer: bytes = b"") -> None:
+        """``message`` was taken (and answered with ``answer``)."""
+        self.message, self.answer = message, answer
 
 
 class WallClock:

@@ -5,6 +5,7 @@ and a finished run stays up or exits, as ``on_finish`` says."""
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import random
@@ -224,6 +225,27 @@ def test_four_nodes_by_hand_in_any_order_with_any_gaps_never_lose_step_0(graph: 
     assert all(code == 0 for code in codes.values()), (plan, codes)
 
 
+def test_step_0_sent_before_the_controller_existed_still_closes_the_loop(graph: Graph, paper_core: Any) -> None:
+    """The loss made certain: step 0 goes out (wait_for_peers:=false) while there is no
+    controller, so the sensor's answer reaches nobody; the controller is started only once the
+    probe has step 0. Step 0 is sent again until the loop closes, the sensor answers the repeat
+    with the contact state it published, and the run is the core loop's, bit for bit."""
+    graph.start("rod_simulator", "--ros-args", "-p", "wait_for_peers:=false", "-p", "min_subscribers:=3")
+    graph.start("boundary_sensor")
+    assert graph.spin_until(lambda: graph.last is not None, timeout=120)
+    assert graph.last is not None and graph.last.step == 0
+    graph.start("grasp_controller")
+    assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.status
+    assert graph.spin_until(lambda: graph.last is not None and graph.last.step == int(graph.status["step"]), timeout=60)
+    _, session = paper_core
+    assert graph.status["missed_deadlines"] == "0" and float(graph.status["settle_time_s"]) == session.settle_time
+    assert graph.last is not None
+    same_as_core(graph.last, paper_core)
+    sim_log = graph.output("rod_simulator")
+    assert "the loop closed at step 0 after" in sim_log and "no couple for step" not in sim_log, sim_log[-3000:]
+    assert all(code == 0 for code in graph.close().values())
+
+
 def test_a_state_sent_again_is_answered_again_and_computed_once(make: Any, monkeypatch: pytest.MonkeyPatch) -> None:
     """The mechanism behind the shuffled starts, node by node (callbacks called directly): the
     simulator sends step 0 again while the loop is open; the sensor and the controller answer
@@ -265,11 +287,16 @@ def test_a_state_sent_again_is_answered_again_and_computed_once(make: Any, monke
     assert [m.step for m in sim.pub_state.msgs] == [0, 0, 1] and sim.session.k == 1 and sim.drops.total == 0
     sim.on_tick()  # the loop closed: nothing goes out again
     assert len(sim.pub_state.msgs) == 3 and sim.rule.closed
-    # a couple for the old step with another stamp is no repeat: stale, dropped and counted as before
-    stale = controller.pub.msgs[0]
-    stale.header.stamp.nanosec += 1
-    sim.on_couple(stale)
-    assert sim.drops.counts == {f"{topics.COUPLE}: step mismatch": 1}
+    # a couple for the old step that is not the one taken (another stamp, another controller's
+    # answer) is no repeat: stale, dropped and counted as before
+    for change in ("stamp", "u"):
+        stale = copy.deepcopy(controller.pub.msgs[0])
+        if change == "stamp":
+            stale.header.stamp.nanosec += 1
+        else:
+            stale.u[0] += 1e-9
+        sim.on_couple(stale)
+    assert sim.drops.counts == {f"{topics.COUPLE}: step mismatch": 2}
     for node in (sensor, controller):
         assert node.drops.total == 0
 

@@ -4,9 +4,7 @@ the answers to a message taken again, and the free-running deadlines and wait fo
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
-from contgrasp_ros.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock, loop_key
+from contgrasp_ros.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
 
 LOOP = Peers(rod_state_subscribers=1, couple_publishers=1, contact_links=1)
 
@@ -138,22 +136,16 @@ def test_a_couple_kept_while_paused_closes_the_loop_and_a_stopped_run_sends_noth
     assert rule.resend_due(5.0) is False
 
 
-def test_answered_recognises_the_same_message_by_step_and_stamp() -> None:
-    def header(sec: int, nanosec: int) -> SimpleNamespace:
-        return SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec))
-
-    key = loop_key(1, header(0, 2_000_000))
-    assert key == (1, 0, 2_000_000)
+def test_answered_recognises_the_same_message_only() -> None:
     answered = Answered()
-    assert not answered.again(key)
-    answered.keep(key, b"contact 1")
-    assert answered.again(loop_key(1, header(0, 2_000_000))) and answered.answer == b"contact 1"
-    assert not answered.again(loop_key(1, header(0, 4_000_000)))  # same step, another stamp: another message
-    assert not answered.again(loop_key(2, header(0, 2_000_000)))
-    answered.keep(loop_key(2, header(0, 4_000_000)), b"contact 2")
-    assert not answered.again(key)  # only the newest is kept
+    assert not answered.again(b"state 1") and not answered.again(None)
+    answered.keep(b"state 1", b"contact 1")
+    assert answered.again(bytes(b"state 1")) and answered.answer == b"contact 1"  # (equal, not the same object)
+    assert not answered.again(b"state 1 of another rod")  # (same step and stamp, other content: no repeat)
+    answered.keep(b"state 2", b"contact 2")
+    assert not answered.again(b"state 1")  # only the newest is kept
     answered.reset()
-    assert not answered.again(loop_key(2, header(0, 4_000_000))) and answered.answer == b""
+    assert not answered.again(b"state 2") and answered.answer == b""
 
 
 def test_wall_clock_counts_every_period_lost_once() -> None:

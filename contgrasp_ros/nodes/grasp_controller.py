@@ -6,8 +6,8 @@ the adaptive mu2 of Appendix IV, the law's length unit) are parameters; a change
 at the next contact message (a set that gives unusable gains is refused). The rod geometry
 parameters (read-only) must match the simulator's. Malformed contact states, bad stamps and
 states of another rod size are dropped and counted (``/diagnostics``). A contact state taken
-again (the answer to a rod state the simulator re-sent; same step and stamp) is answered again
-with the couple published for it, not computed twice (:class:`~contgrasp_ros.lockstep.Answered`).
+again (the answer to a rod state the simulator re-sent) is answered again with the couple
+published for it, not computed twice (:class:`~contgrasp_ros.lockstep.Answered`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros import qos, topics
 from contgrasp_ros.cdr import Codec
 from contgrasp_ros.convert import MessageError, contact_arrays, couple_fields, require_finite
-from contgrasp_ros.lockstep import Answered, loop_key
+from contgrasp_ros.lockstep import Answered
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import (
     Diagnostics,
@@ -93,6 +93,9 @@ class GraspController(Node):
     def on_contact(self, data: bytes | ContactState) -> None:
         """Validate a contact state (serialized, or a message) and answer it with the couple
         (echoing its stamp and step)."""
+        if self.answered.again(data):  # (the answer to a state sent again: the simulator may not have had the couple)
+            self.pub.publish(self.answered.answer)
+            return
         try:
             msg = self.contact_codec.message(data)
             c = contact_arrays(msg)
@@ -102,10 +105,6 @@ class GraspController(Node):
                     reason="wrong node count",
                 )
             self.stamps.admit(topics.CONTACT, msg.header, c.step)
-            key = loop_key(c.step, msg.header)
-            if self.answered.again(key):  # (the answer to a state sent again: the simulator may not have had the couple)
-                self.pub.publish(self.answered.answer)
-                return
             u = feedback_at_joints(self.model, self.gains, c.rho, c.alpha)
             require_finite("the couple", u.u, u.g_rho, u.g_alpha)
         except ContgraspError as exc:
@@ -113,7 +112,7 @@ class GraspController(Node):
             return
         out = self.couple_codec.encode(couple_fields(self.model.joint_s, u, msg.header, c.step))
         self.pub.publish(out)
-        self.answered.keep(key, out)
+        self.answered.keep(data, out)
 
 
 def main(args: list[str] | None = None) -> int:

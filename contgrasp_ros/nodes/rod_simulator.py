@@ -11,8 +11,8 @@ the two rod-state topics together;
 after ``peer_timeout`` wall seconds it goes out anyway), so a graph started by hand runs like the launcher's. Lock-step
 mode (default): state k is published and the rod advances only when the couple stamped with
 step k arrives; until the run's first couple the awaited state is published again every
-second (a peer whose reader matched after it went out never got it; a second couple for the
-same step is ignored); after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
+second (a peer whose reader matched after it went out never got it; a couple equal to the one
+taken, the answer to a repeat, is ignored); after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
 couple or apply ``zero``) is used, the miss is counted and a warning logged. Free-running mode
 advances every ``control_period`` of wall time with the latest couple, from the run's first
 couple on (the loop closed: a controller's first answer can take a few milliseconds more than
@@ -76,7 +76,7 @@ from contgrasp_msgs.srv import ApplyWrench
 from contgrasp_ros import qos, topics
 from contgrasp_ros.cdr import Codec
 from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, rod_state_fields, wrench_arrays
-from contgrasp_ros.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock, loop_key
+from contgrasp_ros.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import (
@@ -154,7 +154,7 @@ class RodSimulator(Node):
                             "anyway (0 = wait forever)", lo=0.0, hi=1e6, read_only=True),
         )
         self.rule = LockStep()
-        self.taken = Answered()  # (lock-step: the couple taken last, by step and stamp)
+        self.taken = Answered()  # (lock-step: the couple taken last)
         assert self.config.control_period is not None  # (declared above with lo > 0)
         self.wall = WallClock(self.config.control_period)  # (free-running mode's deadlines)
         self.wait = CoupleWait(wait=not self.lockstep and couple_wait > 0)
@@ -382,6 +382,8 @@ class RodSimulator(Node):
     def on_couple(self, data: bytes | CoupleControl) -> None:
         """Validate a couple (serialized, or a message); in lock-step advance with the couple
         answering the current step."""
+        if self.lockstep and self.taken.again(data):
+            return  # a second answer to a state sent twice (LockStep.resend_due): taken already
         try:
             msg = self.couple_codec.message(data)
             step, s, u = couple_arrays(msg)
@@ -390,9 +392,6 @@ class RodSimulator(Node):
                 raise MessageError(f"couple must be given at the {self.model.n_elements} joints s = k h", reason="wrong joints")
             if self.session.finished or self.failure:
                 return  # the answer to the final state (or a failed run): nothing to do with it
-            key = loop_key(step, msg.header)
-            if self.lockstep and self.taken.again(key):
-                return  # a second answer to a state sent twice (LockStep.resend_due): taken already
             if self.lockstep and step != self.session.k:
                 raise MessageError(f"couple for step {step} while waiting for step {self.session.k} "
                                    "(a late answer to a step that timed out, or a stale one)", reason="step mismatch")
@@ -407,7 +406,7 @@ class RodSimulator(Node):
                 self._end_wait()
                 self._advance(u)
             return
-        self.taken.keep(key)
+        self.taken.keep(data)
         if self.rule.resent and not self.rule.closed:
             self.get_logger().info(f"the loop closed at step {step} after {self.rule.resent} re-send(s) of its state")
         now, ended = self.rule.couple(u, self._can_step())
