@@ -4,8 +4,12 @@
 hand (``ros2 run`` per node, in any order) must not lose it to a sensor that has not matched yet,
 or the lock-step loop stalls for a whole couple timeout at step 0 and the run differs from the
 launcher's. :class:`LockStep` is the lock-step rule itself: state k out, wait for the couple
-answering step k; a couple that arrives while paused is kept; after the couple timeout the
-configured fallback is applied and the miss counted, once per outage in the log.
+answering step k; until the loop has closed once (the run's first couple) the awaited state is
+sent again every ``resend`` seconds, for a peer whose reader matched too late to get it; a couple
+that arrives while paused is kept; after the couple timeout the configured fallback is applied
+and the miss counted, once per outage in the log. :class:`Answered` lets the sensor and the
+controller answer a state sent twice with the answer they gave it, and the simulator ignore a
+second answer.
 :class:`WallClock` is the free-running rule (``lockstep: false``): every whole control period
 the simulation falls behind the wall clock is a missed deadline; :class:`CoupleWait` lets a
 free-running step wait, briefly, for the couple answering the state it starts from.
@@ -19,7 +23,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Peers", "StartGate", "LockStep", "WallClock", "CoupleWait"]
+__all__ = ["Peers", "StartGate", "LockStep", "Answered", "WallClock", "CoupleWait"]
+
+# Wall seconds between two sendings of a state that waits for its couple before the loop has
+# closed (LockStep): far above the loop's first round trip (milliseconds; a re-send whose
+# original was only slow is a duplicate, harmless but recorded), far below the couple timeout.
+RESEND_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -100,29 +109,51 @@ def _have(peers: Peers, need: Peers) -> str:
 class LockStep:
     """The lock-step rule between the state published for step k and the couple answering it.
 
-    ``published(now)`` after each state; ``couple(now, u, can_step)`` for a couple that passed
+    ``published(now)`` after each state; ``couple(u, can_step)`` for a couple that passed
     validation (its step is the current one) returns the couple to apply now, or None (kept
     until ``resume``); ``tick(now, timeout)`` returns True when the deadline passed, the miss
     counted (apply the fallback); ``stop()`` when the run finished or failed.
+
+    ``resend_due(now)`` returns True when the awaited state is to be published again: the loop
+    has not closed yet (no couple in this run) and ``resend`` seconds passed since the state
+    last went out. A state goes out on a volatile topic once the simulator's writer matched the
+    sensor's reader, but the sensor's reader may match the writer later, and a sample sent
+    before that is lost to it (the same for the sensor's contact state on its way to the
+    controller, and for the couple on its way back). The run's first couple proves every hop
+    matched both ways; from then on nothing is re-sent (a peer restarted mid-run is covered by
+    the timeout fallback, as before). ``resent`` counts the re-sends of the run.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, resend: float = RESEND_S) -> None:
+        self.resend = resend
         self.missed = 0  # deadlines missed in this run
         self.outage = 0  # consecutive missed deadlines (the current outage)
         self.reset()
 
     def reset(self) -> None:
-        """A new run: nothing published, nothing pending (the miss counts start over too)."""
+        """A new run: nothing published, nothing pending, the loop open (the miss counts start
+        over too)."""
         self.started = False
+        self.closed = False  # a couple answered a state of this run
         self.waiting_since: float | None = None
+        self.sent_at: float | None = None  # when the awaited state last went out
         self.pending: Any = None
         self.missed = 0
         self.outage = 0
+        self.resent = 0
 
     def published(self, now: float) -> None:
         """A state went out: its couple is due within the timeout from now."""
         self.started = True
-        self.waiting_since = now
+        self.waiting_since = self.sent_at = now
+
+    def resend_due(self, now: float) -> bool:
+        """True when the awaited state goes out again (counted in ``resent``)."""
+        if self.closed or self.waiting_since is None or self.sent_at is None or now - self.sent_at < self.resend:
+            return False
+        self.sent_at = now
+        self.resent += 1
+        return True
 
     def stop(self) -> None:
         """The run is over: no deadline any more."""
@@ -131,6 +162,7 @@ class LockStep:
     def couple(self, u: Any, can_step: bool) -> tuple[Any, int]:
         """A valid couple for the current step: (apply it now or None = kept, length of the outage
         it ends, 0 if none)."""
+        self.closed = True
         ended, self.outage = self.outage, 0
         if can_step:
             return u, ended
@@ -158,6 +190,32 @@ class LockStep:
     def first_of_outage(self) -> bool:
         """The last miss began an outage (log it once; its length is logged when couples return)."""
         return self.outage == 1
+
+
+class Answered:
+    """The loop message a node took last, as it came (serialized, or a typed message), and what
+    the node published in answer (serialized), so the same message taken again - equal, byte
+    for byte: a state :class:`LockStep` re-sent, or an answer to it, which carries its step and
+    stamp - is recognised: the sensor and the controller publish their answer again (a hop
+    after theirs may be the one that lost it) without computing it twice; the simulator ignores
+    a second couple equal to the one it took. A different message with the same step and stamp
+    (another controller's couple, a restarted simulator's other rod) is no repeat."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """Nothing taken yet."""
+        self.message: Any = None
+        self.answer = b""
+
+    def again(self, message: Any) -> bool:
+        """Whether ``message`` is the one taken last."""
+        return self.message is not None and message == self.message
+
+    def keep(self, message: Any, answer: bytes = b"") -> None:
+        """``message`` was taken (and answered with ``answer``)."""
+        self.message, self.answer = message, answer
 
 
 class WallClock:

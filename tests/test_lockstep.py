@@ -1,10 +1,10 @@
 """The simulator's stepping rules without ROS (contgrasp_ros.lockstep): when step 0 goes out,
-the lock-step deadline, fallback and outage counting, and the free-running deadlines and wait
-for the couple."""
+the lock-step deadline, fallback and outage counting, the re-sends until the loop closes and
+the answers to a message taken again, and the free-running deadlines and wait for the couple."""
 
 from __future__ import annotations
 
-from contgrasp_ros.lockstep import CoupleWait, LockStep, Peers, StartGate, WallClock
+from contgrasp_ros.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
 
 LOOP = Peers(rod_state_subscribers=1, couple_publishers=1, contact_links=1)
 
@@ -99,6 +99,53 @@ def test_stop_and_reset() -> None:
     rule.couple("u", can_step=False)
     rule.reset()
     assert (rule.started, rule.missed, rule.outage, rule.pending, rule.waiting_since) == (False, 0, 0, None, None)
+
+
+def test_an_unanswered_state_is_sent_again_until_the_loop_closes() -> None:
+    """A peer whose reader matched after a state went out never gets it: until the run's first
+    couple the awaited state goes out again every ``resend`` seconds (from its last sending);
+    the re-sends do not move the couple's deadline; after the first couple, nothing again."""
+    rule = LockStep(resend=1.0)
+    assert rule.resend_due(100.0) is False  # nothing published
+    rule.published(0.0)
+    assert rule.resend_due(0.99) is False
+    assert rule.resend_due(1.0) is True and rule.resent == 1
+    assert rule.resend_due(1.5) is False  # (a period from the re-send)
+    assert rule.resend_due(2.0) is True and rule.resent == 2
+    assert rule.tick(10.01, 10.0) is True  # the deadline still counts from the first sending
+    assert rule.resend_due(20.0) is False  # (the fallback moves on: the next state is published)
+    rule.published(20.0)  # step 1 after the fallback: the loop is still open
+    assert rule.resend_due(21.0) is True and rule.resent == 3
+    assert rule.couple("u1", can_step=True) == ("u1", 1) and rule.closed
+    rule.published(21.1)
+    assert rule.resend_due(1e6) is False and rule.resent == 3  # closed: every hop has delivered
+    rule.reset()  # a new run: open again
+    assert not rule.closed and rule.resent == 0
+    rule.published(0.0)
+    assert rule.resend_due(1.0) is True
+
+
+def test_a_couple_kept_while_paused_closes_the_loop_and_a_stopped_run_sends_nothing() -> None:
+    rule = LockStep(resend=1.0)
+    rule.published(0.0)
+    rule.couple("u0", can_step=False)
+    assert rule.closed and rule.resend_due(5.0) is False
+    rule.reset()
+    rule.published(0.0)
+    rule.stop()  # (finished or failed)
+    assert rule.resend_due(5.0) is False
+
+
+def test_answered_recognises_the_same_message_only() -> None:
+    answered = Answered()
+    assert not answered.again(b"state 1") and not answered.again(None)
+    answered.keep(b"state 1", b"contact 1")
+    assert answered.again(bytes(b"state 1")) and answered.answer == b"contact 1"  # (equal, not the same object)
+    assert not answered.again(b"state 1 of another rod")  # (same step and stamp, other content: no repeat)
+    answered.keep(b"state 2", b"contact 2")
+    assert not answered.again(b"state 1")  # only the newest is kept
+    answered.reset()
+    assert not answered.again(b"state 2") and answered.answer == b""
 
 
 def test_wall_clock_counts_every_period_lost_once() -> None:

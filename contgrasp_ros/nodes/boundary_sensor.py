@@ -3,7 +3,9 @@
 Every rod state is sensed and its contact state published for the loop (``/contgrasp/contact``);
 the contact states of the simulator's sampled rod states (``/contgrasp/rod_state/sampled``: the
 same steps, whichever of the two arrives first) go out again on ``/contgrasp/contact/sampled``,
-the observers' stream.
+the observers' stream. A rod state taken again (the simulator re-sends the state its loop waits
+for until the loop closes) is answered again with the contact state published for it, not
+sensed twice (:class:`~contgrasp_ros.lockstep.Answered`; a new object forgets it).
 
 Thin wrapper of :func:`contgrasp_core.contact.sense` of the rod state's arm shape (paper eqs.
 (4), (5), Definition 1; the object's ``Boundary.project``). When the object moves, the rod state
@@ -28,6 +30,7 @@ from contgrasp_msgs.msg import ContactState, RodState
 from contgrasp_ros import qos, topics
 from contgrasp_ros.cdr import Codec, MessageView
 from contgrasp_ros.convert import RodArrays, contact_fields, require_finite, rod_state_arrays
+from contgrasp_ros.lockstep import Answered
 from contgrasp_ros.runtime import (
     Diagnostics,
     DropCounter,
@@ -58,9 +61,11 @@ class BoundarySensor(Node):
         # The latched object and the first rod state race (e.g. on one executor): a state that
         # arrives first is kept and sensed as soon as the object is there, so the lock-step
         # simulator is not left waiting for its first couple.
-        self.waiting: tuple[MessageView | RodState, RodArrays] | None = None  # (a decoded or typed message)
+        # (a decoded or typed message, its arrays, the message as it came)
+        self.waiting: tuple[MessageView | RodState, RodArrays, bytes | RodState] | None = None
         self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._sense_waiting)
         self.sensed = 0
+        self.answered = Answered()  # (the rod state sensed last and its contact state)
         # the contact states last published (the sampled announcement of a state can arrive after
         # the next states: the executor takes the per-step topic first) and a sampled step
         # announced before its state was sensed
@@ -79,6 +84,9 @@ class BoundarySensor(Node):
     def on_rod_state(self, data: bytes | RodState) -> None:
         """Validate a rod state (serialized, or a message) and sense it (or keep it until the
         object is known)."""
+        if self.answered.again(data):  # (a state sent again: the controller may not have had its answer)
+            self.pub.publish(self.answered.answer)
+            return
         try:
             msg = self.rod_codec.message(data)
             rod = rod_state_arrays(msg)
@@ -87,13 +95,13 @@ class BoundarySensor(Node):
             self.drops.drop_error(topics.ROD_STATE, exc)
             return
         if self.object.boundary is None:
-            if self.waiting is not None:
+            if self.waiting is not None and self.waiting[2] != data:  # (not the same state sent again)
                 self.drops.drop(topics.ROD_STATE, "no object yet", "a newer rod state arrived before the object")
-            self.waiting = (msg, rod)
+            self.waiting = (msg, rod, data)
             return
-        self._sense(msg, rod)
+        self._sense(msg, rod, data)
 
-    def _sense(self, msg: Any, rod: RodArrays) -> None:
+    def _sense(self, msg: Any, rod: RodArrays, data: bytes | RodState) -> None:
         boundary = self.object.boundary
         assert boundary is not None  # (sensed only once the object is known)
         try:
@@ -104,6 +112,7 @@ class BoundarySensor(Node):
             return
         out = self.contact_codec.encode(contact_fields(state, msg.header, rod.step))
         self.pub.publish(out)
+        self.answered.keep(data, out)
         self.sensed += 1
         self.recent.append((rod.step, out))
         if self.sampled_step is not None and rod.step >= self.sampled_step:
@@ -131,6 +140,8 @@ class BoundarySensor(Node):
         # (else an older state this node never sensed: dropped or lost on the way, nothing to republish)
 
     def _sense_waiting(self) -> None:
+        """A new object: sense the state kept until it came; a state taken again is sensed anew."""
+        self.answered.reset()
         waiting, self.waiting = self.waiting, None
         if waiting is not None:
             self._sense(*waiting)

@@ -5,7 +5,9 @@ core-only closed loop calls, so a lock-step ROS run reproduces it exactly. Gains
 the adaptive mu2 of Appendix IV, the law's length unit) are parameters; a change takes effect
 at the next contact message (a set that gives unusable gains is refused). The rod geometry
 parameters (read-only) must match the simulator's. Malformed contact states, bad stamps and
-states of another rod size are dropped and counted (``/diagnostics``).
+states of another rod size are dropped and counted (``/diagnostics``). A contact state taken
+again (the answer to a rod state the simulator re-sent) is answered again with the couple
+published for it, not computed twice (:class:`~contgrasp_ros.lockstep.Answered`).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros import qos, topics
 from contgrasp_ros.cdr import Codec
 from contgrasp_ros.convert import MessageError, contact_arrays, couple_fields, require_finite
+from contgrasp_ros.lockstep import Answered
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import (
     Diagnostics,
@@ -62,6 +65,7 @@ class GraspController(Node):
         # the loop's messages go in and out serialized (contgrasp_ros.cdr); a typed message
         # passed to on_contact directly works too
         self.contact_codec, self.couple_codec = Codec(ContactState), Codec(CoupleControl)
+        self.answered = Answered()  # (the contact state answered last and its couple)
         self.pub = self.create_publisher(CoupleControl, topics.COUPLE, qos.STREAM)
         self.create_subscription(ContactState, topics.CONTACT, self.on_contact, qos.STREAM, raw=True)
 
@@ -89,6 +93,9 @@ class GraspController(Node):
     def on_contact(self, data: bytes | ContactState) -> None:
         """Validate a contact state (serialized, or a message) and answer it with the couple
         (echoing its stamp and step)."""
+        if self.answered.again(data):  # (the answer to a state sent again: the simulator may not have had the couple)
+            self.pub.publish(self.answered.answer)
+            return
         try:
             msg = self.contact_codec.message(data)
             c = contact_arrays(msg)
@@ -103,7 +110,9 @@ class GraspController(Node):
         except ContgraspError as exc:
             self.drops.drop_error(topics.CONTACT, exc)
             return
-        self.pub.publish(self.couple_codec.encode(couple_fields(self.model.joint_s, u, msg.header, c.step)))
+        out = self.couple_codec.encode(couple_fields(self.model.joint_s, u, msg.header, c.step))
+        self.pub.publish(out)
+        self.answered.keep(data, out)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -10,7 +10,9 @@ rod-state subscriber and a couple publisher; always at least ``min_subscribers``
 the two rod-state topics together;
 after ``peer_timeout`` wall seconds it goes out anyway), so a graph started by hand runs like the launcher's. Lock-step
 mode (default): state k is published and the rod advances only when the couple stamped with
-step k arrives; after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
+step k arrives; until the run's first couple the awaited state is published again every
+second (a peer whose reader matched after it went out never got it; a couple equal to the one
+taken, the answer to a repeat, is ignored); after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
 couple or apply ``zero``) is used, the miss is counted and a warning logged. Free-running mode
 advances every ``control_period`` of wall time with the latest couple, from the run's first
 couple on (the loop closed: a controller's first answer can take a few milliseconds more than
@@ -74,7 +76,7 @@ from contgrasp_msgs.srv import ApplyWrench
 from contgrasp_ros import qos, topics
 from contgrasp_ros.cdr import Codec
 from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, rod_state_fields, wrench_arrays
-from contgrasp_ros.lockstep import CoupleWait, LockStep, Peers, StartGate, WallClock
+from contgrasp_ros.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
 from contgrasp_ros.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.runtime import (
@@ -152,6 +154,7 @@ class RodSimulator(Node):
                             "anyway (0 = wait forever)", lo=0.0, hi=1e6, read_only=True),
         )
         self.rule = LockStep()
+        self.taken = Answered()  # (lock-step: the couple taken last)
         assert self.config.control_period is not None  # (declared above with lo > 0)
         self.wall = WallClock(self.config.control_period)  # (free-running mode's deadlines)
         self.wait = CoupleWait(wait=not self.lockstep and couple_wait > 0)
@@ -240,6 +243,7 @@ class RodSimulator(Node):
         self.session = LoopSession(self.system, self.config)
         self.last_couple: np.ndarray | FeedbackExpansion = np.zeros(self.model.n_elements)
         self.rule.reset()
+        self.taken.reset()
         self.wall.reset()
         self.wait.reset()
         self.next_t: dict[str, float] = {}  # simulated time of the next /clock, sampled state, markers
@@ -276,6 +280,7 @@ class RodSimulator(Node):
             self.pub_clock.publish(ClockMsg(clock=header.stamp))
         state = self.state_codec.encode(rod_state_fields(obs, header, centroid, wrench))
         self.pub_state.publish(state)  # (the loop's first: the sensor is waiting for it)
+        self.sent = state  # (sent again while the loop has not closed: LockStep.resend_due)
         if self._due("sample_period", obs.t, final=True):
             self.pub_sampled.publish(state)
         self._publish_object_motion(obs, header)
@@ -377,6 +382,8 @@ class RodSimulator(Node):
     def on_couple(self, data: bytes | CoupleControl) -> None:
         """Validate a couple (serialized, or a message); in lock-step advance with the couple
         answering the current step."""
+        if self.lockstep and self.taken.again(data):
+            return  # a second answer to a state sent twice (LockStep.resend_due): taken already
         try:
             msg = self.couple_codec.message(data)
             step, s, u = couple_arrays(msg)
@@ -399,6 +406,9 @@ class RodSimulator(Node):
                 self._end_wait()
                 self._advance(u)
             return
+        self.taken.keep(data)
+        if self.rule.resent and not self.rule.closed:
+            self.get_logger().info(f"the loop closed at step {step} after {self.rule.resent} re-send(s) of its state")
         now, ended = self.rule.couple(u, self._can_step())
         if ended:
             self.get_logger().info(f"couples are back at step {step} after {ended} missed deadlines ({self.missed} in total)")
@@ -436,7 +446,14 @@ class RodSimulator(Node):
                 assert self._wait_over is not None  # (a tick waits only with couple_wait > 0)
                 self._wait_over.reset()
             return
-        if self.rule.tick(time.monotonic(), self.get_parameter("couple_timeout").value):
+        now = time.monotonic()
+        if self.rule.resend_due(now):
+            if self.rule.resent == 1:  # (once per run; the couple that closes the loop says how many)
+                self.get_logger().info(f"step {self.session.k} unanswered after {self.rule.resend:g} s: publishing it "
+                                       f"again every {self.rule.resend:g} s until the loop closes (a peer's reader may "
+                                       "have matched after it went out)")
+            self.pub_state.publish(self.sent)
+        if self.rule.tick(now, self.get_parameter("couple_timeout").value):
             fallback = self.get_parameter("timeout_fallback").value
             if self.rule.first_of_outage:  # once per outage; its length is reported when couples return
                 self.get_logger().warn(
