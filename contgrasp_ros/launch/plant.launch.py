@@ -3,8 +3,9 @@ with record:=true), for your own controller on /contgrasp/contact -> /contgrasp/
 
     ros2 launch contgrasp_ros plant.launch.py [object:=...] [record:=true] [rviz:=true] ...
 
-The simulator waits for a couple publisher before step 0 (peer_timeout); the arguments are those
-of paper_grasp.launch.py (lockstep:=false by default here).
+The simulator waits for its peers, a couple publisher among them, before step 0 (up to its
+peer_timeout) and sends step 0 again until the loop closes; the arguments are those of
+paper_grasp.launch.py (lockstep:=false by default here).
 """
 
 from launch import LaunchDescription

@@ -5,7 +5,7 @@ couple control.
 
 Thin wrapper of :class:`contgrasp_core.rod.session.LoopSession` (the same stepping the
 core-only closed loop uses); the stepping rules are :mod:`contgrasp_ros.lockstep`. Step 0 goes
-out once the loop's peers are matched (lock-step with ``wait_for_peers``, the default: a
+out once the loop's peers are matched (``wait_for_peers``, the default: a
 rod-state subscriber and a couple publisher; always at least ``min_subscribers`` subscribers of
 the two rod-state topics together;
 after ``peer_timeout`` wall seconds it goes out anyway), so a graph started by hand runs like the launcher's. Lock-step
@@ -147,9 +147,10 @@ class RodSimulator(Node):
                 "rod state topics, per step and sampled together (a restarted simulator: its first state is not "
                 "lost while they reconnect)", lo=0, hi=1000)
         self.gate = StartGate(
-            wait_for_peers=declare(self, "wait_for_peers", True, "lock-step: publish step 0 only once a rod-state "
-                                   "subscriber (the sensor) and a couple publisher (the controller) are matched",
-                                   read_only=True) and self.lockstep,
+            wait_for_peers=declare(self, "wait_for_peers", True, "publish step 0 only once a rod-state subscriber "
+                                   "(the sensor) and a couple publisher (the controller) are matched (also on the wall "
+                                   "clock: a controller started later, plant.launch.py's, closes the loop)",
+                                   read_only=True),
             timeout=declare(self, "peer_timeout", 30.0, "wall seconds to wait for the peers before publishing step 0 "
                             "anyway (0 = wait forever)", lo=0.0, hi=1e6, read_only=True),
         )
@@ -428,7 +429,9 @@ class RodSimulator(Node):
         if not self.lockstep:
             if not self.loop_closed:
                 timeout = self.get_parameter("couple_timeout").value
-                if self.rule.waiting_since is not None and time.monotonic() - self.rule.waiting_since <= timeout:
+                now = time.monotonic()
+                if self.rule.waiting_since is not None and now - self.rule.waiting_since <= timeout:
+                    self._resend_if_due(now)
                     return  # (the schedule starts with the first couple)
                 self.get_logger().warn(f"no couple within {timeout:g} s of the first state: free-running without one")
                 self.loop_closed = True
@@ -447,12 +450,7 @@ class RodSimulator(Node):
                 self._wait_over.reset()
             return
         now = time.monotonic()
-        if self.rule.resend_due(now):
-            if self.rule.resent == 1:  # (once per run; the couple that closes the loop says how many)
-                self.get_logger().info(f"step {self.session.k} unanswered after {self.rule.resend:g} s: publishing it "
-                                       f"again every {self.rule.resend:g} s until the loop closes (a peer's reader may "
-                                       "have matched after it went out)")
-            self.pub_state.publish(self.sent)
+        self._resend_if_due(now)
         if self.rule.tick(now, self.get_parameter("couple_timeout").value):
             fallback = self.get_parameter("timeout_fallback").value
             if self.rule.first_of_outage:  # once per outage; its length is reported when couples return
@@ -461,6 +459,15 @@ class RodSimulator(Node):
                     f"until couples arrive again ({self.missed} missed deadlines so far)"
                 )
             self._advance(self.last_couple if fallback == "hold" else np.zeros(self.model.n_elements))
+
+    def _resend_if_due(self, now: float) -> None:
+        """Until the loop's first couple, the awaited state again every ``LockStep.resend`` seconds."""
+        if self.rule.resend_due(now):
+            if self.rule.resent == 1:  # (once per run; the couple that closes the loop says how many)
+                self.get_logger().info(f"step {self.session.k} unanswered after {self.rule.resend:g} s: publishing it "
+                                       f"again every {self.rule.resend:g} s until the loop closes (a peer's reader may "
+                                       "have matched after it went out)")
+            self.pub_state.publish(self.sent)
 
     @guarded("timer")
     def on_wait_over(self) -> None:
