@@ -137,7 +137,10 @@ def test_four_nodes_by_hand_without_parameters_give_the_paper_grasp_bitwise(grap
     # this test's probe, a participant older than the graph that Fast DDS may announce only
     # after a few seconds; step 0 waits until it hears the run)
     graph.start("rod_simulator", "--ros-args", "-p", "min_subscribers:=3")
-    time.sleep(1.0)  # a person starting the next terminal
+    # a person starting the next terminal once the simulator is up (on a busy machine its start-up
+    # took longer than a fixed second, and the peers were there before it looked for them)
+    assert graph.spin_until(lambda: graph.node.count_publishers(topics.ROD_STATE) > 0, timeout=120)
+    time.sleep(1.0)
     for node in ("grasp_quality", "grasp_controller", "boundary_sensor"):
         graph.start(node)
     assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.status
