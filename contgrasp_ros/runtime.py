@@ -602,11 +602,10 @@ class GuardedSpin:
             self.streak = 0
 
 
-def _ignore_stop_signals() -> None:
-    """From here on SIGINT and SIGTERM do nothing (the process is already stopping)."""
+def _ignore_interrupts() -> None:
+    """From here on SIGINT does nothing (the process is already stopping)."""
     if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, signal.SIG_IGN)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
@@ -677,7 +676,8 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
     finally:
         # A second SIGINT must not cut the clean-up short (a recorder finalising its file): a
         # terminal's Ctrl-C reaches every process and ros2 launch forwards one more to each child.
-        _ignore_stop_signals()
+        # (SIGTERM still ends the process: what launchers escalate to when a clean-up hangs.)
+        _ignore_interrupts()
         for node in nodes:
             node.destroy_node()
             code = max(code, int(getattr(node, "exit_code", 0)))  # a failure during the node's own clean-up
