@@ -200,7 +200,8 @@ MAX_GAP_S = 1.5
 def test_four_nodes_by_hand_in_any_order_with_any_gaps_never_lose_step_0(graph: Graph, paper_core: Any, run: int) -> None:
     """Issue 30: the four executables, no parameter file, started in a shuffled order 0-1.5 s
     apart: step 0 reaches the loop every time (no couple timeout, no fallback), so the run is
-    the core loop's bit for bit with zero missed deadlines, whichever node comes last."""
+    the core loop's bit for bit with zero missed deadlines, whichever node comes last; every
+    node then exits by itself with status 0."""
     rng = random.Random(f"{BY_HAND_SEED}:{run}")
     order = list(NODES)
     rng.shuffle(order)
@@ -208,14 +209,15 @@ def test_four_nodes_by_hand_in_any_order_with_any_gaps_never_lose_step_0(graph: 
     plan = f"seed {BY_HAND_SEED} run {run}: " + ", ".join(f"{node} +{gap:.2f} s" for node, gap in starts)
     print(f"by hand, {plan} (replay: CONTGRASP_BY_HAND_SEED={BY_HAND_SEED} -k 'never_lose_step_0 and [{run}]')")
     for node, gap in starts:
-        # (min_subscribers 3: this test's probe too, as above, so it hears the run to its end)
-        graph.start(node, *(("--ros-args", "-p", "min_subscribers:=3") if node == "rod_simulator" else ()))
+        # (min_subscribers 3: this test's probe too, as above, so it hears the run to its end;
+        # on_finish exit: every node ends itself when the run is over, as in the test above)
+        graph.start(node, "--ros-args", "-p", "on_finish:=exit",
+                    *(("-p", "min_subscribers:=3") if node == "rod_simulator" else ()))
         time.sleep(gap)  # a person starting the next terminal
     assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), (plan, graph.status)
-    # the final state, and every node up (the last one started may still be starting: stopped
-    # by close() only once it is, as a person would press Ctrl-C)
-    assert graph.spin_until(lambda: graph.last is not None and graph.last.step == int(graph.status["step"])
-                            and set(NODES) <= set(graph.node.get_node_names()), timeout=60), plan
+    assert graph.spin_until(lambda: graph.last is not None and graph.last.step == int(graph.status["step"]), timeout=60), plan
+    assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=120,
+                            stop_on_failure=False), (plan, {n: p.poll() for n, p in graph.procs.items()})
     sim_log = graph.output("rod_simulator")
     assert "no couple for step" not in sim_log, (plan, sim_log[-3000:])  # no stall, no fallback
     print(next((line for line in sim_log.splitlines() if "the loop closed" in line), "step 0 answered at once"))
