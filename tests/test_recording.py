@@ -9,6 +9,8 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -619,29 +621,37 @@ def test_replay_window_and_loop(tmp_path: Path) -> None:
     assert bad.returncode == 2 and "rate" in bad.stderr
 
 
-def test_recorder_finalises_through_repeated_ctrl_c(tmp_path: Path) -> None:
-    """Ctrl-C under ros2 launch reaches a node twice (the terminal's and the one launch forwards):
-    later SIGINTs during the clean-up are ignored, so the node exits 0 with no traceback and the
-    recording is complete (before: a KeyboardInterrupt traceback mid-clean-up, exit -2)."""
-    env = ros_env(fresh_domain_id())
-    rec = _recorder(tmp_path / "bag", env)
+@contextmanager
+def _after_300_states(rec: subprocess.Popen[str], env: dict[str, str]) -> Iterator[None]:
+    """Publish 300 rod states to the running recorder ``rec``; the block runs once they are out;
+    afterwards nothing of the test is left running."""
     pub = subprocess.Popen([sys.executable, "-c", PUBLISHER, "300", "-1"], env=env, stdout=subprocess.PIPE, text=True)
     try:
         assert pub.stdout is not None
         while int(pub.stdout.readline().split()[0]) < 299:
             pass
         time.sleep(0.5)
+        yield
+    finally:
+        for p in (pub, rec):
+            if p.poll() is None:
+                p.kill()
+                p.wait(timeout=30)
+
+
+def test_recorder_finalises_through_repeated_ctrl_c(tmp_path: Path) -> None:
+    """Ctrl-C under ros2 launch reaches a node twice (the terminal's and the one launch forwards):
+    later SIGINTs during the clean-up are ignored, so the node exits 0 with no traceback and the
+    recording is complete (before: a KeyboardInterrupt traceback mid-clean-up, exit -2)."""
+    env = ros_env(fresh_domain_id())
+    rec = _recorder(tmp_path / "bag", env)
+    with _after_300_states(rec, env):
         for _ in range(20):  # a burst that covers the recorder's clean-up
             if rec.poll() is not None:
                 break
             rec.send_signal(signal.SIGINT)
             time.sleep(0.01)
         out, _ = rec.communicate(timeout=30)
-    finally:
-        for p in (pub, rec):
-            if p.poll() is None:
-                p.kill()
-                p.wait(timeout=30)
     assert rec.returncode == 0 and "Traceback" not in out and "KeyboardInterrupt" not in out, out[-3000:]
     steps = [m.step for _, m in iter_decoded(open_recording(tmp_path / "bag"), ["/contgrasp/rod_state"])]
     assert steps == list(range(300))
@@ -651,19 +661,9 @@ def test_recorder_finalises_on_sigterm(tmp_path: Path) -> None:
     """(With a split every 0.2 s: the messages span several files, none lost at the splits.)"""
     env = ros_env(fresh_domain_id())
     rec = _recorder(tmp_path / "bag", env, "-p", "max_bag_duration:=0.2")
-    pub = subprocess.Popen([sys.executable, "-c", PUBLISHER, "300", "-1"], env=env, stdout=subprocess.PIPE, text=True)
-    try:
-        assert pub.stdout is not None
-        while int(pub.stdout.readline().split()[0]) < 299:
-            pass
-        time.sleep(0.5)
+    with _after_300_states(rec, env):
         rec.send_signal(signal.SIGTERM)
         assert rec.wait(timeout=30) == 0
-    finally:
-        for p in (pub, rec):
-            if p.poll() is None:
-                p.kill()
-                p.wait(timeout=30)
     rec_ = open_recording(tmp_path / "bag")
     assert len(rec_.files) >= 3  # 300 messages 2 ms apart (and more) in 0.2 s files
     steps = [m.step for _, m in iter_decoded(rec_, ["/contgrasp/rod_state"])]
