@@ -8,6 +8,7 @@ the executor, with a tqdm progress bar on request, so every executor gives the s
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any, TypeVar
 
 from .errors import InvalidParameterError, MissingDependencyError
@@ -22,8 +23,8 @@ T = TypeVar("T")
 def run_tasks(task: Callable[[Any], T], items: Sequence[Any], executor: str = "serial", *, workers: int | None = None,
               scheduler: str | None = None, progress: str | None = None, unit: str = "task") -> Iterator[T]:
     """``task(item)`` for each item, yielded in order as they complete in order: ``serial``,
-    ``processes`` (a pool of ``workers``, forked where the platform can; interrupted or failed,
-    it ends its workers at once) or ``dask`` (the cluster at ``scheduler``).
+    ``processes`` (``workers`` processes, forked where the platform can; interrupted or failed,
+    it ends them at once) or ``dask`` (the cluster at ``scheduler``).
     ``progress``: the description of a progress bar (None: no bar)."""
     if executor not in EXECUTORS:
         raise InvalidParameterError(f"unknown executor {executor!r}: serial, processes or dask")
@@ -44,12 +45,102 @@ def run_tasks(task: Callable[[Any], T], items: Sequence[Any], executor: str = "s
             bar.close()
 
 
-def _ignore_interrupts() -> None:
-    """A pool worker leaves SIGINT to its parent (a terminal's Ctrl-C reaches the whole process
-    group): the parent stops them, and no worker prints a KeyboardInterrupt traceback."""
+def _worker(task: Callable[[Any], Any], conn: Any) -> None:
+    """A pool worker: leaves SIGINT to its parent (a terminal's Ctrl-C reaches the whole process
+    group; the parent ends the workers, and no worker prints a KeyboardInterrupt traceback), then
+    answers ``(index, item)`` with ``(index, ok, result or exception)`` until it reads None."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    while (message := conn.recv()) is not None:
+        index, item = message
+        try:
+            conn.send((index, True, task(item)))
+        except Exception as exc:  # noqa: BLE001 - the parent raises it
+            try:
+                conn.send((index, False, exc))
+            except Exception:  # noqa: BLE001 - an exception that does not pickle
+                conn.send((index, False, RuntimeError(f"{type(exc).__name__}: {exc}")))
+
+
+@contextmanager
+def _interrupts_deferred() -> Iterator[None]:
+    """SIGINT blocked while the workers are forked: they start with it blocked (and ignore it
+    before unblocking), and a Ctrl-C meanwhile reaches the parent afterwards."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _pool_results(task: Callable[[Any], T], items: Sequence[Any], workers: int | None) -> Iterator[T]:
+    """The ``processes`` executor: one pipe per worker and no lock shared between processes, so
+    that ending the workers (Ctrl-C, a failed task, the consumer stopping) cannot deadlock, as
+    :class:`multiprocessing.pool.Pool` can when it terminates a worker that holds its queue's lock;
+    a worker that dies is reported instead of waited for."""
+    import multiprocessing as mp
+    import os
+    from multiprocessing.connection import wait
+
+    if not items:
+        return
+    # fork where the platform has it (the workers inherit the loaded modules); spawn on Windows
+    ctx: Any = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
+    size = max(1, min(workers or os.cpu_count() or 1, len(items)))
+    procs: dict[Any, Any] = {}  # the parent's end of each worker's pipe -> its process
+    finished = False
+    try:
+        with _interrupts_deferred():
+            for _ in range(size):
+                mine, theirs = ctx.Pipe()
+                proc = ctx.Process(target=_worker, args=(task, theirs), daemon=True)
+                proc.start()
+                theirs.close()
+                procs[mine] = proc
+        pending = iter(enumerate(items))
+        busy = set()  # the workers with an item to answer
+        for conn in procs:
+            conn.send(next(pending))
+            busy.add(conn)
+        done: dict[int, T] = {}
+        following = 0
+        while following < len(items):
+            ready: list[Any] = wait(list(busy))
+            for conn in ready:
+                try:
+                    index, ok, value = conn.recv()
+                except EOFError:  # its end of the pipe closed: the worker is ending
+                    procs[conn].join(timeout=5)
+                    raise RuntimeError(f"a worker process ended with exit code {procs[conn].exitcode} "
+                                       "before answering") from None
+                if not ok:
+                    raise value
+                done[index] = value
+                following_item = next(pending, None)
+                conn.send(following_item)  # None: no item left, the worker ends
+                if following_item is None:
+                    busy.discard(conn)
+            while following in done:
+                yield done.pop(following)
+                following += 1
+        finished = True
+    finally:
+        for conn, proc in procs.items():
+            if not finished:  # Ctrl-C, a failed task or the consumer stopping: end the workers now
+                proc.terminate()
+            proc.join(timeout=5)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+            conn.close()
 
 
 def _results(task: Callable[[Any], T], items: Sequence[Any], executor: str, workers: int | None,
@@ -58,22 +149,7 @@ def _results(task: Callable[[Any], T], items: Sequence[Any], executor: str, work
         for item in items:
             yield task(item)
     elif executor == "processes":
-        import multiprocessing as mp
-
-        # fork where the platform has it (the workers inherit the loaded modules); spawn on Windows
-        method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
-        pool = mp.get_context(method).Pool(workers, initializer=_ignore_interrupts)
-        try:
-            yield from pool.imap(task, items)
-        except BaseException:
-            # Ctrl-C (or a failed task, or the consumer stopping): end the workers now; a pool
-            # that waits for its busy workers is what made the study hang on the first Ctrl-C
-            pool.terminate()
-            raise
-        else:
-            pool.close()
-        finally:
-            pool.join()
+        yield from _pool_results(task, items, workers)
     else:
         try:
             from distributed import Client

@@ -180,7 +180,11 @@ def _summary(result: dict[str, Any]) -> str:
 
 def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] | None = None) -> int:
     """Entry point of the ``contgrasp`` command; returns the process exit code."""
-    parser = build_parser(extra)
+    try:  # the subcommands' modules load here: a Ctrl-C meanwhile ends as one during a command does
+        parser = build_parser(extra)
+    except KeyboardInterrupt:
+        print("contgrasp: interrupted", file=sys.stderr)
+        return 130
     args, unknown = parser.parse_known_args(argv)
     command = " ".join(c for c in (args.command, getattr(args, "bag_command", None)) if c)
     if unknown:  # argparse would name the top-level parser; the subcommand's help is the one to read
