@@ -38,7 +38,7 @@ SECTION = "churn_memory"
 PEER = """
 import sys, rclpy
 from contgrasp_msgs.msg import ContactState, RodState
-from contgrasp_ros import qos, topics
+from contgrasp_ros.plumbing import qos, topics
 rclpy.init()
 node = rclpy.create_node("churn_peer")
 pub = node.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)

@@ -5,7 +5,7 @@ process (this script with ``--echo``) republishes every message it takes on ``/h
 pinger waits for each echo before sending the next, as the lock-step loop does. For each
 variant - rclpy's SingleThreadedExecutor, contgrasp's LeanExecutor (both ends alike), and the
 LeanExecutor with serialized messages (``raw=True`` subscriptions and ``publish`` of the bytes,
-as the loop's nodes do: contgrasp_ros.cdr) - the round trip's median and the CPU time per
+as the loop's nodes do: contgrasp_ros.plumbing.cdr) - the round trip's median and the CPU time per
 message of each end are reported, and the ratios in the same run. Everything stays on loopback with its own ROS_DOMAIN_ID.
 
     AMENT_PREFIX_PATH=.venv .venv/bin/python benchmarks/hop.py [--messages 3000] [--repeat 3]
@@ -30,7 +30,7 @@ N_NODES = 101
 def _executor(kind: str):  # type: ignore[no-untyped-def]
     from rclpy.executors import SingleThreadedExecutor
 
-    from contgrasp_ros.executor import LeanExecutor
+    from contgrasp_ros.plumbing.executor import LeanExecutor
 
     return SingleThreadedExecutor() if kind == "rclpy" else LeanExecutor()
 
@@ -52,7 +52,7 @@ def echo(kind: str) -> None:
     from rclpy.node import Node
 
     from contgrasp_msgs.msg import RodState
-    from contgrasp_ros import qos
+    from contgrasp_ros.plumbing import qos
 
     rclpy.init()
     node = Node("hop_echo")
@@ -85,7 +85,7 @@ def ping(kind: str, messages: int, domain: int) -> dict[str, float]:
     from rclpy.serialization import serialize_message
 
     from contgrasp_msgs.msg import RodState
-    from contgrasp_ros import qos
+    from contgrasp_ros.plumbing import qos
 
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     proc = subprocess.Popen([sys.executable, __file__, "--echo", kind], env=env, stdout=subprocess.PIPE, text=True)

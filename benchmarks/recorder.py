@@ -41,7 +41,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from contgrasp_ros import topics
+from contgrasp_ros.plumbing import topics
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
@@ -90,7 +90,7 @@ def publisher(rate: float, count: int, match_timeout: float, settle: float, drai
     from rclpy.qos import QoSProfile
     from rclpy.serialization import serialize_message
 
-    from contgrasp_ros import qos
+    from contgrasp_ros.plumbing import qos
 
     rclpy.init()
     node = rclpy.create_node("recorder_bench_publisher")

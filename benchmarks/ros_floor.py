@@ -2,7 +2,7 @@
 nothing but the loop's own work.
 
 Three bare rclpy nodes (the project's lean executor, QoS and serialized messages,
-`contgrasp_ros.cdr`) do only what the loop needs: the simulator advances the rod
+`contgrasp_ros.plumbing.cdr`) do only what the loop needs: the simulator advances the rod
 (`LoopSession`) and publishes its state, the sensor senses it (`contact.sense`), the controller
 answers with the law's expansion (`control.feedback_at_joints`). No validation, stamp rule,
 diagnostics, sampled streams, /clock or markers: what is left is the middleware, the process
@@ -46,9 +46,9 @@ def node_main(roles: list[str]) -> None:
     from contgrasp_core.rod.session import LoopSession, preload
     from contgrasp_core.scenario import PAPER
     from contgrasp_msgs.msg import ContactState, CoupleControl, RodState
-    from contgrasp_ros import qos
-    from contgrasp_ros.cdr import Codec
-    from contgrasp_ros.executor import LeanExecutor
+    from contgrasp_ros.plumbing import qos
+    from contgrasp_ros.plumbing.cdr import Codec
+    from contgrasp_ros.plumbing.executor import LeanExecutor
 
     rclpy.init()
     ex = LeanExecutor()

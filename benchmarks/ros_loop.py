@@ -44,8 +44,8 @@ import yaml
 
 from contgrasp_core.rod.session import run_sampled
 from contgrasp_core.scenario import PAPER
-from contgrasp_ros.events import read_events
-from contgrasp_ros.launcher import default_params_file
+from contgrasp_ros.launcher.events import read_events
+from contgrasp_ros.launcher.cli import default_params_file
 
 
 COMPOSE = ("--compose", "boundary_sensor,grasp_controller,grasp_quality")

@@ -67,9 +67,9 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from contgrasp_ros import topics  # noqa: E402
-from contgrasp_ros.launch_handle import LaunchHandle  # noqa: E402
-from contgrasp_ros.launcher import default_params_file  # noqa: E402
+from contgrasp_ros.plumbing import topics# noqa: E402
+from contgrasp_ros.launcher.launch_handle import LaunchHandle  # noqa: E402
+from contgrasp_ros.launcher.cli import default_params_file  # noqa: E402
 
 SIM = "rod_simulator"
 KILLABLE = ("boundary_sensor", "grasp_controller", "grasp_quality")

@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from contgrasp_ros import cli_analyze
+from contgrasp_ros.recordings import cli_analyze
 from contgrasp_ros.layer import guarded
 
 __all__ = ["register", "qos_text"]
@@ -84,7 +84,7 @@ def _bag_recover(args: argparse.Namespace) -> dict[str, Any]:
 
 @guarded
 def _replay(args: argparse.Namespace) -> dict[str, Any]:
-    from contgrasp_ros.replay import replay
+    from contgrasp_ros.recordings.replay import replay
 
     return replay(args.bag, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start, end=args.end, delay=args.delay)
 

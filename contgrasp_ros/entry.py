@@ -33,11 +33,11 @@ def _entry(module: str) -> Callable[[], int]:
     return main
 
 
-launcher = _entry("contgrasp_ros.launcher")
+launcher = _entry("contgrasp_ros.launcher.cli")
 rod_simulator = _entry("contgrasp_ros.nodes.rod_simulator")
 boundary_sensor = _entry("contgrasp_ros.nodes.boundary_sensor")
 grasp_controller = _entry("contgrasp_ros.nodes.grasp_controller")
 grasp_quality = _entry("contgrasp_ros.nodes.grasp_quality")
 foxglove_bridge = _entry("contgrasp_ros.nodes.foxglove_bridge")
 mcap_recorder = _entry("contgrasp_ros.nodes.mcap_recorder")
-container = _entry("contgrasp_ros.container")
+container = _entry("contgrasp_ros.nodes.container")

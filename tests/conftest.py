@@ -84,7 +84,7 @@ def make(ros_context):  # type: ignore[no-untyped-def]
 
 class Sink:
     """Stands in for a node's publisher: keeps what would have been published (and has no
-    subscribers). A serialized message (the loop's nodes publish bytes, contgrasp_ros.cdr) is
+    subscribers). A serialized message (the loop's nodes publish bytes, contgrasp_ros.plumbing.cdr) is
     kept as rclpy's own deserializer reads it as ``msg_type``."""
 
     def __init__(self, msg_type: Any = None) -> None:
@@ -106,7 +106,7 @@ class Sink:
 def pytest_sessionfinish(session, exitstatus):  # type: ignore[no-untyped-def]
     """Leave no Fast DDS shared-memory files of killed test processes in /dev/shm."""
     try:
-        from contgrasp_ros.processes import clean_shared_memory
+        from contgrasp_ros.launcher.processes import clean_shared_memory
     except ImportError:  # (a core-only environment)
         return
     clean_shared_memory()

@@ -19,11 +19,11 @@ from conftest import fresh_domain_id
 
 from contgrasp_core.cli import main
 from contgrasp_core.scenario import PAPER
-from contgrasp_ros import cli_analyze
-from contgrasp_ros.analysis import analyze, load_run, recompute
+from contgrasp_ros.recordings import cli_analyze
+from contgrasp_ros.recordings.analysis import analyze, load_run, recompute
 from contgrasp_ros.bag.reader import iter_decoded, iter_raw, open_recording
 from contgrasp_ros.bag.writer import BagWriter
-from contgrasp_ros.summary import ContactStats, FinalQuality, FinalState, RunSummary, build_summary, contact_stats
+from contgrasp_ros.launcher.summary import ContactStats, FinalQuality, FinalState, RunSummary, build_summary, contact_stats
 
 BIN = Path(sys.executable).parent
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,7 +43,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     ``--duration`` does not reach a separate-process simulator whose section of the file sets it.
     """
     pytest.importorskip("rclpy")
-    from contgrasp_ros.launcher import default_params_file
+    from contgrasp_ros.launcher.cli import default_params_file
 
     d = tmp_path_factory.mktemp("analysis")
     data = yaml.safe_load(default_params_file().read_text())
@@ -144,7 +144,7 @@ def test_analyze_runs_without_ros(recording: tuple[Path, dict], tmp_path: Path) 
         f"for name in {BLOCKED!r}:\n"
         "    sys.modules[name] = None\n"
         "from contgrasp_core.cli import main\n"
-        "from contgrasp_ros import cli_analyze\n"
+        "from contgrasp_ros.recordings import cli_analyze\n"
         f"rc = main(['analyze', {str(bag)!r}, '--json', '--plot', {str(tmp_path / 'p.png')!r}], extra=[cli_analyze.add_parser])\n"
         "leaked = sorted(m for m in sys.modules if m.split('.')[0] in " + repr(BLOCKED) + " and sys.modules[m] is not None)\n"
         "print(json.dumps({'leaked': leaked}))\n"
@@ -321,7 +321,7 @@ def test_holding_under_pushes_recovers_a_known_compliance() -> None:
     and their compliances exactly."""
     import numpy as np
 
-    from contgrasp_ros.analysis import holding_under_pushes
+    from contgrasp_ros.recordings.analysis import holding_under_pushes
 
     t = np.arange(100) * 0.01
     wrench = np.zeros((100, 3))

@@ -31,8 +31,8 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from contgrasp_core.rod.session import run_sampled  # noqa: E402
 from contgrasp_core.scenario import NODES, PAPER  # noqa: E402
 from contgrasp_msgs.msg import RodState  # noqa: E402
-from contgrasp_ros import qos, topics  # noqa: E402
-from contgrasp_ros.launcher import default_params_file  # noqa: E402
+from contgrasp_ros.plumbing import qos, topics# noqa: E402
+from contgrasp_ros.launcher.cli import default_params_file  # noqa: E402
 
 from conftest import fresh_domain_id  # noqa: E402
 
@@ -261,7 +261,7 @@ def test_a_state_sent_again_is_answered_again_and_computed_once(make: Any, monke
     from std_srvs.srv import SetBool
 
     from contgrasp_msgs.msg import ContactState, CoupleControl
-    from contgrasp_ros.convert import boundary_to_msg
+    from contgrasp_ros.plumbing.convert import boundary_to_msg
     from contgrasp_ros.nodes import grasp_controller
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
     from contgrasp_ros.nodes.rod_simulator import RodSimulator
@@ -313,7 +313,7 @@ def test_a_state_sent_again_before_the_object_is_no_drop(make: Any) -> None:
 
     from contgrasp_core.boundary import circle
     from contgrasp_msgs.msg import ContactState
-    from contgrasp_ros.convert import boundary_to_msg
+    from contgrasp_ros.plumbing.convert import boundary_to_msg
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
 
     from conftest import Sink

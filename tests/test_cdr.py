@@ -1,4 +1,4 @@
-"""The loop's serialized messages (contgrasp_ros.cdr) against rclpy's own serializer: what the
+"""The loop's serialized messages (contgrasp_ros.plumbing.cdr) against rclpy's own serializer: what the
 codec writes, rclpy reads as the message it was made from; what rclpy writes, the codec reads
 as that message. Malformed bytes are refused with a reason, and a node that gets them counts the
 drop and goes on."""
@@ -22,8 +22,8 @@ from std_msgs.msg import Header  # noqa: E402
 
 from contgrasp_core.boundary import circle  # noqa: E402
 from contgrasp_msgs.msg import ContactState, CoupleControl, ObjectBoundary, RodState  # noqa: E402
-from contgrasp_ros.cdr import Codec  # noqa: E402
-from contgrasp_ros.convert import MessageError, boundary_to_msg  # noqa: E402
+from contgrasp_ros.plumbing.cdr import Codec  # noqa: E402
+from contgrasp_ros.plumbing.convert import MessageError, boundary_to_msg  # noqa: E402
 
 from conftest import Sink  # noqa: E402
 

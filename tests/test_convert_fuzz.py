@@ -29,7 +29,7 @@ from std_msgs.msg import Header  # noqa: E402
 
 from contgrasp_core.boundary import circle, deformed_circle, ellipse  # noqa: E402
 from contgrasp_core.rod.session import FeedbackExpansion  # noqa: E402
-from contgrasp_ros.convert import (  # noqa: E402
+from contgrasp_ros.plumbing.convert import (  # noqa: E402
     MAX_ABS,
     MessageError,
     boundary_from_msg,

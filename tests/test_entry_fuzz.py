@@ -18,7 +18,7 @@ Accepted, and therefore not fuzzed:
   (NaN), ``GraspQuality.contact_length`` when unknown (NaN), ``ContactState.nu_o`` and
   ``ContactState.foot_turn`` where ``1 + rho kappa_o = 0`` (the ``valid`` flags say so);
 * an optimal-grasp solve that does not converge is a result (``converged=False``), not an error;
-* :func:`contgrasp_ros.analysis.analyze` is fuzzed through its recording path, and its
+* :func:`contgrasp_ros.recordings.analysis.analyze` is fuzzed through its recording path, and its
   overrides of the wrong type are checked in :func:`test_analyze_overrides_of_the_wrong_type`.
 
 CLI property: ``contgrasp_core.cli.main(argv)`` (in-process) with argument lists in which at
@@ -583,7 +583,7 @@ def test_recover(files, how, cut, pos, junk, out) -> None:  # type: ignore[no-un
 @settings(max_examples=10, deadline=None)
 @given(**corruptions)
 def test_analyze_recording(files, how, cut, pos, junk) -> None:  # type: ignore[no-untyped-def]
-    from contgrasp_ros.analysis import analyze
+    from contgrasp_ros.recordings.analysis import analyze
 
     call(analyze, _corrupt(files, how, cut, pos, junk), finite=lambda r: [])
 
@@ -591,7 +591,7 @@ def test_analyze_recording(files, how, cut, pos, junk) -> None:  # type: ignore[
 @needs_bag
 @pytest.mark.parametrize("kw", [{"sensor_tolerance": "x"}, {"csv_dir": 5}, {"plot": 5}, {"quality_tolerance": float("nan")}])
 def test_analyze_overrides_of_the_wrong_type(files, kw) -> None:  # type: ignore[no-untyped-def]
-    from contgrasp_ros.analysis import analyze
+    from contgrasp_ros.recordings.analysis import analyze
 
     assert call(analyze, files["bag"], **kw, finite=lambda r: []) is None
 

@@ -1,4 +1,4 @@
-"""The launcher's JSON-lines events (contgrasp_ros.events, `contgrasp-launch --events`): the
+"""The launcher's JSON-lines events (contgrasp_ros.launcher.events, `contgrasp-launch --events`): the
 format, the channels, and the launcher's first and last events. The events of real runs
 (started/exited/restarted/resumed with real pids) are checked in tests/test_faults.py, whose
 LaunchHandle follows the launcher through them."""
@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from contgrasp_core.errors import InvalidParameterError, WriteError
-from contgrasp_ros.events import EVENTS, EventWriter, open_events, parse_event, read_events
+from contgrasp_ros.launcher.events import EVENTS, EventWriter, open_events, parse_event, read_events
 
 
 def test_each_event_is_one_json_object_per_line() -> None:
@@ -69,14 +69,14 @@ def test_channels_file_fd_and_stdout(tmp_path: Path, capsys: pytest.CaptureFixtu
 def test_launcher_events_start_with_the_domain_id_and_end_with_finished(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The launcher's own events around a (stubbed) graph run, and the error path."""
     pytest.importorskip("rclpy")
-    import contgrasp_ros.graph_run
-    from contgrasp_ros import launcher
+    import contgrasp_ros.launcher.graph_run
+    from contgrasp_ros.launcher import cli as launcher
 
     def fake_run(*_a: object, events: Any = None, **_k: object) -> tuple[dict[str, Any], int]:
         events("started", node="rod_simulator", pid=99)
         return {"error": "node 'rod_simulator' exited with code -9"}, 1
 
-    monkeypatch.setattr(contgrasp_ros.graph_run, "run_graph", fake_run)
+    monkeypatch.setattr(contgrasp_ros.launcher.graph_run, "run_graph", fake_run)
     for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
         monkeypatch.setenv(var, os.environ.get(var, "0"))
     path = tmp_path / "ev.jsonl"
@@ -89,7 +89,7 @@ def test_launcher_events_start_with_the_domain_id_and_end_with_finished(tmp_path
     def broken(*_a: object, **_k: object) -> None:
         raise InvalidParameterError("n_elements must be >= 2")
 
-    monkeypatch.setattr(contgrasp_ros.graph_run, "run_graph", broken)
+    monkeypatch.setattr(contgrasp_ros.launcher.graph_run, "run_graph", broken)
     assert launcher.main(["--no-record", "--domain-id", "17", "--events", str(path)]) == 2
     got = list(read_events(path.read_text().splitlines()))
     assert got[-1]["event"] == "finished" and got[-1]["exit_code"] == 2 and "n_elements" in got[-1]["error"]

@@ -1,4 +1,4 @@
-"""LeanExecutor (contgrasp_ros.executor) does what rclpy's executors do, with real rclpy entities:
+"""LeanExecutor (contgrasp_ros.plumbing.executor) does what rclpy's executors do, with real rclpy entities:
 subscriptions, timers, services and clients, coroutine callbacks and tasks, QoS events,
 entities created and destroyed while spinning, exceptions out of callbacks, shutdown."""
 
@@ -17,7 +17,7 @@ from std_srvs.srv import SetBool  # noqa: E402
 
 from conftest import spin_until  # noqa: E402
 
-from contgrasp_ros.executor import EVENTS_PERIOD_S, LeanExecutor  # noqa: E402
+from contgrasp_ros.plumbing.executor import EVENTS_PERIOD_S, LeanExecutor  # noqa: E402
 
 
 @pytest.fixture

@@ -3,7 +3,7 @@
 * every error class is in exactly one family: :class:`InputError` (a ``ValueError``) or
   :class:`RunFailure` (a ``RuntimeError``);
 * every entry point - ``contgrasp`` (each subcommand), ``contgrasp-launch`` and the node mains
-  (:func:`contgrasp_ros.runtime.run_node`) - exits 2 with one line ``PROG: error: ...`` on bad
+  (:func:`contgrasp_ros.plumbing.runtime.run_node`) - exits 2 with one line ``PROG: error: ...`` on bad
   input or bad usage, and 1 with one such line when a run on valid input fails.
 
 The run failures are real where the system offers one: a Newton failure (``simulate --dt 5``),
@@ -54,8 +54,8 @@ RUN_FAILURES = [StepFailedError, SimulationDivergedError, SingularSystemError, F
 
 
 def _ros_classes() -> tuple[list[type], list[type]]:
-    from contgrasp_ros.convert import MessageError
-    from contgrasp_ros.runtime import FatalNodeError
+    from contgrasp_ros.plumbing.convert import MessageError
+    from contgrasp_ros.plumbing.runtime import FatalNodeError
 
     return [MessageError], [FatalNodeError]
 
@@ -83,8 +83,8 @@ def test_every_error_class_is_in_exactly_one_family() -> None:
     """No class below the root is in neither family (it would exit 1 unexplained) or both;
     the only exception is BagError, the catch-all of the two bag classes (never raised)."""
     _ros_classes()  # import every module that defines an error class
-    import contgrasp_ros.analysis  # noqa: F401
-    import contgrasp_ros.replay  # noqa: F401
+    import contgrasp_ros.recordings.analysis  # noqa: F401
+    import contgrasp_ros.recordings.replay  # noqa: F401
 
     seen, todo = [], [ContgraspError]
     while todo:
@@ -271,7 +271,7 @@ def test_core_main_maps_the_family_to_the_exit_code(monkeypatch: pytest.MonkeyPa
 # ----------------------------------------------------------------------------- contgrasp-launch
 def test_launcher_bad_input_and_usage_exit_2(capsys: pytest.CaptureFixture[str], tmp_path: Path,
                                             monkeypatch: pytest.MonkeyPatch) -> None:
-    from contgrasp_ros import launcher
+    from contgrasp_ros.launcher import cli as launcher
 
     for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR"):  # the launcher sets them
         monkeypatch.setenv(var, os.environ.get(var, "0"))
@@ -294,13 +294,13 @@ def test_launcher_bad_input_and_usage_exit_2(capsys: pytest.CaptureFixture[str],
 
 def test_launcher_run_failure_exits_1(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """A RunFailure out of the graph run (injected: a real one needs a whole graph) exits 1."""
-    import contgrasp_ros.graph_run
-    from contgrasp_ros import launcher
+    import contgrasp_ros.launcher.graph_run
+    from contgrasp_ros.launcher import cli as launcher
 
     def diverged(*_a: object, **_k: object) -> None:
         raise SimulationDivergedError("simulation diverged: NaN/Inf in the rod state")
 
-    monkeypatch.setattr(contgrasp_ros.graph_run, "run_graph", diverged)
+    monkeypatch.setattr(contgrasp_ros.launcher.graph_run, "run_graph", diverged)
     monkeypatch.setenv("ROS_DOMAIN_ID", os.environ.get("ROS_DOMAIN_ID", "0"))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     capsys.readouterr()
@@ -316,7 +316,7 @@ def test_launcher_run_failure_exits_1(monkeypatch: pytest.MonkeyPatch, capsys: p
     (StepFailedError("Newton failed"), 1, "broken_node: error: Newton failed"),
 ])
 def test_run_node_start_up_errors(capsys: pytest.CaptureFixture[str], exc: Exception, code: int, line: str) -> None:
-    from contgrasp_ros.runtime import run_node
+    from contgrasp_ros.plumbing.runtime import run_node
 
     def broken_node() -> None:
         raise exc
@@ -332,7 +332,7 @@ def test_run_node_stopped_while_the_node_is_built_exits_0(capsys: pytest.Capture
     fails ('publisher's context is invalid'): a stop, exit 0, not a failure with a traceback."""
     import rclpy
 
-    from contgrasp_ros.runtime import run_node
+    from contgrasp_ros.plumbing.runtime import run_node
 
     def interrupted_node() -> None:
         node = rclpy.create_node("interrupted_node")
@@ -350,7 +350,7 @@ def test_node_processes_use_the_lean_executor_whatever_the_environment(monkeypat
     is the launcher's choice only, so not even a bad value reaches a node."""
     import rclpy
 
-    from contgrasp_ros.runtime import make_executor, run_node
+    from contgrasp_ros.plumbing.runtime import make_executor, run_node
 
     monkeypatch.setenv("CONTGRASP_EXECUTOR", "bogus")
     with pytest.raises(ValueError, match="CONTGRASP_EXECUTOR must be"):

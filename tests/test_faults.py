@@ -21,8 +21,8 @@ pytest.importorskip("rclpy")
 from conftest import fresh_domain_id  # noqa: E402
 
 from contgrasp_ros.bag.reader import iter_decoded, open_recording  # noqa: E402
-from contgrasp_ros.launch_handle import LaunchHandle  # noqa: E402
-from contgrasp_ros.launcher import default_params_file  # noqa: E402
+from contgrasp_ros.launcher.launch_handle import LaunchHandle  # noqa: E402
+from contgrasp_ros.launcher.cli import default_params_file  # noqa: E402
 
 BIN = Path(sys.executable).parent
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")
@@ -278,7 +278,7 @@ def test_orphaned_shared_memory_files_are_removed_and_files_in_use_kept(tmp_path
     port segment and mutex) are removed; a locked one, a mapped one and a young one stay."""
     import mmap
 
-    from contgrasp_ros.processes import remove_orphans
+    from contgrasp_ros.launcher.processes import remove_orphans
 
     def make(name: str, size: int = 4096) -> Path:
         path = tmp_path / name

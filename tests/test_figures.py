@@ -103,7 +103,7 @@ def test_fig4_labels_legend_and_every_curve_inside(short_grasp) -> None:  # type
 @pytest.mark.skipif(not SAMPLE_BAG.exists(), reason="the sample bag is not in this checkout")
 def test_run_figure_labels_legend_and_every_curve_inside() -> None:
     from contgrasp_core.figures.run import TIME_LABEL, build_run_figure
-    from contgrasp_ros.analysis import history, load_run
+    from contgrasp_ros.recordings.analysis import history, load_run
 
     run = load_run(SAMPLE_BAG)
     assert run.params is not None

@@ -20,8 +20,8 @@ pytest.importorskip("foxglove")
 websockets_client = pytest.importorskip("websockets.sync.client")
 
 from conftest import fresh_domain_id  # noqa: E402
-from contgrasp_ros.launch_handle import LaunchHandle  # noqa: E402
-from contgrasp_ros.launcher import default_params_file  # noqa: E402
+from contgrasp_ros.launcher.launch_handle import LaunchHandle  # noqa: E402
+from contgrasp_ros.launcher.cli import default_params_file  # noqa: E402
 
 SUBPROTOCOL = "foxglove.sdk.v1"  # the Foxglove WebSocket protocol as foxglove-sdk serves it
 MESSAGE_DATA = 0x01  # binary opcode of a message

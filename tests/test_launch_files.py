@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from contgrasp_ros import topics
+from contgrasp_ros.plumbing import topics
 
 from conftest import fresh_domain_id
 
@@ -29,7 +29,7 @@ def test_the_rviz_configuration_shows_the_markers_in_their_frame() -> None:
     assert manager["Global Options"]["Fixed Frame"] == "world"  # the frame of every marker and state
     markers = [d for d in manager["Displays"] if d["Class"] == "rviz_default_plugins/MarkerArray"]
     assert [d["Topic"]["Value"] for d in markers] == [topics.MARKERS]
-    assert set(markers[0]["Namespaces"]) == {"arm", "object", "contact"}  # contgrasp_ros.markers' namespaces
+    assert set(markers[0]["Namespaces"]) == {"arm", "object", "contact"}  # contgrasp_ros.plumbing.markers' namespaces
     assert manager["Views"]["Current"]["Class"] == "rviz_default_plugins/TopDownOrtho"  # the grasp's plane
 
 

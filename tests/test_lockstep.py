@@ -1,10 +1,10 @@
-"""The simulator's stepping rules without ROS (contgrasp_ros.lockstep): when step 0 goes out,
+"""The simulator's stepping rules without ROS (contgrasp_ros.nodes.lockstep): when step 0 goes out,
 the lock-step deadline, fallback and outage counting, the re-sends until the loop closes and
 the answers to a message taken again, and the free-running deadlines and wait for the couple."""
 
 from __future__ import annotations
 
-from contgrasp_ros.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
+from contgrasp_ros.nodes.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
 
 LOOP = Peers(rod_state_subscribers=1, couple_publishers=1, contact_links=1)
 

@@ -36,9 +36,9 @@ from contgrasp_core.contact import sense  # noqa: E402
 from contgrasp_core.rod import RodModel  # noqa: E402
 from contgrasp_core.rod.integrator import StepFailedError  # noqa: E402
 from contgrasp_msgs.msg import ContactState, CoupleControl, ObjectBoundary, RodState  # noqa: E402
-from contgrasp_ros import qos, topics  # noqa: E402
-from contgrasp_ros.convert import MAX_SAMPLES, boundary_to_msg  # noqa: E402
-from contgrasp_ros.runtime import stamp_problem  # noqa: E402
+from contgrasp_ros.plumbing import qos, topics# noqa: E402
+from contgrasp_ros.plumbing.convert import MAX_SAMPLES, boundary_to_msg  # noqa: E402
+from contgrasp_ros.plumbing.runtime import stamp_problem  # noqa: E402
 
 from conftest import Sink, fresh_domain_id  # noqa: E402
 
@@ -533,7 +533,7 @@ def test_unexpected_exception_is_counted_and_the_node_keeps_working(make, monkey
 
 @pytest.mark.parametrize("which", ["controller", "quality", "simulator", "tracker", "service"])
 def test_internal_errors_in_every_handler_are_contained(make, monkeypatch, which) -> None:  # type: ignore[no-untyped-def]
-    from contgrasp_ros import convert
+    from contgrasp_ros.plumbing import convert
     from contgrasp_ros.nodes import grasp_controller, grasp_quality, rod_simulator
 
     arrays, flags, tol = contact_arrays_of(9, 10.0, (0.0, 0.0, 0.0))
@@ -586,7 +586,7 @@ def test_diagnostics_update_publishes_on_a_change_at_once_and_otherwise_a_few_ti
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
-    from contgrasp_ros.runtime import Diagnostics
+    from contgrasp_ros.plumbing.runtime import Diagnostics
 
     host = make(BoundarySensor)
     state = {"level": DiagnosticStatus.OK, "message": "running", "built": 0}
@@ -770,7 +770,7 @@ def _newton_fails(sim: Any) -> None:
 def test_divergence_stops_the_simulation(make, case, params, inject, cause) -> None:  # type: ignore[no-untyped-def]
     from rclpy.executors import SingleThreadedExecutor
 
-    from contgrasp_ros.convert import couple_to_msg
+    from contgrasp_ros.plumbing.convert import couple_to_msg
     from contgrasp_ros.nodes.rod_simulator import _stamp
 
     sim = small_sim(make, **params)
@@ -820,7 +820,7 @@ def test_paper_scale_limits_do_not_trip_a_normal_run(make) -> None:  # type: ign
     from contgrasp_core.control import paper_gains
     from contgrasp_core.contact import sense
     from contgrasp_core.control import feedback_at_joints
-    from contgrasp_ros.convert import couple_to_msg
+    from contgrasp_ros.plumbing.convert import couple_to_msg
     from contgrasp_ros.nodes.rod_simulator import _stamp
 
     sim = small_sim(make, n_elements=20, control_period=0.002, damping=1.0)
@@ -859,7 +859,7 @@ def test_guarded_spin_survives_a_message_rclpy_cannot_take(ros_context) -> None:
     from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
 
-    from contgrasp_ros.runtime import DropCounter, GuardedSpin
+    from contgrasp_ros.plumbing.runtime import DropCounter, GuardedSpin
 
     class FlakyExecutor:
         def __init__(self, fail: int, context_ok: bool = True) -> None:
@@ -894,7 +894,7 @@ def test_a_callback_failing_because_the_node_is_stopping_is_not_an_internal_erro
     not a fault; the same failure on a live context is counted (and logged with its traceback)."""
     from rclpy.context import Context
 
-    from contgrasp_ros.runtime import DropCounter
+    from contgrasp_ros.plumbing.runtime import DropCounter
 
     ctx = Context()
     rclpy.init(context=ctx, domain_id=fresh_domain_id())

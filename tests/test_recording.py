@@ -355,7 +355,7 @@ PUBLISHER = """
 import sys, time, rclpy
 from contgrasp_msgs.msg import RodState
 from std_msgs.msg import String
-from contgrasp_ros import qos
+from contgrasp_ros.plumbing import qos
 rclpy.init()
 node = rclpy.create_node("test_publisher")
 pub = node.create_publisher(RodState, "/contgrasp/rod_state", qos.STREAM)

@@ -19,8 +19,8 @@ pytest.importorskip("contgrasp_msgs.msg")
 from contgrasp_core.errors import InvalidParameterError  # noqa: E402
 from contgrasp_core.rod.session import run_sampled  # noqa: E402
 from contgrasp_core.scenario import Scenario  # noqa: E402
-from contgrasp_ros.events import read_events  # noqa: E402
-from contgrasp_ros.launcher import default_params_file, load_params  # noqa: E402
+from contgrasp_ros.launcher.events import read_events  # noqa: E402
+from contgrasp_ros.launcher.cli import default_params_file, load_params  # noqa: E402
 
 from conftest import fresh_domain_id  # noqa: E402
 
@@ -124,7 +124,7 @@ def test_graph_as_processes_is_deterministic_and_leaves_nothing_behind(tmp_path:
 
 def test_composed_nodes_run_the_same_graph_in_fewer_processes(tmp_path: Path) -> None:
     """--compose: the sensor, the controller and the quality node hosted by one process
-    (contgrasp_ros.container) give the core loop's run bit for bit, the process exits 0 under
+    (contgrasp_ros.nodes.container) give the core loop's run bit for bit, the process exits 0 under
     its composed name, and the graph still has every node (the quality node answered)."""
     params = small_params(tmp_path)
     proc = launch("--json", "--no-record", "--params", str(params), "--compose", "boundary_sensor,grasp_controller,grasp_quality")
@@ -173,13 +173,13 @@ def test_launcher_keeps_running_when_the_recorder_cannot_write(tmp_path: Path) -
 def test_launcher_turns_unexpected_errors_into_one_line(monkeypatch, capsys, exc, code, prefix) -> None:  # type: ignore[no-untyped-def]
     """An exception out of the graph run is one line on stderr (exit 1, or 2 for bad input);
     --debug shows the traceback instead, with the same code."""
-    import contgrasp_ros.graph_run
-    from contgrasp_ros import launcher
+    import contgrasp_ros.launcher.graph_run
+    from contgrasp_ros.launcher import cli as launcher
 
     def broken(*_a: object, **_k: object) -> None:
         raise exc
 
-    monkeypatch.setattr(contgrasp_ros.graph_run, "run_graph", broken)
+    monkeypatch.setattr(contgrasp_ros.launcher.graph_run, "run_graph", broken)
     for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
         monkeypatch.setenv(var, os.environ.get(var, "0"))
     assert launcher.main(["--no-record", "--domain-id", str(fresh_domain_id())]) == code
@@ -194,9 +194,9 @@ def test_node_processes_get_the_discovery_profile_and_the_launcher_keeps_its_env
     announcements: processes started together meet at once); the launcher's own is unchanged."""
     import xml.etree.ElementTree as ET
 
-    import contgrasp_ros.processes
-    from contgrasp_ros.discovery import discovery_profile
-    from contgrasp_ros.graph_run import run_graph
+    import contgrasp_ros.launcher.processes
+    from contgrasp_ros.launcher.discovery import discovery_profile
+    from contgrasp_ros.launcher.graph_run import run_graph
 
     seen: list[dict[str, str]] = []
 
@@ -207,7 +207,7 @@ def test_node_processes_get_the_discovery_profile_and_the_launcher_keeps_its_env
         seen.append(env)
         raise Started
 
-    monkeypatch.setattr(contgrasp_ros.processes, "ProcessGroup", group)
+    monkeypatch.setattr(contgrasp_ros.launcher.processes, "ProcessGroup", group)
     monkeypatch.setenv("ROS_DOMAIN_ID", str(fresh_domain_id()))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     before = os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE")
@@ -223,9 +223,9 @@ def test_node_processes_get_the_discovery_profile_and_the_launcher_keeps_its_env
 
 
 def test_the_discovery_profile_is_used_unless_one_is_named() -> None:
-    """The launcher's rule (contgrasp_ros.discovery): the packaged profile unless the environment
+    """The launcher's rule (contgrasp_ros.launcher.discovery): the packaged profile unless the environment
     names one."""
-    from contgrasp_ros.discovery import discovery_profile, discovery_profile_set, use_discovery_profile
+    from contgrasp_ros.launcher.discovery import discovery_profile, discovery_profile_set, use_discovery_profile
 
     env: dict[str, str] = {}
     use_discovery_profile(env)

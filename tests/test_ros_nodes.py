@@ -24,8 +24,8 @@ from contgrasp_core.contact import sense  # noqa: E402
 from contgrasp_core.quality import quality_of_state  # noqa: E402
 from contgrasp_core.scenario import PAPER, QUALITY  # noqa: E402
 from contgrasp_msgs.msg import ContactState, GraspQuality, ObjectBoundary, RodState  # noqa: E402
-from contgrasp_ros import qos, topics  # noqa: E402
-from contgrasp_ros.convert import boundary_to_msg, contact_to_msg  # noqa: E402
+from contgrasp_ros.plumbing import qos, topics# noqa: E402
+from contgrasp_ros.plumbing.convert import boundary_to_msg, contact_to_msg  # noqa: E402
 from contgrasp_ros.nodes.boundary_sensor import BoundarySensor  # noqa: E402
 from contgrasp_ros.nodes.grasp_quality import GraspQualityNode  # noqa: E402
 
@@ -205,7 +205,7 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
 
     from contgrasp_core.rod.session import LoopSession
     from contgrasp_msgs.msg import CoupleControl
-    from contgrasp_ros.convert import couple_to_msg
+    from contgrasp_ros.plumbing.convert import couple_to_msg
     from contgrasp_ros.nodes.rod_simulator import RodSimulator
 
     ctx, ex, add = graph
@@ -272,7 +272,7 @@ def test_rod_simulator_free_running_starts_with_the_first_couple_then_runs_on_wa
     run's first couple (the loop closed); from then on the rod advances every control period of
     wall time with the latest couple, whether or not the controller answers again."""
     from contgrasp_msgs.msg import CoupleControl
-    from contgrasp_ros.convert import couple_to_msg
+    from contgrasp_ros.plumbing.convert import couple_to_msg
 
     ex, sim, probe, states = _free_running(graph, couple_timeout=5.0)
     u_pub = probe.create_publisher(CoupleControl, topics.COUPLE, qos.STREAM)
@@ -296,7 +296,7 @@ def test_rod_simulator_free_running_steps_with_the_answer_to_each_state_when_it_
     from contgrasp_core.rod import Obstacle, RodSystem
     from contgrasp_core.rod.session import LoopSession
     from contgrasp_msgs.msg import CoupleControl
-    from contgrasp_ros.convert import couple_to_msg
+    from contgrasp_ros.plumbing.convert import couple_to_msg
     from contgrasp_ros.nodes.rod_simulator import RodSimulator
 
     ctx, ex, add = graph
@@ -395,7 +395,7 @@ def test_the_light_nodes_and_the_launcher_import_neither_scipy_nor_the_rod_engin
     (each would cost those processes ~0.3 s of start-up on a shared core)."""
     code = (
         "import json, sys\n"
-        "import contgrasp_ros.launcher, contgrasp_ros.graph_run\n"
+        "import contgrasp_ros.launcher.cli, contgrasp_ros.launcher.graph_run\n"
         "import contgrasp_ros.nodes.boundary_sensor, contgrasp_ros.nodes.grasp_controller, contgrasp_ros.nodes.grasp_quality\n"
         "heavy = ('scipy', 'numba', 'matplotlib')\n"
         "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[0] in heavy or m == 'contgrasp_core.rod.integrator')))\n"

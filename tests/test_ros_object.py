@@ -23,10 +23,10 @@ from contgrasp_core.scenario import PAPER, Scenario, motion_from_parameters
 pytest.importorskip("contgrasp_msgs.msg")
 
 from contgrasp_core.rod.session import run_sampled  # noqa: E402
-from contgrasp_ros import topics  # noqa: E402
-from contgrasp_ros.analysis import analyze, history, load_run  # noqa: E402
-from contgrasp_ros.discovery import use_discovery_profile  # noqa: E402
-from contgrasp_ros.launcher import default_params_file, load_params  # noqa: E402
+from contgrasp_ros.plumbing import topics# noqa: E402
+from contgrasp_ros.recordings.analysis import analyze, history, load_run  # noqa: E402
+from contgrasp_ros.launcher.discovery import use_discovery_profile  # noqa: E402
+from contgrasp_ros.launcher.cli import default_params_file, load_params  # noqa: E402
 
 from conftest import fresh_domain_id  # noqa: E402
 
@@ -118,7 +118,7 @@ NODE_BAD = [
 def test_simulator_with_bad_object_parameters_exits_2_with_one_line(capsys: pytest.CaptureFixture[str], args: list[str],
                                                                     needle: str) -> None:
     from contgrasp_ros.nodes.rod_simulator import RodSimulator
-    from contgrasp_ros.runtime import run_node
+    from contgrasp_ros.plumbing.runtime import run_node
 
     capsys.readouterr()
     assert run_node(RodSimulator, args=["rod_simulator", "--ros-args", "-p", "start_paused:=true", *args]) == 2
@@ -184,7 +184,7 @@ def test_markers_draw_the_object_where_it_is() -> None:
 
     from contgrasp_core.rod.body import BodyState, ObjectDynamics
     from contgrasp_core.rod.session import LoopSession
-    from contgrasp_ros.markers import scene_markers
+    from contgrasp_ros.plumbing.markers import scene_markers
 
     scenario = replace(PAPER, rod=replace(PAPER.rod, n_elements=20), dynamics=ObjectDynamics("free"))
     system = scenario.system()
@@ -263,8 +263,8 @@ from rclpy.executors import ExternalShutdownException
 from geometry_msgs.msg import WrenchStamped
 from contgrasp_msgs.msg import RodState
 from contgrasp_msgs.srv import ApplyWrench
-from contgrasp_ros import qos, topics
-from contgrasp_ros.executor import LeanExecutor
+from contgrasp_ros.plumbing import qos, topics
+from contgrasp_ros.plumbing.executor import LeanExecutor
 
 args = json.loads(sys.argv[1])
 rclpy.init()

@@ -17,7 +17,7 @@ from contgrasp_msgs.msg import ContactState, RodState  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
 
 from contgrasp_core.boundary import circle  # noqa: E402
-from contgrasp_ros.convert import boundary_to_msg, couple_to_msg  # noqa: E402
+from contgrasp_ros.plumbing.convert import boundary_to_msg, couple_to_msg  # noqa: E402
 
 from conftest import Sink  # noqa: E402
 

@@ -16,7 +16,7 @@ from contgrasp_core.cli import main as cli_main
 from contgrasp_core.errors import InvalidBoundaryError, InvalidParameterError
 from contgrasp_core.objects import FIG2_SCALE, ROD_SCALE, ObjectSpec
 from contgrasp_core.scenario import NODES, PAPER, Scenario
-from contgrasp_ros.launcher import default_params_file, load_params
+from contgrasp_ros.launcher.cli import default_params_file, load_params
 
 KIDNEY = Path(__file__).parent / "data" / "kidney_outline.csv"
 
@@ -209,7 +209,7 @@ def test_malformed_outline_is_one_line_and_exit_2(command: list[str], tmp_path: 
 
 def test_launcher_refuses_a_malformed_outline(tmp_path: Path) -> None:
     bad = _malformed(tmp_path)["crossing"]
-    out = subprocess.run([sys.executable, "-m", "contgrasp_ros.launcher", "--outline", str(bad), "--no-record"],
+    out = subprocess.run([sys.executable, "-m", "contgrasp_ros.launcher.cli", "--outline", str(bad), "--no-record"],
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2
     assert len(out.stderr.strip().splitlines()) == 1 and "crosses itself" in out.stderr
@@ -231,7 +231,7 @@ def test_user_outline_through_the_ros_graph(tmp_path: Path) -> None:
     data["rod_simulator"]["ros__parameters"]["duration"] = 0.1
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(data))
-    out = subprocess.run([sys.executable, "-m", "contgrasp_ros.launcher", "--outline", str(outline), "--params", str(params),
+    out = subprocess.run([sys.executable, "-m", "contgrasp_ros.launcher.cli", "--outline", str(outline), "--params", str(params),
                           "--no-record", "--json", "--domain-id", str(fresh_domain_id())],
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
@@ -250,7 +250,7 @@ def test_an_outline_travels_in_the_object_message_exactly(tmp_path: Path) -> Non
     pytest.importorskip("contgrasp_msgs.msg")
     from std_msgs.msg import Header
 
-    from contgrasp_ros.convert import boundary_from_msg, boundary_to_msg
+    from contgrasp_ros.plumbing.convert import boundary_from_msg, boundary_to_msg
 
     for smoothing in (0.0, 1e-4):
         sent = ObjectSpec.from_outline(kidney_in_metres(tmp_path)).boundary()

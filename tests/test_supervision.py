@@ -1,4 +1,4 @@
-"""The launcher's supervision state machine (contgrasp_ros.supervision), without ROS: every
+"""The launcher's supervision state machine (contgrasp_ros.launcher.supervision), without ROS: every
 decision of a run from fed observations. tests/test_faults.py runs the same rules with real
 processes."""
 
@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from contgrasp_ros.supervision import (
+from contgrasp_ros.launcher.supervision import (
     Action,
     Exit,
     Finish,

@@ -25,8 +25,8 @@ from conftest import fresh_domain_id  # noqa: E402
 
 from contgrasp_ros.bag.reader import info, iter_raw, open_recording  # noqa: E402
 from contgrasp_ros.bag.writer import RUN_RECORD, BagWriter  # noqa: E402
-from contgrasp_ros.launch_handle import LaunchHandle  # noqa: E402
-from contgrasp_ros.launcher import default_params_file  # noqa: E402
+from contgrasp_ros.launcher.launch_handle import LaunchHandle  # noqa: E402
+from contgrasp_ros.launcher.cli import default_params_file  # noqa: E402
 
 BIN = Path(sys.executable).parent
 ROOT = Path(__file__).resolve().parents[1]

@@ -4,14 +4,14 @@
         [params_file:=FILE] [lockstep:=true|false] [duration:=S] [compose:=true]
         [record:=true] [bag:=bags/mine] [on_finish:=idle|exit] [rviz:=true]
 
-``--show-args`` lists them. The graph is contgrasp-launch's (contgrasp_ros.graph); include this
+``--show-args`` lists them. The graph is contgrasp-launch's (contgrasp_ros.launcher.graph); include this
 file from your own launch file to reuse it (docs/ros.md, "In a ROS 2 workspace").
 """
 
 from launch import LaunchDescription
 
-from contgrasp_ros.graph import LOOP
-from contgrasp_ros.ros_launch import graph_description
+from contgrasp_ros.launcher.graph import LOOP
+from contgrasp_ros.launcher.ros_launch import graph_description
 
 
 def generate_launch_description() -> LaunchDescription:

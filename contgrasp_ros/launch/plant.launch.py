@@ -10,8 +10,8 @@ paper_grasp.launch.py (lockstep:=false by default here).
 
 from launch import LaunchDescription
 
-from contgrasp_ros.graph import PLANT
-from contgrasp_ros.ros_launch import graph_description
+from contgrasp_ros.launcher.graph import PLANT
+from contgrasp_ros.launcher.ros_launch import graph_description
 
 
 def generate_launch_description() -> LaunchDescription:

@@ -5,15 +5,15 @@ the contact states of the simulator's sampled rod states (``/contgrasp/rod_state
 same steps, whichever of the two arrives first) go out again on ``/contgrasp/contact/sampled``,
 the observers' stream. A rod state taken again (the simulator re-sends the state its loop waits
 for until the loop closes) is answered again with the contact state published for it, not
-sensed twice (:class:`~contgrasp_ros.lockstep.Answered`; a new object forgets it).
+sensed twice (:class:`~contgrasp_ros.nodes.lockstep.Answered`; a new object forgets it).
 
 Thin wrapper of :func:`contgrasp_core.contact.sense` of the rod state's arm shape (paper eqs.
 (4), (5), Definition 1; the object's ``Boundary.project``). When the object moves, the rod state
 carries the object's displacement of the same step and the arm is sensed in the object's
-start-pose frame (:attr:`~contgrasp_ros.convert.RodArrays.sensed_shape`): the contact state
+start-pose frame (:attr:`~contgrasp_ros.plumbing.convert.RodArrays.sensed_shape`): the contact state
 (its feet ``shadow_x/y`` included) is then in that frame, against the boundary as published. Malformed rod states or objects, bad
 stamps and states whose sensing fails are dropped with a throttled warning and counted per
-reason (``/diagnostics``); see :mod:`contgrasp_ros.runtime`.
+reason (``/diagnostics``); see :mod:`contgrasp_ros.plumbing.runtime`.
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ from contgrasp_core.contact import load_sensing, sense
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, RodState
-from contgrasp_ros import qos, topics
-from contgrasp_ros.cdr import Codec, MessageView
-from contgrasp_ros.convert import RodArrays, contact_fields, require_finite, rod_state_arrays
-from contgrasp_ros.lockstep import Answered
-from contgrasp_ros.runtime import (
+from contgrasp_ros.plumbing import qos, topics
+from contgrasp_ros.plumbing.cdr import Codec, MessageView
+from contgrasp_ros.plumbing.convert import RodArrays, contact_fields, require_finite, rod_state_arrays
+from contgrasp_ros.nodes.lockstep import Answered
+from contgrasp_ros.plumbing.runtime import (
     Diagnostics,
     DropCounter,
     FinishPolicy,
@@ -71,7 +71,7 @@ class BoundarySensor(Node):
         # announced before its state was sensed
         self.recent: deque[tuple[int, bytes]] = deque(maxlen=RECENT)  # (step, serialized contact state)
         self.sampled_step: int | None = None
-        # the loop's messages go in and out serialized (contgrasp_ros.cdr: no conversion to
+        # the loop's messages go in and out serialized (contgrasp_ros.plumbing.cdr: no conversion to
         # Python message objects); a typed message passed to the callbacks directly works too
         self.rod_codec, self.contact_codec = Codec(RodState), Codec(ContactState)
         load_sensing()  # (the compiled sensing, now rather than at the run's first state)

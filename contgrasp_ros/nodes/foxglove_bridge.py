@@ -34,9 +34,9 @@ from rclpy.node import Node
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.rod.body import to_world
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
-from contgrasp_ros import qos, topics
-from contgrasp_ros.convert import ContactArrays, RodArrays, contact_arrays, rod_state_arrays
-from contgrasp_ros.runtime import (
+from contgrasp_ros.plumbing import qos, topics
+from contgrasp_ros.plumbing.convert import ContactArrays, RodArrays, contact_arrays, rod_state_arrays
+from contgrasp_ros.plumbing.runtime import (
     Diagnostics,
     DropCounter,
     ObjectTracker,
@@ -88,7 +88,7 @@ class FoxgloveBridge(Node):
                      (topics.ROD_STATE, topics.CONTACT, topics.QUALITY, STATUS)}
         self.next_scene_t = 0.0
         self.contact: ContactArrays | None = None
-        # (the observers' sampled streams: see contgrasp_ros.topics)
+        # (the observers' sampled streams: see contgrasp_ros.plumbing.topics)
         self.create_subscription(RodState, topics.ROD_STATE_SAMPLED, self.on_rod_state, qos.STREAM)
         self.create_subscription(ContactState, topics.CONTACT_SAMPLED, self.on_contact, qos.STREAM)
         self.create_subscription(GraspQuality, topics.QUALITY, self.on_quality, qos.STREAM)

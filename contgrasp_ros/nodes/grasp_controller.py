@@ -7,7 +7,7 @@ at the next contact message (a set that gives unusable gains is refused). The ro
 parameters (read-only) must match the simulator's. Malformed contact states, bad stamps and
 states of another rod size are dropped and counted (``/diagnostics``). A contact state taken
 again (the answer to a rod state the simulator re-sent) is answered again with the couple
-published for it, not computed twice (:class:`~contgrasp_ros.lockstep.Answered`).
+published for it, not computed twice (:class:`~contgrasp_ros.nodes.lockstep.Answered`).
 """
 
 from __future__ import annotations
@@ -21,12 +21,12 @@ from contgrasp_core.control import FeedbackGains, feedback_at_joints, paper_gain
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, CoupleControl
-from contgrasp_ros import qos, topics
-from contgrasp_ros.cdr import Codec
-from contgrasp_ros.convert import MessageError, contact_arrays, couple_fields, require_finite
-from contgrasp_ros.lockstep import Answered
+from contgrasp_ros.plumbing import qos, topics
+from contgrasp_ros.plumbing.cdr import Codec
+from contgrasp_ros.plumbing.convert import MessageError, contact_arrays, couple_fields, require_finite
+from contgrasp_ros.nodes.lockstep import Answered
 from contgrasp_ros.nodes.rod_params import declare_rod_model
-from contgrasp_ros.runtime import (
+from contgrasp_ros.plumbing.runtime import (
     Diagnostics,
     DropCounter,
     FinishPolicy,
@@ -62,7 +62,7 @@ class GraspController(Node):
         self.gains = self._gains({n: self.get_parameter(n).value for n in GAIN_PARAMETERS})
         add_parameter_check(self, self._check_gains)
         self.add_post_set_parameters_callback(self.drops.guard("parameters", self._refresh))
-        # the loop's messages go in and out serialized (contgrasp_ros.cdr); a typed message
+        # the loop's messages go in and out serialized (contgrasp_ros.plumbing.cdr); a typed message
         # passed to on_contact directly works too
         self.contact_codec, self.couple_codec = Codec(ContactState), Codec(CoupleControl)
         self.answered = Answered()  # (the contact state answered last and its couple)

@@ -1,6 +1,6 @@
 """grasp_quality: contact state -> continuum grasp quality (W, Q1..Q3) at a configurable rate.
 
-Thin wrapper of :func:`contgrasp_ros.evaluate.contact_quality` (paper Sec. IV, Prop. 4.1) over
+Thin wrapper of :func:`contgrasp_ros.plumbing.evaluate.contact_quality` (paper Sec. IV, Prop. 4.1) over
 the run's one contact set: the contact states' own tolerance (the sensor's, the scenario's
 ``SensingSettings.contact_tolerance``); the node has no tolerance of its own. It reads the
 sensor's sampled stream, ``/contgrasp/contact/sampled`` (every ``sample_period`` of the
@@ -20,10 +20,10 @@ from rclpy.node import Node
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.scenario import PAPER
 from contgrasp_msgs.msg import ContactState, GraspQuality
-from contgrasp_ros import qos, topics
-from contgrasp_ros.convert import ContactArrays, contact_arrays, quality_to_msg, require_finite
-from contgrasp_ros.evaluate import contact_quality
-from contgrasp_ros.runtime import (
+from contgrasp_ros.plumbing import qos, topics
+from contgrasp_ros.plumbing.convert import ContactArrays, contact_arrays, quality_to_msg, require_finite
+from contgrasp_ros.plumbing.evaluate import contact_quality
+from contgrasp_ros.plumbing.runtime import (
     Diagnostics,
     DropCounter,
     FinishPolicy,

@@ -60,7 +60,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_ros import qos, topics
+from contgrasp_ros.plumbing import qos, topics
 from contgrasp_ros.bag.definitions import full_text
 from contgrasp_ros.bag.errors import BagError
 from contgrasp_ros.bag.rosbag2 import qos_profile_dict
@@ -74,7 +74,7 @@ from contgrasp_ros.bag.writer import (
     BagWriter,
     check_split,
 )
-from contgrasp_ros.runtime import DropCounter, FatalNodeError, FinishPolicy, declare, guarded, run_node
+from contgrasp_ros.plumbing.runtime import DropCounter, FatalNodeError, FinishPolicy, declare, guarded, run_node
 
 
 

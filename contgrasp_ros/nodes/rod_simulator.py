@@ -4,7 +4,7 @@ stream), the object boundary (transient-local), RViz markers and /diagnostics; a
 couple control.
 
 Thin wrapper of :class:`contgrasp_core.rod.session.LoopSession` (the same stepping the
-core-only closed loop uses); the stepping rules are :mod:`contgrasp_ros.lockstep`. Step 0 goes
+core-only closed loop uses); the stepping rules are :mod:`contgrasp_ros.nodes.lockstep`. Step 0 goes
 out once the loop's peers are matched (``wait_for_peers``, the default: a
 rod-state subscriber and a couple publisher; always at least ``min_subscribers`` subscribers of
 the two rod-state topics together;
@@ -19,12 +19,12 @@ couple on (the loop closed: a controller's first answer can take a few milliseco
 the next ones, and stepping on without it starts the grasp on stale feedback; after
 ``couple_timeout`` it starts without one); a step whose tick comes before the couple answering
 its state waits up to ``couple_wait`` control periods for it, then goes on with the newest couple
-(a late couple, counted: :class:`~contgrasp_ros.lockstep.CoupleWait`); each whole period it
-falls behind the wall clock is a missed deadline (:class:`~contgrasp_ros.lockstep.WallClock`). Services: ``~/pause``
+(a late couple, counted: :class:`~contgrasp_ros.nodes.lockstep.CoupleWait`); each whole period it
+falls behind the wall clock is a missed deadline (:class:`~contgrasp_ros.nodes.lockstep.WallClock`). Services: ``~/pause``
 (std_srvs/SetBool: true pauses, false resumes) and ``~/reset`` (std_srvs/Trigger). The node runs
 in simulated time (``use_sim_time`` defaults to true: the ``/clock`` it publishes every
 ``clock_period`` of simulated time, before the state of that time) and, when the
-run is over, stays up or exits as ``on_finish`` says (:class:`~contgrasp_ros.runtime.FinishPolicy`).
+run is over, stays up or exits as ``on_finish`` says (:class:`~contgrasp_ros.plumbing.runtime.FinishPolicy`).
 
 Couples are validated (lengths, NaN/Inf, joints, the stamp rule, the step in lock-step) and
 bad ones dropped and counted. A run that breaks - Newton fails, NaN/Inf in the state, the rod
@@ -73,13 +73,13 @@ from contgrasp_core.scenario import PAPER, motion_from_parameters, object_from_p
 from contgrasp_core.control import FeedbackExpansion
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_msgs.srv import ApplyWrench
-from contgrasp_ros import qos, topics
-from contgrasp_ros.cdr import Codec
-from contgrasp_ros.convert import MessageError, boundary_to_msg, couple_arrays, rod_state_fields, wrench_arrays
-from contgrasp_ros.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
-from contgrasp_ros.markers import scene_markers
+from contgrasp_ros.plumbing import qos, topics
+from contgrasp_ros.plumbing.cdr import Codec
+from contgrasp_ros.plumbing.convert import MessageError, boundary_to_msg, couple_arrays, rod_state_fields, wrench_arrays
+from contgrasp_ros.nodes.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
+from contgrasp_ros.plumbing.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
-from contgrasp_ros.runtime import (
+from contgrasp_ros.plumbing.runtime import (
     Diagnostics,
     DropCounter,
     FatalNodeError,
@@ -173,7 +173,7 @@ class RodSimulator(Node):
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops, self._status_values, summary=self._status_summary)
         self.failure = ""
-        # the loop's messages go out and in serialized (contgrasp_ros.cdr: no conversion to Python
+        # the loop's messages go out and in serialized (contgrasp_ros.plumbing.cdr: no conversion to Python
         # message objects); a typed couple passed to on_couple directly works too
         self.state_codec, self.couple_codec = Codec(RodState), Codec(CoupleControl)
         self.pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, qos.STREAM)
@@ -364,7 +364,7 @@ class RodSimulator(Node):
                              self._publish_status)
 
     def _publish_first_observation(self) -> None:
-        """The run's first state, once the peers are matched (:class:`~contgrasp_ros.lockstep.StartGate`)."""
+        """The run's first state, once the peers are matched (:class:`~contgrasp_ros.nodes.lockstep.StartGate`)."""
         contact = min(self.count_publishers(topics.CONTACT), self.count_subscribers(topics.CONTACT))
         subscribers = self.pub_state.get_subscription_count() + self.pub_sampled.get_subscription_count()
         peers = Peers(subscribers, self.sub_couple.get_publisher_count(), contact)

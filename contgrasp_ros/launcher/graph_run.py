@@ -8,9 +8,9 @@ With recording on, the ``mcap_recorder`` starts first, the simulator is resumed 
 recorder subscribes to every stream, and it is stopped last, after the other nodes, so the
 recording holds the whole run; the summary's ``bag`` entry is read back from the finished file.
 What to do when (resume, restart a dead node, go on without it, time out) is decided by
-:class:`contgrasp_ros.supervision.Supervisor`; ``_drive`` feeds it what rclpy and the process
+:class:`contgrasp_ros.launcher.supervision.Supervisor`; ``_drive`` feeds it what rclpy and the process
 group show (once per supervisor's spin period, and at once when the simulator's state
-changes) and carries out its actions. The summary is :class:`contgrasp_ros.summary.RunSummary`.
+changes) and carries out its actions. The summary is :class:`contgrasp_ros.launcher.summary.RunSummary`.
 """
 
 from __future__ import annotations
@@ -35,16 +35,16 @@ from std_srvs.srv import SetBool
 
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
-from contgrasp_ros import qos, topics
-from contgrasp_ros.container import node_class
-from contgrasp_ros.convert import stamp_seconds
-from contgrasp_ros.discovery import discovery_profile_set, use_discovery_profile
-from contgrasp_ros.events import EventSink
-from contgrasp_ros.graph import LOOP as NODES
-from contgrasp_ros.graph import processes as graph_processes
-from contgrasp_ros.graph import recorder_params
-from contgrasp_ros.runtime import DropCounter, GuardedSpin, make_executor
-from contgrasp_ros.supervision import (
+from contgrasp_ros.plumbing import qos, topics
+from contgrasp_ros.nodes.container import node_class
+from contgrasp_ros.plumbing.convert import stamp_seconds
+from contgrasp_ros.launcher.discovery import discovery_profile_set, use_discovery_profile
+from contgrasp_ros.launcher.events import EventSink
+from contgrasp_ros.launcher.graph import LOOP as NODES
+from contgrasp_ros.launcher.graph import processes as graph_processes
+from contgrasp_ros.launcher.graph import recorder_params
+from contgrasp_ros.plumbing.runtime import DropCounter, GuardedSpin, make_executor
+from contgrasp_ros.launcher.supervision import (
     RECORDER,
     Exit,
     Finish,
@@ -59,7 +59,7 @@ from contgrasp_ros.supervision import (
     UNRECORDED_MIN_SUBSCRIBERS,
     Unrecorded,
 )
-from contgrasp_ros.summary import FinalQuality, FinalState, RunSummary, build_summary, contact_stats
+from contgrasp_ros.launcher.summary import FinalQuality, FinalState, RunSummary, build_summary, contact_stats
 
 __all__ = ["Monitor", "run_graph"]
 
@@ -155,7 +155,7 @@ def _overrides(values: dict[str, Any]) -> list[Parameter]:
 
 
 def _summary(mon: Monitor, loop_wall_time_s: float | None = None, wall_time_s: float | None = None) -> RunSummary:
-    """The run's :class:`~contgrasp_ros.summary.RunSummary` from what the monitor received."""
+    """The run's :class:`~contgrasp_ros.launcher.summary.RunSummary` from what the monitor received."""
     rod, q, c = mon.rod, mon.quality, mon.contact
     return build_summary(
         mon.status,
@@ -186,7 +186,7 @@ def _observe(mon: Monitor, sup: Supervisor, group: Any, resume_fut: Any, params_
 
 def _drive(mon: Monitor, sup: Supervisor, executor: Executor, group: Any,
            on_recorder_lost: Callable[[], None] | None = None, emit: EventSink | None = None) -> str | None:
-    """Run ``sup`` (:class:`~contgrasp_ros.supervision.Supervisor`, which decides) on what the
+    """Run ``sup`` (:class:`~contgrasp_ros.launcher.supervision.Supervisor`, which decides) on what the
     monitor and the process group show, and perform its actions. Returns an error text or None.
 
     ``on_recorder_lost`` is called when the recorder died (a simulator restarted later must not
@@ -287,10 +287,10 @@ def run_graph(
     node processes up to ``respawn`` times each); returns (summary, exit code). SIGINT/SIGTERM
     end the run early with exit code 130, everything stopped and the recording finalised.
     ``events`` receives the node processes' ``started``/``restarted``/``exited`` events and
-    ``resumed`` (:mod:`contgrasp_ros.events`). ``foxglove``: serve the run live on this WebSocket
+    ``resumed`` (:mod:`contgrasp_ros.launcher.events`). ``foxglove``: serve the run live on this WebSocket
     port (:mod:`contgrasp_ros.nodes.foxglove_bridge`, in the launcher's process; 0 = any). A
     recording lost mid-run (the recorder died) fails the run (exit 1) unless ``allow_unrecorded``.
-    ``compose``: groups of nodes each hosted by one process (:mod:`contgrasp_ros.container`, named
+    ``compose``: groups of nodes each hosted by one process (:mod:`contgrasp_ros.nodes.container`, named
     ``a+b``), the simulator not among them; the other nodes run one per process."""
     wall0 = time.perf_counter()
     sim_params = {**params["rod_simulator"], "start_paused": True}
@@ -337,10 +337,10 @@ def run_graph(
         else:
             import os
 
-            from contgrasp_ros.processes import ProcessGroup
+            from contgrasp_ros.launcher.processes import ProcessGroup
 
             env = dict(os.environ, PYTHONUNBUFFERED="1")
-            use_discovery_profile(env)  # (the node processes', not this process's: contgrasp_ros.discovery)
+            use_discovery_profile(env)  # (the node processes', not this process's: contgrasp_ros.launcher.discovery)
             group = ProcessGroup(env, events=events)
             # Launcher overrides go in a second parameter file: a node's own section in the user's
             # file would beat a plain ``-p name:=value`` (rcl gives node-specific entries priority).

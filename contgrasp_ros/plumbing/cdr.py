@@ -21,10 +21,10 @@ types are refused when the codec is made.
 
 :meth:`Codec.decode` gives a :class:`MessageView`: the message's fields as attributes (arrays as
 writable, aligned float64 / bool numpy arrays, the header as ``header.stamp.sec`` ...), so
-:mod:`contgrasp_ros.convert`'s readers validate it as they validate a typed message. Bytes that
+:mod:`contgrasp_ros.plumbing.convert`'s readers validate it as they validate a typed message. Bytes that
 are not a message of the type (truncated, a count beyond the end, trailing garbage, another
 encapsulation, a frame_id that is not a terminated UTF-8 string) raise
-:class:`~contgrasp_ros.convert.MessageError` (reason ``"bad encoding"``), which a node counts as
+:class:`~contgrasp_ros.plumbing.convert.MessageError` (reason ``"bad encoding"``), which a node counts as
 a drop. Padding bytes are written as zeros and not read; bytes after the last field are ignored
 (rmw_fastrtps's serializer leaves uninitialised padding and may hand over a longer buffer).
 """
@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from contgrasp_ros.convert import MessageError
+from contgrasp_ros.plumbing.convert import MessageError
 
 __all__ = ["Codec", "MessageView", "Stamp", "HeaderView"]
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
-from contgrasp_ros.events import EventSink
+from contgrasp_ros.launcher.events import EventSink
 
 __all__ = ["Child", "ProcessGroup", "clean_shared_memory", "remove_orphans"]
 
@@ -42,7 +42,7 @@ class ProcessGroup:
     Each child's stdout and stderr are merged and echoed line by line to ``sink`` (stderr by
     default, so the launcher's stdout stays free for ``--json``), prefixed with ``[name]`` and
     coloured when the sink is a terminal. Each start is announced on ``sink`` and, given
-    ``events``, as a ``started``/``restarted`` event (:mod:`contgrasp_ros.events`).
+    ``events``, as a ``started``/``restarted`` event (:mod:`contgrasp_ros.launcher.events`).
     """
 
     def __init__(self, env: dict[str, str], sink: IO[str] | None = None, events: EventSink | None = None) -> None:

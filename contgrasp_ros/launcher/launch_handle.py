@@ -1,7 +1,7 @@
 """Run ``contgrasp-launch`` in the background and follow it: child pids, log lines, result.
 
 Used by the fault-injection tests and the soak benchmark (and handy for scripting runs): the
-launcher writes its events (:mod:`contgrasp_ros.events`: each node process it starts, with its
+launcher writes its events (:mod:`contgrasp_ros.launcher.events`: each node process it starts, with its
 pid, exits, resumes, the end) as JSON lines to a pipe it inherits (``--events fd:N``), and its
 human-readable log to stderr; :class:`LaunchHandle` reads both in threads, so callers can wait
 for an event or a log line, signal one node by its pid, and collect the JSON summary at the end.
@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from contgrasp_ros.events import parse_event
+from contgrasp_ros.launcher.events import parse_event
 
 __all__ = ["LaunchHandle"]
 

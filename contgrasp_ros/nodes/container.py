@@ -11,7 +11,7 @@ the price of isolation (a crash or a fatal error of one ends all of them).
 
 The nodes are built in the order given (``NODE`` is one of :data:`NODE_CLASSES`, each at most
 once); the process spins until SIGINT/SIGTERM or until every node asks to stop (``on_finish:
-exit``), and exits as :func:`contgrasp_ros.runtime.run_nodes` says (2 for bad usage or a
+exit``), and exits as :func:`contgrasp_ros.plumbing.runtime.run_nodes` says (2 for bad usage or a
 refused parameter, naming the node; 1 for a failure).
 """
 
@@ -23,7 +23,7 @@ from collections.abc import Callable, Sequence
 
 from rclpy.node import Node
 
-from contgrasp_ros.runtime import run_nodes
+from contgrasp_ros.plumbing.runtime import run_nodes
 
 __all__ = ["NODE_CLASSES", "node_class", "main"]
 

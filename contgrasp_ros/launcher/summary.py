@@ -85,7 +85,7 @@ class RunSummary:
     ``sim_time_s``, ``steps``, ``missed_deadlines`` (lock-step timeouts that applied the
     fallback couple; free-running: control periods lost behind the wall clock),
     ``late_couples`` (free-running steps that went on without the couple answering their state,
-    :class:`~contgrasp_ros.lockstep.CoupleWait`; 0 in lock-step) and ``max_penetration`` (m) are the simulator's last ``/diagnostics``
+    :class:`~contgrasp_ros.nodes.lockstep.CoupleWait`; 0 in lock-step) and ``max_penetration`` (m) are the simulator's last ``/diagnostics``
     status; ``final``, ``final_quality`` and the contact statistics
     (:class:`~contgrasp_core.tracking.ContactStats`: mean and max tracking errors over the
     ``contact_nodes`` nodes in contact, ``contact_length`` m) the last rod state, grasp

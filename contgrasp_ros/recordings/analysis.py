@@ -7,10 +7,10 @@ numpy arrays; :func:`recompute` repeats the sensing (paper eqs. (4) and
 (5), Definition 1) and the grasp quality (Sec. IV: W = int_S G G^T ds, Q1 = lambda_min(W),
 Q2 = det W, Q3 = lambda_min / lambda_max) from the recorded rod states with exactly the
 functions the nodes call (:func:`contgrasp_core.contact.sense`,
-:func:`contgrasp_ros.evaluate.contact_quality`), so on a genuine recording the
+:func:`contgrasp_ros.plumbing.evaluate.contact_quality`), so on a genuine recording the
 recomputation agrees with the recorded topics to rounding (in practice bitwise);
 :func:`summarize` builds the launcher's summary (with the launcher's own builder,
-:func:`contgrasp_ros.summary.build_summary`) plus the recomputation errors. :func:`write_csv`
+:func:`contgrasp_ros.launcher.summary.build_summary`) plus the recomputation errors. :func:`write_csv`
 and :func:`write_plots` export the run.
 
 Recordings may be decimated (the recorder keeps rod state/contact/couple only every so many
@@ -37,11 +37,11 @@ from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError, InvalidParameterError, RunFailure, WriteError, output_error
 from contgrasp_core.rod.session import SettleDetector
-from contgrasp_ros import topics
+from contgrasp_ros.plumbing import topics
 from contgrasp_ros.bag import BagInputError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
 from contgrasp_core.scenario import PAPER
-from contgrasp_ros.convert import (
+from contgrasp_ros.plumbing.convert import (
     ContactArrays,
     ObjectArrays,
     RodArrays,
@@ -50,8 +50,8 @@ from contgrasp_ros.convert import (
     rod_state_arrays,
     stamp_seconds,
 )
-from contgrasp_ros.evaluate import contact_quality
-from contgrasp_ros.summary import FinalQuality, FinalState, build_summary, contact_stats
+from contgrasp_ros.plumbing.evaluate import contact_quality
+from contgrasp_ros.launcher.summary import FinalQuality, FinalState, build_summary, contact_stats
 
 __all__ = [
     "RodSeries",
@@ -89,7 +89,7 @@ class RecomputeMismatchError(RunFailure):
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-# topic names as in contgrasp_ros.qos (not imported: that module imports rclpy)
+# topic names as in contgrasp_ros.plumbing.qos (not imported: that module imports rclpy)
 RUN_RECORD = "contgrasp_run"  # = contgrasp_ros.bag.writer.RUN_RECORD
 RECORDER_RECORD = "contgrasp_recorder"  # = contgrasp_ros.bag.writer.RECORDER_RECORD
 SIMULATOR = "rod_simulator"
@@ -130,7 +130,7 @@ class RodSeries:
     object: ObjectSeries | None = None
 
     def arrays(self, k: int) -> RodArrays:
-        """The k-th state as the sensor node reads it (:func:`contgrasp_ros.convert.rod_state_arrays`)."""
+        """The k-th state as the sensor node reads it (:func:`contgrasp_ros.plumbing.convert.rod_state_arrays`)."""
         o = self.object
         body = None if o is None else ObjectArrays(o.centroid[k], o.q[k], o.v[k], o.wrench[k])
         return RodArrays(int(self.step[k]), float(self.t[k]), self.s[k], self.x[k], self.y[k], self.theta[k],
@@ -395,7 +395,7 @@ def recompute(
     """Recompute the contact state of every recorded rod state that has a recorded contact state
     of the same step (:func:`contgrasp_core.contact.sense`, as the boundary sensor; eqs.
     (4) and (5)), and the quality of every recorded quality step whose rod state was recorded
-    (rod state -> sensing -> :func:`~contgrasp_ros.evaluate.contact_quality`, Sec. IV,
+    (rod state -> sensing -> :func:`~contgrasp_ros.plumbing.evaluate.contact_quality`, Sec. IV,
     W = int_S G G^T ds); return the largest absolute differences per quantity.
 
     The keyword arguments override the run's parameters (e.g. to check that a wrong tolerance
@@ -608,9 +608,9 @@ def holding_under_pushes(t: Array, q: Array, v: Array, wrench: Array) -> list[di
 
 
 def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
-    """The JSON result: the run's :class:`~contgrasp_ros.summary.RunSummary` built from the
+    """The JSON result: the run's :class:`~contgrasp_ros.launcher.summary.RunSummary` built from the
     recording (simulator status, last rod state, contact and quality; by the launcher's own
-    :func:`~contgrasp_ros.summary.build_summary`) plus the recomputation and recording checks."""
+    :func:`~contgrasp_ros.launcher.summary.build_summary`) plus the recomputation and recording checks."""
     rod, c, q = run.rod, run.contact, run.quality
     settled_re, settle_re = settle_recomputed(run)
     gaps = step_gaps(run)

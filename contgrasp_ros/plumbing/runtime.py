@@ -44,8 +44,8 @@ from std_msgs.msg import Header
 
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import ContgraspError, RunFailure, exit_code, one_line
-from contgrasp_ros import topics
-from contgrasp_ros.executor import LeanExecutor
+from contgrasp_ros.plumbing import topics
+from contgrasp_ros.plumbing.executor import LeanExecutor
 
 __all__ = [
     "declare",
@@ -80,7 +80,7 @@ class FatalNodeError(RunFailure):
 
 def make_executor(context: Context | None = None) -> Executor:
     """The launcher's executor (its monitor, and every node with ``--in-process``), named by
-    ``CONTGRASP_EXECUTOR``: ``lean`` (default, :class:`~contgrasp_ros.executor.LeanExecutor`),
+    ``CONTGRASP_EXECUTOR``: ``lean`` (default, :class:`~contgrasp_ros.plumbing.executor.LeanExecutor`),
     ``single`` (rclpy's SingleThreadedExecutor) or ``events`` (rclpy.experimental.EventsExecutor).
     Node processes (:func:`run_node`) always use the lean executor (docs/ros.md). The
     multi-threaded executor is deliberately not offered: on 2 cores its tail latency is large
@@ -217,7 +217,7 @@ class DropCounter:
 
     def drop_error(self, topic: str, exc: Exception) -> None:
         """Count a drop for a validation/processing error: the reason is the error's ``reason``
-        (:class:`~contgrasp_ros.convert.MessageError`) or its class name."""
+        (:class:`~contgrasp_ros.plumbing.convert.MessageError`) or its class name."""
         self.drop(topic, getattr(exc, "reason", None) or type(exc).__name__, str(exc))
 
     def internal_error(self, where: str, exc: BaseException) -> None:
@@ -342,9 +342,9 @@ class StampGate:
 
     def admit(self, topic: str, header: Any, step: int | None, *, check_past: bool = True) -> None:
         """Accept the message's stamp (and track it as the newest on ``topic``) or raise
-        :class:`~contgrasp_ros.convert.MessageError` with the rule's reason. ``check_past=False``
+        :class:`~contgrasp_ros.plumbing.convert.MessageError` with the rule's reason. ``check_past=False``
         for topics without an order (the latched object: the newest publication wins)."""
-        from contgrasp_ros.convert import MessageError
+        from contgrasp_ros.plumbing.convert import MessageError
 
         sec, nanosec = int(header.stamp.sec), int(header.stamp.nanosec)
         now_ns = self._node.get_clock().now().nanoseconds
@@ -385,7 +385,7 @@ class Diagnostics:
 
     def __init__(self, node: Node, drops: DropCounter, build: Callable[[], Status] | None = None, period_s: float = 1.0,
                  min_period_s: float = 0.2, summary: Callable[[], tuple[int, str]] | None = None) -> None:
-        from contgrasp_ros import qos
+        from contgrasp_ros.plumbing import qos
 
         self._node = node
         self._drops = drops
@@ -473,7 +473,7 @@ class FinishPolicy:
                 choices=ON_FINISH)
         node.stop_requested = False  # type: ignore[attr-defined]
         if watch_simulator:
-            from contgrasp_ros import qos
+            from contgrasp_ros.plumbing import qos
 
             node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_status, qos.STREAM)
 
@@ -541,7 +541,7 @@ class ObjectTracker:
     def __init__(self, node: Node, drops: DropCounter, stamps: StampGate,
                  on_change: Callable[[], None] | None = None, prepare: bool = False) -> None:
         from contgrasp_msgs.msg import ObjectBoundary
-        from contgrasp_ros import qos
+        from contgrasp_ros.plumbing import qos
 
         self.boundary: Boundary | None = None
         self.drops = drops
@@ -556,7 +556,7 @@ class ObjectTracker:
     @guarded(topics.OBJECT)
     def on_object(self, msg: Any) -> None:
         """Validate and keep the boundary of an ObjectBoundary message."""
-        from contgrasp_ros.convert import boundary_from_msg
+        from contgrasp_ros.plumbing.convert import boundary_from_msg
 
         try:
             boundary = boundary_from_msg(msg)

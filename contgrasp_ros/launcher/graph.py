@@ -1,6 +1,6 @@
 """The graph's one description: which node processes run, what each executes, and their parameters.
 
-``contgrasp-launch`` (:mod:`contgrasp_ros.graph_run`) and the launch files
+``contgrasp-launch`` (:mod:`contgrasp_ros.launcher.graph_run`) and the launch files
 (``launch/paper_grasp.launch.py``, ``launch/plant.launch.py``) both build their processes from
 :func:`processes` and their parameter files from :func:`load_params`, :func:`object_parameters`
 and :func:`recorder_params`, so there is no second list of nodes and parameters to drift.
@@ -21,8 +21,8 @@ import yaml
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ObjectSpec
 from contgrasp_core.scenario import CONTROLLER, NODES, QUALITY, SIMULATOR, Scenario
-from contgrasp_ros import topics
-from contgrasp_ros.supervision import RECORDER
+from contgrasp_ros.plumbing import topics
+from contgrasp_ros.launcher.supervision import RECORDER
 
 __all__ = ["PACKAGE", "RECORDER", "CONTAINER", "LOOP", "PLANT", "COMPOSABLE", "DECIMATED_STREAMS", "Process",
            "compose_groups", "processes", "default_params_file", "load_params", "object_parameters", "recorder_params",

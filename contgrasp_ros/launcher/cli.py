@@ -33,8 +33,8 @@ from contgrasp_core.errors import InvalidParameterError, exit_code, one_line
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
-from contgrasp_ros.events import EventWriter, open_events
-from contgrasp_ros.graph import compose_groups, default_params_file, load_params, object_parameters, parameter_file
+from contgrasp_ros.launcher.events import EventWriter, open_events
+from contgrasp_ros.launcher.graph import compose_groups, default_params_file, load_params, object_parameters, parameter_file
 
 
 __all__ = ["main", "default_params_file", "load_params"]
@@ -69,7 +69,7 @@ def _port(text: str) -> int:
 
 
 def _compose_groups(values: list[str], in_process: bool) -> list[tuple[str, ...]]:
-    """The ``--compose`` groups (:func:`contgrasp_ros.graph.compose_groups`), separate processes only."""
+    """The ``--compose`` groups (:func:`contgrasp_ros.launcher.graph.compose_groups`), separate processes only."""
     if values and in_process:
         raise InvalidParameterError("--compose groups node processes: it does not apply with --in-process")
     try:
@@ -92,7 +92,7 @@ def _parser() -> argparse.ArgumentParser:
                         "SingleThreadedExecutor or rclpy's experimental events executor "
                         "(separate node processes always use the lean executor, see docs/ros.md)")
     p.add_argument("--compose", action="append", default=[], metavar="NODE,NODE[,...]",
-                   help="host these nodes in one process (`contgrasp_ros.container`; any two or more of "
+                   help="host these nodes in one process (`contgrasp_ros.nodes.container`; any two or more of "
                         "boundary_sensor, grasp_controller, grasp_quality; the simulator always runs alone; repeatable): "
                         "boundary_sensor,grasp_controller saves the lock-step loop a process hop per step")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
@@ -182,7 +182,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         os.environ["CONTGRASP_EXECUTOR"] = args.executor
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_LOG_DIR", os.path.join(tempfile.gettempdir(), "contgrasp_ros_log"))
-    from contgrasp_ros.graph_run import run_graph
+    from contgrasp_ros.launcher.graph_run import run_graph
     from contgrasp_ros.nodes.mcap_recorder import default_output
 
     record = None

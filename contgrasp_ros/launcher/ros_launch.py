@@ -1,6 +1,6 @@
 """The graph as ROS 2 launch entities, for ``launch/paper_grasp.launch.py`` and ``launch/plant.launch.py``.
 
-The nodes, their executables and parameters come from :mod:`contgrasp_ros.graph`, as those of
+The nodes, their executables and parameters come from :mod:`contgrasp_ros.launcher.graph`, as those of
 ``contgrasp-launch`` do. Needs ``launch`` and ``launch_ros`` (part of every ROS 2 install; not
 published as wheels, so the pip-only set-up has no ``ros2 launch``; docs/ros.md, "In a ROS 2
 workspace").
@@ -25,7 +25,7 @@ from launch_ros.substitutions import FindPackageShare
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
 from contgrasp_core.scenario import SIMULATOR
-from contgrasp_ros.graph import (
+from contgrasp_ros.launcher.graph import (
     COMPOSABLE,
     PACKAGE,
     RECORDER,
@@ -105,8 +105,8 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node | Register
 
 
 def graph_description(nodes: Sequence[str], *, lockstep: bool) -> LaunchDescription:
-    """The launch description of a graph of ``nodes`` (:data:`contgrasp_ros.graph.LOOP` or
-    :data:`~contgrasp_ros.graph.PLANT`), lock-step by default when ``lockstep``, with RViz on
+    """The launch description of a graph of ``nodes`` (:data:`contgrasp_ros.launcher.graph.LOOP` or
+    :data:`~contgrasp_ros.launcher.graph.PLANT`), lock-step by default when ``lockstep``, with RViz on
     ``rviz:=true``."""
     rviz_config = PathJoinSubstitution([FindPackageShare(PACKAGE), "rviz", "contgrasp.rviz"])
     return LaunchDescription([

@@ -1,6 +1,6 @@
 """The graph's topic names: the one list, imported by the nodes, the launcher, the recorder and
 offline analysis (no rclpy import, so ``contgrasp analyze`` reads recordings without ROS).
-The quality-of-service profiles are in :mod:`contgrasp_ros.qos`."""
+The quality-of-service profiles are in :mod:`contgrasp_ros.plumbing.qos`."""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 Registered by :func:`contgrasp_ros.cli.register`; the parsed namespace has
 ``func=cli_analyze.run``, which returns the JSON-able result
-(:func:`contgrasp_ros.analysis.analyze`; keys in docs/analysis.md). Imports no ROS package, and
+(:func:`contgrasp_ros.recordings.analysis.analyze`; keys in docs/analysis.md). Imports no ROS package, and
 the recording stack (mcap) only when it runs.
 """
 
@@ -41,9 +41,9 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser] | None = None) -
 
 @guarded
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    """Analyse ``args.bag``; the result dict (see :func:`contgrasp_ros.analysis.summarize`), or
-    :class:`~contgrasp_ros.analysis.RecomputeMismatchError` (exit 1, the result printed first)
-    when the recording does not recompute (:func:`contgrasp_ros.analysis.check`).
+    """Analyse ``args.bag``; the result dict (see :func:`contgrasp_ros.recordings.analysis.summarize`), or
+    :class:`~contgrasp_ros.recordings.analysis.RecomputeMismatchError` (exit 1, the result printed first)
+    when the recording does not recompute (:func:`contgrasp_ros.recordings.analysis.check`).
     The output paths are checked first, so a typo does not cost an analysis."""
     if args.plot is not None:
         from contgrasp_core.figures.draw import check_figure_path
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 if not d.is_dir():
                     raise InvalidParameterError(f"--csv {args.csv}: {d} exists and is not a directory")
                 break
-    from contgrasp_ros.analysis import analyze, check
+    from contgrasp_ros.recordings.analysis import analyze, check
 
     out = analyze(args.bag, csv_dir=args.csv, plot=args.plot)
     check(out)  # exit 1 (after printing the result) when the recording does not recompute

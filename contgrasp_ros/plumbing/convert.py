@@ -190,7 +190,7 @@ def object_fields(centroid: tuple[float, float] | None, body: BodyState | None, 
 def rod_state_fields(obs: Observation, header: Header | Any, centroid: tuple[float, float] | None,
                      wrench: Array | None) -> dict[str, Any]:
     """The fields of the RodState message of an observation (arrays as numpy arrays, for
-    :class:`~contgrasp_ros.cdr.Codec`); the object fields as :func:`object_fields` says."""
+    :class:`~contgrasp_ros.plumbing.cdr.Codec`); the object fields as :func:`object_fields` says."""
     return {"header": header, "step": obs.k, "s": obs.s, "x": obs.x[:, 0], "y": obs.x[:, 1], "theta": obs.theta,
             "kappa": obs.kappa, "radius": obs.radius, "vx": obs.v[:, 0], "vy": obs.v[:, 1],
             "kinetic_energy": obs.kinetic_energy, "max_penetration": obs.penetration,
@@ -248,7 +248,7 @@ def wrench_arrays(msg: WrenchStamped) -> Array:
 
 def contact_fields(state: ContactState, header: Header | Any, step: int) -> dict[str, Any]:
     """The fields of the ContactState message of a sensed contact state (arrays as numpy
-    arrays: for :class:`~contgrasp_ros.cdr.Codec` or :func:`contact_to_msg`)."""
+    arrays: for :class:`~contgrasp_ros.plumbing.cdr.Codec` or :func:`contact_to_msg`)."""
     return {"header": header, "step": int(step), "s": state.s, "rho": state.rho, "alpha": state.alpha, "delta": state.delta,
             "s_o": state.s_o, "shadow_x": state.foot[:, 0], "shadow_y": state.foot[:, 1],
             "in_contact": np.asarray(state.in_contact, dtype=bool), "contact_tolerance": float(state.tol)}
@@ -315,7 +315,7 @@ def contact_arrays(msg: ContactStateMsg) -> ContactArrays:
 def couple_fields(s: Array, couple: Array | FeedbackExpansion, header: Header | Any, step: int) -> dict[str, Any]:
     """The fields of the CoupleControl message of the couple u (N m) at the joint arclengths s,
     with the law's first-order expansion when given a :class:`FeedbackExpansion` (arrays as
-    numpy arrays: for :class:`~contgrasp_ros.cdr.Codec` or :func:`couple_to_msg`)."""
+    numpy arrays: for :class:`~contgrasp_ros.plumbing.cdr.Codec` or :func:`couple_to_msg`)."""
     fields = {"header": header, "step": int(step), "s": np.asarray(s, dtype=float)}
     if isinstance(couple, FeedbackExpansion):
         fields.update(u=couple.u, rho_ref=couple.rho_ref, alpha_ref=couple.alpha_ref, du_drho=couple.g_rho,

@@ -2,7 +2,7 @@
 
 :func:`contact_quality` is the quality node's step (Sec. IV: W and Q1..Q3). The boundary
 sensor's step is :func:`contgrasp_core.contact.sense` of the rod state's
-:attr:`~contgrasp_ros.convert.RodArrays.shape` (paper eqs. (4) and (5),
+:attr:`~contgrasp_ros.plumbing.convert.RodArrays.shape` (paper eqs. (4) and (5),
 Definition 1). ``contgrasp analyze`` calls the same two functions on recorded messages, so a
 recomputation from a recording reproduces the topics exactly. No ROS imports: both run on
 messages decoded without ROS as well.
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.quality import GraspQuality, grasp_quality
-from contgrasp_ros.convert import ContactArrays
+from contgrasp_ros.plumbing.convert import ContactArrays
 
 __all__ = ["contact_quality"]
 
