@@ -180,3 +180,28 @@ def test_bag_info_prints_qos_readably(capsys: pytest.CaptureFixture[str]) -> Non
     assert topics and all("| QoS (" in ln and "Reliability: " in ln and "Durability: " in ln for ln in topics)
     assert "unknown 0" not in text
     assert "Durability: transient_local" in next(ln for ln in topics if "/contgrasp/object" in ln)
+
+
+@pytest.mark.parametrize("hold", ["first-order", "zero-order"])
+def test_max_penetration_is_over_every_control_step_recorded_or_not(hold: str) -> None:
+    """One definition of ``max_penetration`` (issue 31, item 3): the largest rod-surface
+    penetration over every control step, as the ROS simulator's session reports it, whatever the
+    record period. Truth: the same run recorded at every step (record_period None)."""
+    from contgrasp_core.cli.simulate import run_first_order
+    from contgrasp_core.control import paper_gains
+    from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+    from contgrasp_core.rod import Obstacle, RodSystem
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
+    from contgrasp_core.scenario import PAPER
+
+    obj = ObjectSpec.from_cli(None, None, ROD_SCALE)
+    gains = paper_gains(PAPER.rod, obj.radius)
+    run = run_first_order if hold == "first-order" else run_closed_loop
+    every, sparse = (run(RodSystem(PAPER.rod, Obstacle(obj.boundary())), gains,
+                         ClosedLoopConfig(duration=0.6, control_period=0.002, record_period=rp)) for rp in (None, 0.01))
+    assert len(every.t) > 4 * len(sparse.t)
+    truth = float(every.penetration.max())
+    assert truth > 0 and sparse.max_penetration == pytest.approx(truth, rel=1e-9)
+    assert every.max_penetration == pytest.approx(truth, rel=1e-9)
+    assert sparse.max_penetration_ratio == pytest.approx(float(every.penetration_ratio.max()), rel=1e-9)
+    assert sparse.penetration.max() < truth  # the sampled series alone misses the peak

@@ -117,8 +117,8 @@ def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_
         "integrator_steps": int(res.integrator_steps),
         "wall_time_s": float(res.wall_time),
         "newton_iterations": int(res.newton_iterations),
-        "max_penetration": float(res.penetration.max()),
-        "max_penetration_ratio": float(res.penetration_ratio.max()),
+        "max_penetration": float(res.max_penetration),
+        "max_penetration_ratio": float(res.max_penetration_ratio),
         "final_penetration": float(res.penetration[-1]),
         "final_penetration_ratio": float(res.penetration_ratio[-1]),
         "contact_tolerance": float(contact_tol),
@@ -200,6 +200,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     wall0 = time.perf_counter()
     session = LoopSession(system, config)
     period = config.control_period
+    max_ratio = 0.0
     while True:
         obs = session.observe(True if law is None else law.holding)
         sn = sense(obs.shape, obstacle, obs.radius)
@@ -211,9 +212,10 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
         else:
             expansion = feedback_at_joints(m, command, sn.rho, sn.alpha)
             couple = expansion.u
+        pen_c = m.r_centres - obstacle.project(chain.centres(m, session.state.theta)).signed_distance
+        ratio = max(float((sn.delta / obs.radius).max()), float((pen_c / m.r_centres).max()), 0.0)
+        max_ratio = max(max_ratio, ratio)
         if session.k % rec_every == 0 or session.finished:
-            pen_c = m.r_centres - obstacle.project(chain.centres(m, session.state.theta)).signed_distance
-            ratio = max(float((sn.delta / obs.radius).max()), float((pen_c / m.r_centres).max()), 0.0)
             for key, val in (("t", obs.t), ("x", obs.x), ("theta", obs.theta), ("rho", sn.rho), ("alpha", sn.alpha),
                              ("couple", couple), ("pen", obs.penetration), ("ratio", ratio),
                              ("speed", obs.max_speed)):
@@ -227,7 +229,8 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
         penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=session.settled,
         settle_time=session.settle_time, wall_time=time.perf_counter() - wall0, newton_iterations=session.iterations,
         final_state=session.state, model=m, gains=gains, config=config, steps=session.k,
-        integrator_steps=session.k * config.substeps)
+        integrator_steps=session.k * config.substeps, max_penetration=session.max_penetration,
+        max_penetration_ratio=max_ratio)
 
 
 MAX_NODES = 10_001

@@ -91,6 +91,9 @@ class ClosedLoopResult:
     (K, N+1, 2), node angles ``theta`` (K, N+1), sensed ``rho``, ``alpha`` (K, N+1), applied
     ``couple`` (K, N), ``penetration`` (K,) max surface penetration (m) and
     ``penetration_ratio`` (K,) max penetration / local radius, ``max_speed`` (K,) (m/s);
+    ``max_penetration`` (m) and ``max_penetration_ratio``: their largest values over *every*
+    control step, recorded or not (what the ROS simulator's ``LoopSession.max_penetration``
+    reports, on the nodes and element centres);
     ``settled``, ``settle_time`` (s or None), ``wall_time`` (s), ``newton_iterations``,
     the ``final_state`` and the run's ``model``, ``gains`` and ``config``; ``steps`` the control
     periods advanced and ``integrator_steps`` the accepted implicit steps (substeps included)."""
@@ -114,6 +117,8 @@ class ClosedLoopResult:
     config: ClosedLoopConfig = field(repr=False)
     steps: int = 0
     integrator_steps: int = 0
+    max_penetration: float = 0.0
+    max_penetration_ratio: float = 0.0
 
 
 def _speeds(system: RodSystem, st: RodState) -> float:
@@ -158,6 +163,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     dt_next = dt
     quiet_since: float | None = None
     settled = False
+    max_pen = max_ratio = 0.0
     wall0 = time.perf_counter()
     for k in range(n_ctrl + 1):
         if system.body is not None:  # a movable object: sensed where it is at the start of the period
@@ -178,10 +184,11 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
             done = st.t >= config.min_time and st.t - quiet_since >= config.settle_hold
         else:
             quiet_since = None
+        pen_c = m.r_centres - obstacle.project(chain.centres(m, st.theta)).signed_distance
+        pen = max(float(sn.delta.max()), float(pen_c.max()), 0.0)
+        ratio = max(float((sn.delta / r_nodes).max()), float((pen_c / m.r_centres).max()), 0.0)
+        max_pen, max_ratio = max(max_pen, pen), max(max_ratio, ratio)
         if k % rec_every == 0 or done or k == n_ctrl:
-            pen_c = m.r_centres - obstacle.project(chain.centres(m, st.theta)).signed_distance
-            pen = max(float(sn.delta.max()), float(pen_c.max()), 0.0)
-            ratio = max(float((sn.delta / r_nodes).max()), float((pen_c / m.r_centres).max()), 0.0)
             for key, val in (("t", st.t), ("x", shape.r), ("theta", shape.theta),
                              ("rho", sn.rho), ("alpha", sn.alpha), ("couple", u), ("pen", pen), ("ratio", ratio),
                              ("speed", speed)):
@@ -206,4 +213,5 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         t=arr["t"], x=arr["x"], theta=arr["theta"], rho=arr["rho"], alpha=arr["alpha"], couple=arr["couple"],
         penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=settled,
         settle_time=(quiet_since if settled else None), wall_time=wall, newton_iterations=iters,
-        final_state=st, model=m, gains=gains, config=config, steps=steps, integrator_steps=substeps)
+        final_state=st, model=m, gains=gains, config=config, steps=steps, integrator_steps=substeps,
+        max_penetration=max_pen, max_penetration_ratio=max_ratio)
