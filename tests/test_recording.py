@@ -48,6 +48,8 @@ def graph_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     # the recorder's last log lines come after SIGINT shut its context down (issue 31: rcl printed
     # "Failed to publish log message to rosout: publisher's context is invalid" on every run)
     assert "Failed to publish log message to rosout" not in proc.stderr, proc.stderr[-3000:]
+    # nor a hint to reset or Ctrl-C nodes the launcher stops itself (issue 31, item 6)
+    assert "staying up" not in proc.stderr and "~/reset" not in proc.stderr, proc.stderr[-3000:]
     return out, json.loads(proc.stdout)
 
 

@@ -266,3 +266,19 @@ def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
                       ["--bag", str(tmp_path / "one.mcap"), "--max-bag-duration", "5"]):
         proc = launch(*bad_split)
         assert proc.returncode == 2 and "--max-bag" in proc.stderr and "Traceback" not in proc.stderr, bad_split
+
+
+def test_text_summary_reads_like_the_contgrasp_subcommands(tmp_path: Path) -> None:
+    """Without --json the launcher prints ``key.sub: value`` lines, floats to 6 significant digits,
+    as every ``contgrasp`` subcommand does: no Python dict, no 15-digit float (issue 31, item 6)."""
+    proc = launch("--in-process", "--no-record", "--params", str(small_params(tmp_path)))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    lines = proc.stdout.strip().splitlines()
+    values = dict(line.split(": ", 1) for line in lines)
+    assert values["settled"] in ("True", "False") and float(values["sim_time_s"]) == pytest.approx(0.1)
+    assert any(key.startswith("final_quality.") for key in values)
+    for line in lines:
+        assert "{" not in line, line
+        for word in line.split(": ", 1)[1].strip("[]").split(", "):
+            mantissa = word.lower().split("e")[0].lstrip("-").replace(".", "").lstrip("0")
+            assert not word[:1].isdigit() or len(mantissa) <= 6, line

@@ -207,8 +207,10 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         raise InvalidParameterError(f"--respawn takes N >= 0 and applies to separate node processes only, got {args.respawn}"
                                     + (" with --in-process" if args.in_process else ""))
     # (after the checks of the command line: bad usage stays one line)
-    print(f"[launcher] ROS_DOMAIN_ID={domain} (attach from another terminal: ROS_DOMAIN_ID={domain} "
-          "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ros2 topic echo /contgrasp/quality)", file=sys.stderr, flush=True)
+    # (ros2cli is part of a ROS 2 install, not of this venv: say so instead of assuming it)
+    print(f"[launcher] ROS_DOMAIN_ID={domain} (another terminal joins the graph with ROS_DOMAIN_ID={domain} "
+          "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; with a ROS 2 install: ros2 topic echo /contgrasp/quality)",
+          file=sys.stderr, flush=True)
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
                               respawn=args.respawn, keep_history=args.plot is not None, events=events,
                               foxglove=args.foxglove, allow_unrecorded=args.allow_unrecorded, compose=compose)
@@ -227,15 +229,17 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         events("finished", exit_code=code, error=summary.get("error"))
     if args.json:
         print(json.dumps(summary))
-    else:
-        for key in ("mode", "settled", "settle_time_s", "sim_time_s", "steps", "wall_time_s", "loop_wall_time_s",
-                    "real_time_factor", "step_wall_ms", "missed_deadlines", "late_couples",
-                    "mean_abs_rho_ratio_minus_1_contact", "max_abs_rho_ratio_minus_1_contact",
-                    "mean_abs_alpha_minus_half_pi_contact", "max_abs_alpha_minus_half_pi_contact",
-                    "contact_nodes", "contact_length",
-                    "final_quality", "bag", "restarts", "faults", "exit_codes", "error"):
-            if key in summary:
-                print(f"{key}: {summary[key]}")
+    else:  # as the ``contgrasp`` subcommands print theirs: ``key.sub: value``, floats to 6 digits
+        from contgrasp_core.cli import summary_lines
+
+        keys = ("mode", "settled", "settle_time_s", "sim_time_s", "steps", "wall_time_s", "loop_wall_time_s",
+                "real_time_factor", "step_wall_ms", "missed_deadlines", "late_couples",
+                "mean_abs_rho_ratio_minus_1_contact", "max_abs_rho_ratio_minus_1_contact",
+                "mean_abs_alpha_minus_half_pi_contact", "max_abs_alpha_minus_half_pi_contact",
+                "contact_nodes", "contact_length", "max_penetration",
+                "final_quality", "bag", "restarts", "faults", "exit_codes", "error")
+        lines, _ = summary_lines({key: summary[key] for key in keys if key in summary})
+        print("\n".join(lines))
     return code
 
 

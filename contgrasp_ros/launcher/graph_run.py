@@ -150,6 +150,11 @@ class Monitor(Node):
         )
 
 
+SUPERVISED = {"use_sim_time": True, "on_finish": "supervised"}
+"""What the launcher sets on every node it starts: simulated time, and no "staying up" hint when
+the run is over (the launcher stops its nodes itself)."""
+
+
 def _overrides(values: dict[str, Any]) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in values.items()]
 
@@ -322,7 +327,7 @@ def run_graph(
             for name in NODES:  # (node_class imports each module now: the node processes import their own)
                 values = sim_params if name == "rod_simulator" else params[name]
                 try:
-                    nodes.append(node_class(name)(parameter_overrides=_overrides({**values, "use_sim_time": True})))
+                    nodes.append(node_class(name)(parameter_overrides=_overrides({**values, **SUPERVISED})))
                 except (rclpy.exceptions.ParameterException, ContgraspError, TypeError) as exc:
                     if isinstance(exc, RunFailure):  # as run_node exits: 1 for a failure, 2 for bad input
                         return {"error": f"{name}: {exc}", "exit_codes": {}, "pids": {}}, 1
@@ -331,7 +336,8 @@ def run_graph(
                 from contgrasp_ros.nodes.mcap_recorder import McapRecorder
 
                 try:
-                    nodes.append(McapRecorder(parameter_overrides=_overrides(recorder_params(record))))
+                    nodes.append(McapRecorder(parameter_overrides=_overrides({**recorder_params(record),
+                                                                                "on_finish": "supervised"})))
                 except ContgraspError as exc:
                     return {"error": f"{RECORDER}: {exc}", "exit_codes": {}, "pids": {}}, exit_code(exc)
         else:
@@ -344,7 +350,7 @@ def run_graph(
             group = ProcessGroup(env, events=events)
             # Launcher overrides go in a second parameter file: a node's own section in the user's
             # file would beat a plain ``-p name:=value`` (rcl gives node-specific entries priority).
-            overrides: dict[str, Any] = {name: {"ros__parameters": {"use_sim_time": True}} for name in NODES}
+            overrides: dict[str, Any] = {name: {"ros__parameters": dict(SUPERVISED)} for name in NODES}
             # the sensor, the launcher's monitor and the recorder must hear the first state, also
             # from a restarted simulator; once the recorder has died it no longer counts
             # (``_drive`` rewrites this file before restarting the simulator)
@@ -352,7 +358,7 @@ def run_graph(
                 start_paused=True, duration=float(sim_params["duration"]),
                 min_subscribers=UNRECORDED_MIN_SUBSCRIBERS + (record is not None))
             if record is not None:
-                overrides[RECORDER] = {"ros__parameters": recorder_params(record)}
+                overrides[RECORDER] = {"ros__parameters": {**recorder_params(record), "on_finish": "supervised"}}
             tmp = Path(tempfile.mkdtemp(prefix="contgrasp_launch_"))
             override_file = tmp / "overrides.yaml"
             override_file.write_text(yaml.safe_dump(overrides))

@@ -450,14 +450,15 @@ def sim_time_by_default(node: Node) -> None:
         node.set_parameters([Parameter("use_sim_time", value=True)])
 
 
-ON_FINISH = ("idle", "exit")
+ON_FINISH = ("idle", "exit", "supervised")
 
 
 class FinishPolicy:
     """What the node does when the run is over, by its ``on_finish`` parameter: ``idle`` (the
     default) stays up and says so (the simulator can be reset with ``~/reset``; Ctrl-C stops a
     node); ``exit`` ends the process ``grace_s`` wall seconds later (so the last messages are
-    delivered), with status 0 for a finished run and 1 for a failed one.
+    delivered), with status 0 for a finished run and 1 for a failed one; ``supervised`` stays up
+    without a word (``contgrasp-launch`` gives it to its nodes: it stops them itself).
 
     The simulator reports the end itself (:meth:`done`); the other nodes learn it from the
     simulator's status on ``/diagnostics`` (``watch_simulator``: state ``finished`` or
@@ -469,7 +470,8 @@ class FinishPolicy:
         self._node = node
         self._grace = grace_s
         self._ended = False
-        declare(node, "on_finish", "idle", "when the run is over: 'idle' (stay up) or 'exit' (status 0 finished, 1 failed)",
+        declare(node, "on_finish", "idle", "when the run is over: 'idle' (stay up), 'exit' (status 0 finished, 1 failed) or "
+                "'supervised' (stay up quietly: a launcher stops the node)",
                 choices=ON_FINISH)
         node.stop_requested = False  # type: ignore[attr-defined]
         if watch_simulator:
@@ -503,7 +505,11 @@ class FinishPolicy:
             return
         self._ended = True
         log = self._node.get_logger()
-        if self._node.get_parameter("on_finish").value == "idle":
+        policy = self._node.get_parameter("on_finish").value
+        if policy == "supervised":
+            log.debug(f"{what}; staying up until the launcher stops the node (on_finish: supervised)")
+            return
+        if policy == "idle":
             log.info(f"{what}; staying up (on_finish: idle): call ~/reset on the simulator to run again, "
                      "Ctrl-C to stop, or start the nodes with on_finish:=exit")
             return
