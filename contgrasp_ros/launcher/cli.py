@@ -39,6 +39,9 @@ from contgrasp_ros.launcher.graph import compose_groups, default_params_file, lo
 
 __all__ = ["main", "default_params_file", "load_params"]
 
+PACKAGED_PARAMS = "contgrasp_ros/config/default.yaml (packaged)"
+"""How a recording names the packaged parameter file (its run_info ``params_file``)."""
+
 
 def _domain_id(given: int | None) -> int:
     """The run's ROS_DOMAIN_ID: ``--domain-id``, else ``$ROS_DOMAIN_ID`` when set, else random in 1..101."""
@@ -191,7 +194,10 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         layout = args.bag_layout or ("file" if out.suffix == ".mcap" else "folder")
         if out.exists():
             raise InvalidParameterError(f"--bag {out} already exists (give a new folder or .mcap file name)")
-        run_info = {"params": params, "params_file": str(params_file), "argv": list(sys.argv[1:] if argv is None else argv)}
+        # the file as the user named it (or the packaged one by name), never a path of this machine:
+        # the parameters themselves are in ``params``
+        run_info = {"params": params, "params_file": str(args.params) if args.params else PACKAGED_PARAMS,
+                    "argv": list(sys.argv[1:] if argv is None else argv)}
         if not (np.isfinite(args.bag_decimate) and args.bag_decimate >= 0):
             raise InvalidParameterError(f"--bag-decimate must be a finite number >= 0 (seconds), got {args.bag_decimate}")
         try:
