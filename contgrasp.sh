@@ -128,12 +128,14 @@ run_main() {
     echo "== figure: results/closed_loop.png, summary: results/closed_loop.json, recording: $bag/"
     echo "== offline analysis of the recording (no ROS needed) -> results/closed_loop_analysis.json"
     "$venv/bin/contgrasp" bag info "$bag"
-    "$venv/bin/contgrasp" analyze "$bag" --json --plot results/closed_loop_from_bag.png --csv results/closed_loop_csv \
-        >results/closed_loop_analysis.json
+    "$venv/bin/contgrasp" analyze "$bag" --json --plot results/closed_loop_from_bag.png >results/closed_loop_analysis.json
     for obj in circle ellipse deformed; do
         echo "== contact kinematics around the $obj -> results/kinematics_$obj.png"
         "$venv/bin/contgrasp" kinematics --object "$obj" --plot "results/kinematics_$obj.png" >/dev/null
     done
+    # what the run left behind, and how big (each run adds a recording of ~13 MB)
+    echo "== written: $(du -sh results | cut -f1) in results/ (overwritten by the next run), $(du -sh "$bag" | cut -f1) in $bag/ (one per run: remove old ones with rm -r bags/run_*)"
+    echo "== the recording as CSV files (~33 MB): $venv/bin/contgrasp analyze $bag --csv results/closed_loop_csv"
 }
 
 run_checks() {
