@@ -221,6 +221,7 @@ def test_truncated_files_give_a_clear_error_and_recover_a_prefix(small_bag, tmp_
         stats = recover(bad, d / "fixed.mcap")
         got = [m.data for m in iter_raw(open_recording(d / "fixed.mcap"))]
         assert got == data[: len(got)] and stats["messages"] == len(got)  # an intact prefix
+        assert stats["output_chunks"] == info(open_recording(d / "fixed.mcap"))["chunk_count"]
 
 
 @settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -368,4 +368,6 @@ def recover(src: str | Path, dst: str | Path, *, layout: str | None = None) -> d
                         out.records[r.name] = dict(r.metadata)
     finally:
         meta = out.close()
-    return {**stats, "output": str(dst_p), "metadata": meta}
+    # ``chunks_kept``/``chunks_lost`` count the input's chunks; the copy is chunked anew by the
+    # writer, so its own count (what ``bag info`` of the output shows) is reported beside them
+    return {**stats, "output_chunks": info(open_recording(dst_p))["chunk_count"], "output": str(dst_p), "metadata": meta}
