@@ -337,3 +337,35 @@ def test_holding_under_pushes_recovers_a_known_compliance() -> None:
     expected = float(q[49, :2] @ wrench[20, :2] / (0.05**2))
     assert abs(pushes[0]["compliance_force"] - expected) < 1e-15 and pushes[0]["compliance_torque"] is None
     assert abs(pushes[1]["compliance_torque"] - 3.0) < 1e-12 and pushes[1]["compliance_force"] is None
+
+
+def test_a_recording_without_run_parameters_still_replays_the_settle_rule(recording: tuple[Path, dict], tmp_path: Path,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run started by hand records no run parameters (no launcher): with every rod state from
+    step 0 the settle rule is still replayed, with the node defaults, and the report says so
+    (issue 31, item 10: ``settled_recomputed: None`` beside ``step_gaps.contiguous: true``).
+    Truth: the simulator's own verdict, once the fixture's looser rule stands in as the defaults."""
+    from contgrasp_ros.bag.writer import RUN_RECORD
+    from contgrasp_ros.recordings import analysis
+
+    bag, summary = recording
+    rec = open_recording(bag)
+    copy = tmp_path / "by_hand.mcap"
+    out = BagWriter(copy)
+    for m in iter_raw(rec):
+        out.add_topic(m.topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""),
+                      m.channel.metadata.get("topic_type_hash", ""), definition=m.schema.data.decode())
+        out.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns, m.sequence)
+    out.records.update({k: v for k, v in rec.metadata_records().items() if k not in ("rosbag2", RUN_RECORD)})
+    out.close()
+    r = analyze(copy)
+    assert r["step_gaps"]["contiguous"] and r["recompute_parameters"]["source"].startswith("recorded messages and node defaults")
+    assert r["recompute_parameters"]["settle_speed"] == PAPER.loop.settle_speed
+    assert isinstance(r["settled_recomputed"], bool)
+    fixture_rule = {"settle_speed": 0.05, "settle_hold": 0.04, "min_time": 0.2}  # (the recording fixture's)
+    default = analysis._default
+    monkeypatch.setattr(analysis, "_default", lambda node, key: fixture_rule.get(key, default(node, key))
+                        if node == analysis.SIMULATOR else default(node, key))
+    r = analyze(copy)
+    assert r["settled_recomputed"] is True
+    assert r["settle_time_recomputed_s"] == pytest.approx(summary["settle_time_s"], rel=0, abs=1e-9)

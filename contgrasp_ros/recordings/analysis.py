@@ -358,8 +358,11 @@ def _param(params: dict[str, dict[str, Any]] | None, node: str, key: str, defaul
 def recompute_parameters(run: RunData) -> dict[str, Any]:
     """Sensor/quality tolerances and wrench reference the nodes ran with: the run's parameters
     (MCAP metadata) or, without them, what the recorded messages carry and the node defaults."""
+    settle = {k: _param(run.params, SIMULATOR, k, _default(SIMULATOR, k))
+              for k in ("settle_speed", "settle_hold", "min_time")}  # the simulator's settle rule
     if run.params is not None:
         return {
+            **settle,
             "source": "run parameters",
             "sensor_contact_tolerance": _param(run.params, "boundary_sensor", "contact_tolerance", _default("boundary_sensor", "contact_tolerance")),
             # the quality node uses the contact states' own tolerance (-1); recordings made before
@@ -368,6 +371,7 @@ def recompute_parameters(run: RunData) -> dict[str, Any]:
             "reference": [_param(run.params, "grasp_quality", k, _default("grasp_quality", k)) for k in ("reference_x", "reference_y")],
         }
     return {
+        **settle,
         "source": "recorded messages and node defaults (no run parameters in the recording)",
         "sensor_contact_tolerance": float(run.contact.tol[0]) if run.contact is not None else _default("boundary_sensor", "contact_tolerance"),
         "quality_contact_tolerance": float(run.quality.contact_tolerance[0]) if run.quality is not None else -1.0,
@@ -510,13 +514,14 @@ def settle_recomputed(run: RunData) -> tuple[bool | None, float | None]:
     stamp, the simulated time rounded to ns (the simulator's own float times reach /diagnostics
     only a few times per second): the rule's hold and minimum time are taken 1 ns short, so a
     run the simulator judged settled at the last step is so judged again, and the settle time
-    agrees with the simulator's to 1 ns; (None, None) when the rod states are not complete or
-    the run's parameters are not recorded."""
+    agrees with the simulator's to 1 ns; the rule's parameters as :func:`recompute_parameters`
+    finds them (the run's, else the node defaults: a run started by hand records none);
+    (None, None) when the rod states are not complete."""
     gaps = step_gaps(run)
-    if run.params is None or not gaps["contiguous"] or gaps["first_step"] != 0:
+    if not gaps["contiguous"] or gaps["first_step"] != 0:
         return None, None
-    sim = run.params.get(SIMULATOR, {})
-    speed, hold, min_time = (float(sim.get(k, _default(SIMULATOR, k))) for k in ("settle_speed", "settle_hold", "min_time"))
+    par = recompute_parameters(run)
+    speed, hold, min_time = par["settle_speed"], par["settle_hold"], par["min_time"]
     det = SettleDetector(speed, hold - STAMP_RESOLUTION_S, min_time - STAMP_RESOLUTION_S)
     for t, v in zip(run.rod.t, run.rod.max_speed, strict=True):
         det.update(float(t), float(v))
