@@ -33,7 +33,7 @@ import numpy as np
 from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
 from .executors import run_tasks
 from .holding import GraspFailure, HoldSettings, measure_holding
-from .objects import FIG2_SCALE, SHAPES, ObjectSpec
+from .objects import FIG2_SCALE, SHAPES, SYNTAX, ObjectSpec
 from .quality_map import MapSpec, QualityMap, quality_map
 from .scenario import PAPER, Scenario
 
@@ -76,9 +76,18 @@ class StudySpec:
         if not (np.isfinite(self.duration) and self.duration > 0):
             raise InvalidParameterError(f"duration must be a finite number > 0 (s), got {self.duration!r}")
 
+    def object_spec(self) -> ObjectSpec:
+        """The object in the paper's units; :class:`InvalidParameterError` for anything but a
+        built-in shape (the static map is scaled to the rod's metres about the shape's centre,
+        which an outline in absolute coordinates does not have), naming only the shapes taken."""
+        if not isinstance(self.object, str) or self.object.strip().partition(":")[0] not in SHAPES:
+            raise InvalidParameterError(f"the holding study takes a built-in shape in the paper's units: {SYNTAX}; "
+                                        f"got {self.object!r} (outlines: grasp, kinematics, quality-map, simulate, hold)")
+        return ObjectSpec.parse(self.object, FIG2_SCALE)
+
     def map_spec(self) -> MapSpec:
         """The static quality map's specification (paper units)."""
-        return MapSpec(object=ObjectSpec.parse(self.object, FIG2_SCALE), psi_steps=self.psi_steps,
+        return MapSpec(object=self.object_spec(), psi_steps=self.psi_steps,
                        d_steps=self.d_steps, d_min=self.d_min, d_max=self.d_max)
 
     def distinct_rows(self) -> int:
@@ -88,7 +97,7 @@ class StudySpec:
         ``0 .. distinct_rows() - 1`` are measured and the others follow
         (:func:`expand_symmetric`): 1 for a circle, ``psi_steps / 2`` for an ellipse (its half
         turn), ``psi_steps / gcd(lobes, psi_steps)`` for a deformed circle."""
-        spec = ObjectSpec.parse(self.object, FIG2_SCALE)
+        spec = self.object_spec()
         p = dict(zip(SHAPES[spec.shape], spec.params, strict=True))
         if spec.shape == "circle" or (spec.shape == "ellipse" and p["a"] == p["b"]) or (
                 spec.shape == "deformed" and p["amplitude"] == 0):
@@ -99,9 +108,7 @@ class StudySpec:
     def rod_object(self) -> ObjectSpec:
         """The object in metres: the paper's shape scaled by ``scale`` about its centre, placed
         at the rod scenario's object centre."""
-        spec = ObjectSpec.parse(self.object, FIG2_SCALE)
-        if spec.shape == "outline":
-            raise InvalidParameterError("the study takes a built-in shape (its static map is in the paper's units)")
+        spec = self.object_spec()
         params = tuple(p * self.scale if name in ("R", "a", "b") else p
                        for name, p in zip(SHAPES[spec.shape], spec.params, strict=True))
         return ObjectSpec(spec.shape, params, PAPER.object.center, spec.angle)

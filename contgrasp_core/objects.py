@@ -1,8 +1,9 @@
 """How an object is named: one syntax for the built-in shapes and a user's outline.
 
-Every entry point that takes an object (``contgrasp kinematics|grasp|quality-map|simulate``,
-``contgrasp-launch``, the simulator node, the scenario model) names it with an
-:class:`ObjectSpec`, written as text ``NAME[:P1,P2,...]`` or given as an outline file:
+Every entry point that takes an object (``contgrasp kinematics|grasp|quality-map|simulate|hold``,
+``contgrasp-launch``, the simulator node, the scenario model; ``contgrasp holding-study`` the
+built-in shapes only) names it with an :class:`ObjectSpec`, written as text ``NAME[:P1,P2,...]``
+or given as an outline file:
 
 =============  ==========================================  =======================================
 ``NAME``       parameters (in the caller's units)          paper defaults (Fig. 2 / Fig. 4 scale)
@@ -10,14 +11,16 @@ Every entry point that takes an object (``contgrasp kinematics|grasp|quality-map
 ``circle``     ``R``                                       5 / 0.025 m
 ``ellipse``    ``a, b`` (semi-axes)                        8, 4 / 0.03, 0.02 m
 ``deformed``   ``R, amplitude, lobes, phase``              5, 0.15, 3, 0 / 0.025 m, 0.15, 3, 0
-``outline``    a CSV file, rows ``x, y`` (``--outline``)   -
+``outline``    ``FILE`` (a CSV file of rows ``x, y``)      -
 =============  ==========================================  =======================================
 
 Omitted trailing parameters take the defaults of the caller's :class:`ObjectScale`:
 :data:`FIG2_SCALE` (the paper's dimensionless Sec. III-IV examples, centred at the origin) or
 :data:`ROD_SCALE` (the rod scenario of Sec. V-C, metres, centred at (0.08, 0.08) m). A user's
-outline is used as given (absolute coordinates in the caller's units); it is closed
-implicitly when its last row does not repeat the first. Paper Sec. III-A names the three
+outline (``outline:FILE.csv``, or ``--outline FILE.csv``) is used as given (absolute coordinates
+in the caller's units); it is closed implicitly when its last row does not repeat the first.
+:meth:`ObjectSpec.text` is the one name of an object: every command prints it, and ``--object``
+takes it back. Paper Sec. III-A names the three
 built-in objects (:func:`contgrasp_core.boundary.deformed_circle` gives the third's formula).
 """
 
@@ -32,7 +35,8 @@ import numpy as np
 from .boundary import Boundary, circle, deformed_circle, ellipse, from_points, load_points
 from .errors import InvalidParameterError
 
-__all__ = ["SHAPES", "PAPER_OBJECTS", "ObjectScale", "FIG2_SCALE", "ROD_SCALE", "ObjectSpec", "paper_object"]
+__all__ = ["SHAPES", "SYNTAX", "OUTLINE", "PAPER_OBJECTS", "ObjectScale", "FIG2_SCALE", "ROD_SCALE", "ObjectSpec", "outline_text",
+           "paper_object"]
 
 SHAPES: dict[str, tuple[str, ...]] = {
     "circle": ("R",),
@@ -41,12 +45,14 @@ SHAPES: dict[str, tuple[str, ...]] = {
 }
 """The built-in shapes and the names of their parameters, in the order the text syntax takes them."""
 
-_SYNTAX = ", ".join(f"{name}[:{','.join(names)}]" for name, names in SHAPES.items())
+SYNTAX = ", ".join(f"{name}[:{','.join(names)}]" for name, names in SHAPES.items())
+"""The built-in shapes' text syntax, for help and error messages."""
 
 PAPER_OBJECTS = tuple(SHAPES)
 """The paper's three objects (Sec. III-A), by name."""
 
 OUTLINE = "outline"
+"""The name of a user's outline (``outline:FILE.csv``)."""
 
 
 @dataclass(frozen=True)
@@ -86,8 +92,9 @@ class ObjectSpec:
 
     def __post_init__(self) -> None:
         if self.shape != OUTLINE and self.shape not in SHAPES:
-            raise InvalidParameterError(f"unknown object {self.shape!r}; use {_SYNTAX}, or an outline "
-                                        "(a CSV file of x, y rows: --outline FILE.csv, or outline:=FILE.csv in a launch file)")
+            raise InvalidParameterError(f"unknown object {self.shape!r}; use {SYNTAX}, or outline:FILE.csv "
+                                        "(your own object: a CSV file of x, y rows; also --outline FILE.csv, "
+                                        "or outline:=FILE.csv in a launch file)")
         object.__setattr__(self, "params", tuple(float(v) for v in self.params))
         object.__setattr__(self, "center", _pair("object centre", self.center))
         object.__setattr__(self, "angle", float(self.angle))
@@ -112,14 +119,16 @@ class ObjectSpec:
     # ------------------------------------------------------------------ construction
     @classmethod
     def parse(cls, text: str, scale: ObjectScale = FIG2_SCALE) -> ObjectSpec:
-        """``NAME[:P1,P2,...]`` (see the module table); omitted trailing parameters and the centre
-        come from ``scale``."""
+        """``NAME[:P1,P2,...]`` (see the module table) or ``outline:FILE.csv``, the inverse of
+        :meth:`text`; omitted trailing parameters and the centre come from ``scale``."""
         if not isinstance(text, str) or not text.strip():
             raise InvalidParameterError(f"--object must be NAME[:PARAMS], got {text!r}")
         name, _, arg = text.strip().partition(":")
         if name == OUTLINE:
-            raise InvalidParameterError("an outline is given as a CSV file of x, y rows, not by name: --outline FILE.csv "
-                                        "(outline:=FILE.csv in a launch file)")
+            if not arg.strip():
+                raise InvalidParameterError("an outline names its CSV file of x, y rows: outline:FILE.csv "
+                                            "(also --outline FILE.csv, or outline:=FILE.csv in a launch file)")
+            return cls.from_outline(arg.strip())
         if name not in SHAPES:
             cls(name)  # raises the unknown-object error
         try:
@@ -183,10 +192,13 @@ class ObjectSpec:
         return self._boundary
 
     def text(self) -> str:
-        """``NAME:P1,...`` for a built-in shape (centre and angle not included), ``outline:<file>``."""
+        """The object's name, as every command prints it and as ``--object`` takes it back
+        (:meth:`parse`): ``NAME:P1,...`` with every parameter, shortest exact numbers, for a
+        built-in shape (centre and angle are the caller's scale's, not included);
+        :func:`outline_text` of the file for an outline (``N points`` when it has no file)."""
         if self.shape == OUTLINE:
-            return f"{OUTLINE}:{self.source or f'{len(self.points)} points'}"
-        return f"{self.shape}:{','.join(f'{v:g}' for v in self.params)}"
+            return outline_text(self.source) if self.source else f"{OUTLINE}:{len(self.points)} points"
+        return f"{self.shape}:{','.join(_number(v) for v in self.params)}"
 
     def to_dict(self) -> dict[str, Any]:
         """Plain types only (JSON, YAML, ROS parameters, recording metadata)."""
@@ -225,6 +237,18 @@ class ObjectSpec:
         pts = np.asarray(self.points, dtype=float).reshape(-1, 2)
         closed = len(pts) > 1 and not np.array_equal(pts[0], pts[-1])
         return from_points(pts, closed=closed)
+
+
+def outline_text(source: str) -> str:
+    """The name of the outline read from the file ``source`` (as given): ``outline:<source>``;
+    for a recording whose outline file may not be at hand (the name needs no file)."""
+    return f"{OUTLINE}:{source}"
+
+
+def _number(value: float) -> str:
+    """``value`` as short as ``:g`` makes it when that reads back exactly, else its exact repr."""
+    short = f"{value:g}"
+    return short if float(short) == value else repr(value)
 
 
 def _pair(what: str, value: Any) -> tuple[float, float]:

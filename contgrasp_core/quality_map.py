@@ -106,7 +106,7 @@ class MapSpec:
         if d_max >= reach:
             raise InvalidParameterError(
                 f"d_max = {d_max:g} must be less than the arm length {reach:.6g} (= length_fraction * L_o): "
-                "a base farther from the object cannot touch it"
+                "a base farther from the object cannot touch it; give a smaller d_max (--d-max) or a larger object"
             )
 
     def boundary(self) -> Boundary:

@@ -239,7 +239,7 @@ def test_a_movable_object_with_a_scripted_disturbance_runs_through_the_graph_as_
     assert names[topics.OBJECT_POSE] == names[topics.OBJECT_TWIST] == names[topics.ROD_STATE] == obs.k + 1
     result = analyze(tmp_path / "bag", csv_dir=tmp_path / "csv")
     assert result["max_recompute_error"] == 0.0  # sensed in the object's frame, as the sensor did
-    assert result["object"]["mode"] == mode and result["object"]["final_q"] == obs.body.q.tolist()
+    assert result["object_motion"]["mode"] == mode and result["object_motion"]["final_q"] == obs.body.q.tolist()
     assert result["final"]["object_q"] == obs.body.q.tolist()  # (analyze: the same summary)
     rows = np.loadtxt(result["csv"]["object"]["path"], delimiter=",", skiprows=1)
     assert rows.shape == (obs.k + 1, 11)
@@ -343,7 +343,7 @@ def test_a_push_on_the_wrench_topic_and_a_pulse_from_the_service_are_in_the_reco
     assert 60 < int(run.rod.step[rows[0]]) == pulse_step < 475 and len(rows) in (20, 21)  # 0.04 s: 20 control periods
     assert np.all(o.wrench[rows, 2] == torque) and np.any(o.q[:, 2] > 0)
     result = analyze(tmp_path / "bag")
-    w = result["object"]["wrench"]
+    w = result["object_motion"]["wrench"]
     assert w["max_force"] == pytest.approx(0.05) and w["max_torque"] == torque
     assert w["first_t"] == pytest.approx(float(run.rod.t[pushed[0]]))
-    assert result["object"]["max_displacement"] >= -o.q[:, 1].min() and result["max_recompute_error"] == 0.0
+    assert result["object_motion"]["max_displacement"] >= -o.q[:, 1].min() and result["max_recompute_error"] == 0.0

@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import argparse
 
-from ..objects import SHAPES, ObjectScale, ObjectSpec
+from ..objects import SYNTAX, ObjectScale, ObjectSpec
 
 __all__ = ["add_object_arguments", "object_from_args"]
-
-_SYNTAX = ", ".join(f"{name}[:{','.join(names)}]" for name, names in SHAPES.items())
 
 
 def add_object_arguments(parser: argparse.ArgumentParser, scale: ObjectScale) -> None:
@@ -18,8 +16,9 @@ def add_object_arguments(parser: argparse.ArgumentParser, scale: ObjectScale) ->
     group = parser.add_mutually_exclusive_group()
     group.add_argument(
         "--object", metavar="NAME[:PARAMS]", default=None,
-        help=f"built-in object: {_SYNTAX} "
-        f"({scale.name}; defaults {defaults}; centre {scale.center[0]:g}, {scale.center[1]:g}). Default: circle")
+        help=f"built-in object: {SYNTAX} "
+        f"({scale.name}; defaults {defaults}; centre {scale.center[0]:g}, {scale.center[1]:g}), or outline:FILE.csv "
+        "(as --outline); the form the command prints as its object. Default: circle")
     group.add_argument("--outline", metavar="FILE.csv", default=None,
                        help=f"your own object: a CSV outline, rows x, y in the same units ({scale.name}), "
                        "closed implicitly")

@@ -98,7 +98,7 @@ def run_grasp(args: argparse.Namespace) -> dict[str, Any]:
     if args.plot:
         from ..figures.grasp import save_grasp_figure
 
-        out["plot"] = str(save_grasp_figure(result, args.plot, title=f"{object_from_args(args, FIG2_SCALE).text()} ({result.solver})"))
+        out["plot"] = str(save_grasp_figure(result, args.plot, title=f"{out['object']} ({result.solver})"))
     return out
 
 
@@ -124,6 +124,7 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
         path = save_grasp_figure(result, out_dir / f"fig2_{name}.png", title=name)
         files.append(str(path))
         summary[name] = {
+            "object": result.to_dict(arrays=False)["object"],
             "cost": result.cost,
             "converged": result.converged,
             "iterations": result.iterations,

@@ -19,6 +19,7 @@ from ..errors import InvalidParameterError
 from ..executors import EXECUTORS
 from ..holding import HoldSettings
 from ..holding_study import PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
+from ..objects import SYNTAX
 
 __all__ = ["add_parser", "run", "format_text"]
 
@@ -28,9 +29,16 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     d = StudySpec()
     p = sub.add_parser("holding-study", parents=parents, description=__doc__.splitlines()[0],
                        help="Q1-Q3 against measured grasp stiffness and holding capacity over a quality map's poses")
-    p.add_argument("--object", default=d.object, help="built-in shape in the paper's units (default circle)")
+    p.add_argument("--object", metavar="NAME[:PARAMS]", default=d.object,
+                   help=f"built-in shape in the paper's units: {SYNTAX} (default {d.object}); no outlines: the "
+                   "static map is scaled to the rod's metres about the shape's centre")
     p.add_argument("--psi-steps", type=int, default=d.psi_steps, help=f"polar angles (default {d.psi_steps})")
     p.add_argument("--d-steps", type=int, default=d.d_steps, help=f"distances (default {d.d_steps})")
+    p.add_argument("--d-min", type=float, default=d.d_min,
+                   help=f"nearest base distance from the object, paper units (default {d.d_min:g})")
+    p.add_argument("--d-max", type=float, default=d.d_max,
+                   help=f"farthest base distance, paper units, below the arm length (half the object's perimeter; "
+                   f"default {d.d_max:g})")
     p.add_argument("--nodes", type=int, default=d.nodes, help=f"rod nodes (default {d.nodes})")
     p.add_argument("--duration", type=float, default=d.duration,
                    help=f"longest closed-loop grasp before a pose counts as not settled, s (default {d.duration:g})")
@@ -65,13 +73,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run (or resume) the study; return the JSON-able summary."""
     if args.workers is not None and args.workers < 1:
         raise InvalidParameterError(f"--workers must be >= 1, got {args.workers}")
-    spec = StudySpec(object=args.object, psi_steps=args.psi_steps, d_steps=args.d_steps, nodes=args.nodes,
-                     duration=args.duration, hold=HoldSettings(directions=args.directions))
+    spec = StudySpec(object=args.object, psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
+                     d_max=args.d_max, nodes=args.nodes, duration=args.duration,
+                     hold=HoldSettings(directions=args.directions))
     qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,
                          progress=not args.json)
     ok = [r for r in rows if r.get("status") == "ok"]
     full = expand_symmetric(spec, rows)
-    out = {"object": args.object, "out": args.out, "poses": len(rows), "grasped": len(ok),
+    out = {"object": qm.spec.object.text(), "out": args.out, "poses": len(rows), "grasped": len(ok),
            "not_grasped": len(rows) - len(ok), "outcomes": dict(Counter(r.get("outcome", "?") for r in rows)),
            "distinct_rows": spec.distinct_rows(), "grid_poses": sum(r["key"].startswith("grid:") for r in full),
            "correlations": correlations(rows), "correlations_with_optima": correlations(rows, grid_only=False)}

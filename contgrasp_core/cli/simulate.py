@@ -304,7 +304,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     else:
         res = run_closed_loop(system, gains, cfg, law=law)
     out = summarize(res, args.contact_tol, "zoh" if args.hold == "zero-order" else "first-order hold")
-    out.update(object_mode=args.object_mode, law=args.law, friction=model.friction)
+    out.update(object=obj.text(), object_mode=args.object_mode, law=args.law, friction=model.friction)
     if law is not None:
         out["law_phase"] = law.phase
     if args.plot:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
@@ -57,13 +57,16 @@ class GraspProblem:
 
     ``boundary`` the object; ``arm`` its length and radius; ``disc`` the arrays the solvers use
     (grid, weights, initial state, desired profiles, chi, tabulated kappa_o);
-    ``penalty`` the initial augmented-Lagrangian weight of the state constraints.
+    ``penalty`` the initial augmented-Lagrangian weight of the state constraints; ``object`` the
+    :class:`~contgrasp_core.objects.ObjectSpec` the boundary was built from, when known
+    (:func:`paper_problem`), which names it in results.
     """
 
     boundary: Boundary
     arm: Arm
     disc: Discretisation
     penalty: float = DEFAULT_PENALTY
+    object: ObjectSpec | None = None
 
     @property
     def s(self) -> Array:
@@ -248,7 +251,7 @@ def paper_problem(obj: str | ObjectSpec, *, nodes: int = 500, **kwargs: Any) -> 
     rho0, alpha0 = PAPER_SETTINGS[spec.shape] if paper else (spec.radius, PAPER_SETTINGS["circle"][1])
     kwargs.setdefault("rho0", rho0)
     kwargs.setdefault("alpha0", alpha0)
-    return grasp_problem(spec.boundary(), nodes=nodes, **kwargs)
+    return replace(grasp_problem(spec.boundary(), nodes=nodes, **kwargs), object=spec)
 
 
 @dataclass(frozen=True)
@@ -336,11 +339,12 @@ class GraspResult:
         return shape_from_contact(self.s, self.rho, self.alpha, self.s_o, self.problem.boundary)
 
     def to_dict(self, arrays: bool = True) -> dict[str, Any]:
-        """JSON-able summary (arrays as lists when ``arrays``)."""
+        """JSON-able summary (arrays as lists when ``arrays``); ``object`` is the problem's object by
+        :meth:`~contgrasp_core.objects.ObjectSpec.text` (None for a bare boundary)."""
         p = self.problem
         out: dict[str, Any] = {
             "solver": self.solver,
-            "object": p.boundary.kind,
+            "object": None if p.object is None else p.object.text(),
             "cost": self.cost,
             "penalty": self.penalty,
             "residual": self.residual,

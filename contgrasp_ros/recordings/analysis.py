@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError, InvalidParameterError, RunFailure, WriteError, output_error
+from contgrasp_core.objects import OUTLINE, ROD_SCALE, SHAPES, ObjectSpec, outline_text
 from contgrasp_core.rod.session import SettleDetector
 from contgrasp_ros.plumbing import topics
 from contgrasp_ros.bag import BagInputError
@@ -63,6 +64,7 @@ __all__ = [
     "load_run",
     "recompute",
     "summarize",
+    "object_name",
     "object_motion",
     "write_csv",
     "write_plots",
@@ -550,6 +552,24 @@ def history(run: RunData, period: float = 0.01) -> list[dict[str, Any]]:
     return out
 
 
+def object_name(run: RunData) -> str | None:
+    """The run's object as every ``contgrasp`` command names it
+    (:meth:`~contgrasp_core.objects.ObjectSpec.text`, what ``--object`` takes back): from the
+    recorded simulator parameters (``object`` in metres, or an outline by its ``object_outline``
+    file, which need not be at hand), else from the recorded boundary when it is a built-in
+    shape; None when the recording names it neither way (a curve without shape parameters)."""
+    if run.params is not None:
+        sim = run.params.get(SIMULATOR, {})
+        text, outline = str(sim.get("object", _default(SIMULATOR, "object"))), str(sim.get("object_outline", ""))
+        if text == OUTLINE or outline:
+            return outline_text(outline)
+        return ObjectSpec.parse(text, ROD_SCALE).text()
+    shape = {"deformed_circle": "deformed"}.get(run.boundary.kind, run.boundary.kind)
+    if shape not in SHAPES:
+        return None
+    return ObjectSpec(shape, tuple(run.boundary.params[k] for k in SHAPES[shape])).text()
+
+
 def object_motion(run: RunData) -> dict[str, Any] | None:
     """How a movable object moved and what pushed it, over the recorded rod states (None: the
     object is fixed): largest and final displacement of the centroid (m) and rotation (rad),
@@ -632,7 +652,8 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
         "topics": run.topics,
         **summary.to_dict(),
         "recorded_sim_time_s": float(rod.t[-1] - rod.t[0]),
-        "object": object_motion(run),
+        "object": object_name(run),
+        "object_motion": object_motion(run),
         "settled_recomputed": settled_re,
         "settle_time_recomputed_s": settle_re,
         "max_penetration_recomputed": float(rod.max_penetration.max()) if gaps["contiguous"] and gaps["first_step"] == 0 else None,
