@@ -124,7 +124,7 @@ def pose_scenario(spec: StudySpec, base_paper: tuple[float, float, float]) -> Sc
     rod = replace(PAPER.rod, n_elements=spec.nodes - 1, length=ms.length_fraction * obj.boundary().length,
                   radius_base=ms.arm_radius * spec.scale, radius_tip=ms.arm_radius * spec.scale,
                   base_position=(cx + spec.scale * x, cy + spec.scale * y), base_angle=float(heading))
-    return replace(PAPER.with_object(obj), rod=rod, loop=replace(PAPER.loop, duration=spec.duration))
+    return PAPER.with_object(obj, rod=rod, loop=replace(PAPER.loop, duration=spec.duration))
 
 
 def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float],

@@ -24,7 +24,6 @@ from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSetting
 from contgrasp_core.control.law import CENTIMETRE
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
-from contgrasp_core.boundary import Boundary
 from contgrasp_core.rod.body import ObjectDynamics
 from contgrasp_core.rod.disturbance import Disturbance
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
@@ -34,7 +33,8 @@ if TYPE_CHECKING:
     from contgrasp_core.rod.integrator import RodSystem
 
 __all__ = ["GainSettings", "SensingSettings", "Scenario", "PAPER", "ROD_PARAMETERS", "NODES", "SIMULATOR", "SENSOR",
-           "CONTROLLER", "QUALITY", "object_from_parameters", "motion_from_parameters", "motion_parameters", "rod_system"]
+           "CONTROLLER", "QUALITY", "object_from_parameters", "motion_from_parameters", "motion_parameters", "rod_system",
+           "check_start"]
 
 SIMULATOR, SENSOR, CONTROLLER, QUALITY = "rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"
 NODES = (SIMULATOR, SENSOR, CONTROLLER, QUALITY)
@@ -90,7 +90,9 @@ class Scenario:
     """A closed-loop grasp: rod, object (its shape and how it moves: ``dynamics``, fixed by
     default, as in the paper), loop, gains and sensing (SI units); a scripted ``disturbance``
     on a movable object (None: none); the ``law`` (:data:`~contgrasp_core.control.hold_law.LAWS`:
-    ``paper``, eq. (19), the default, or ``hold``, docs/holding.md (H1)-(H6), with ``hold_law``)."""
+    ``paper``, eq. (19), the default, or ``hold``, docs/holding.md (H1)-(H6), with ``hold_law``).
+    Its start is checked on construction (:func:`check_start`): the straight arm outside the
+    object, the object within its reach."""
 
     rod: RodModel
     object: ObjectSpec
@@ -113,6 +115,7 @@ class Scenario:
         if self.disturbance is not None and not isinstance(self.disturbance, Disturbance):
             raise InvalidParameterError(f"Scenario.disturbance must be a Disturbance, got {type(self.disturbance).__name__}")
         _check_disturbance(self.dynamics, self.disturbance)
+        check_start(self.rod, self.object)
 
     @property
     def feedback_gains(self) -> FeedbackGains:
@@ -132,7 +135,7 @@ class Scenario:
     def system(self) -> RodSystem:
         """The rod engine of this scenario: the rod, the object's obstacle and, unless the object
         is fixed, its rigid body."""
-        return rod_system(self.rod, self.object.boundary(), self.dynamics)
+        return rod_system(self.rod, self.object, self.dynamics)
 
     @property
     def reference(self) -> tuple[float, float]:
@@ -200,9 +203,11 @@ class Scenario:
         dynamics, disturbance = motion_from_parameters(sim)
         return cls(rod=rod, object=obj, loop=loop, gains=gains, sensing=sensing, dynamics=dynamics, disturbance=disturbance)
 
-    def with_object(self, obj: ObjectSpec) -> Scenario:
-        """The same scenario around another object (the adaptive gain follows its nominal radius)."""
-        return replace(self, object=obj, gains=replace(self.gains, object_radius=None))
+    def with_object(self, obj: ObjectSpec, **changes: Any) -> Scenario:
+        """The same scenario around another object (the adaptive gain follows its nominal radius),
+        with the other ``changes`` (fields, e.g. ``rod``) made at once: the start is checked
+        (:func:`check_start`) on the new object with the new rod, not on a mix of old and new."""
+        return replace(self, object=obj, gains=replace(self.gains, object_radius=None), **changes)
 
 
 def object_from_parameters(text: str, outline: str, center: Any, angle: float) -> ObjectSpec:
@@ -262,13 +267,70 @@ def _check_disturbance(dynamics: ObjectDynamics, disturbance: Disturbance | None
         raise InvalidParameterError("a disturbance pushes a movable object: set the object's mode to spring or free")
 
 
-def rod_system(rod: RodModel, boundary: Boundary, dynamics: ObjectDynamics) -> RodSystem:
+def rod_system(rod: RodModel, obj: ObjectSpec, dynamics: ObjectDynamics) -> RodSystem:
     """The rod engine of a rod, the object's boundary (its obstacle) and, unless the object is
-    fixed, its rigid body (what :meth:`Scenario.system` and the simulator node build)."""
+    fixed, its rigid body (what :meth:`Scenario.system`, ``contgrasp simulate`` and the simulator
+    node build); :class:`InvalidParameterError` for a start :func:`check_start` refuses."""
     from contgrasp_core.rod.integrator import RodSystem
     from contgrasp_core.rod.obstacle import Obstacle
 
+    check_start(rod, obj)
+    boundary = obj.boundary()
     return RodSystem(rod, Obstacle(boundary), body=dynamics.body(boundary))
+
+
+LARGE_OBJECT = 10.0
+"""An object wider than this many arm lengths is taken for one in the wrong units (an outline in
+the paper's dimensionless units is ~50 arm lengths wide): the start's error asks about metres."""
+
+
+def check_start(rod: RodModel, obj: ObjectSpec) -> None:
+    """Refuse a run whose start is geometrically impossible, before anything is simulated: the
+    straight arm (along ``rod.base_angle`` from ``rod.base_position``, the engine's start) must
+    lie outside the object, its surface (centreline signed distance minus the local radius
+    ``r(s)``) included, and the object must be within reach (the base closer to the boundary than
+    the arm is long). One projection of the arm's N + 1 nodes; :class:`InvalidParameterError`
+    with one line naming the cause (and asking about the units when the object is much larger
+    than the arm)."""
+    s = rod.s_nodes
+    heading = np.array([np.cos(rod.base_angle), np.sin(rod.base_angle)])
+    nodes = np.asarray(rod.base_position, dtype=float) + s[:, None] * heading
+    clearance = obj.boundary().project(nodes).signed_distance - rod.radius(s)
+    x, y = rod.base_position
+    base = f"base ({x:.4g}, {y:.4g})"
+    depth = -float(clearance.min())
+    if depth > 0.0:
+        raise InvalidParameterError(
+            f"the arm starts inside the object: its straight start at {base} heading {rod.base_angle:.4g} rad passes "
+            f"{depth:.3g} m inside the object ({_describe(obj)}); move the base or shrink the object{_units_hint(rod, obj)}")
+    gap = float(clearance[0] + rod.radius_base)  # the base's distance to the boundary (it is outside)
+    if gap >= rod.length:
+        raise InvalidParameterError(
+            f"the object is out of the arm's reach: the {base} is {gap:.3g} m from the object ({_describe(obj)}) and "
+            f"the arm is {rod.length:g} m long; move the base closer{_units_hint(rod, obj)}")
+
+
+def _describe(obj: ObjectSpec) -> str:
+    """The object in words, for :func:`check_start`'s messages."""
+    p = obj.params
+    if obj.shape == "circle":
+        return f"circle of radius {p[0]:g} m"
+    if obj.shape == "ellipse":
+        return f"ellipse of semi-axes {p[0]:g} m and {p[1]:g} m"
+    if obj.shape == "deformed":
+        return f"deformed circle of radius {p[0]:g} m"
+    return f"outline {obj.source or f'of {len(obj.points)} points'}"
+
+
+def _units_hint(rod: RodModel, obj: ObjectSpec) -> str:
+    """'; is the outline in metres? ...' when the object is more than :data:`LARGE_OBJECT` arm
+    lengths wide, else ''."""
+    _, pts = obj.boundary().sample(256)
+    width = float(np.max(np.ptp(pts, axis=0)))
+    if width <= LARGE_OBJECT * rod.length:
+        return ""
+    what = "outline" if obj.shape == "outline" else "object"
+    return f"; is the {what} in metres? (it is {width:.3g} m wide, the arm is {rod.length:g} m long)"
 
 
 def _plain(value: Any) -> Any:

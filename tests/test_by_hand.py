@@ -329,12 +329,16 @@ def test_a_state_sent_again_before_the_object_is_no_drop(make: Any) -> None:
 
 
 def test_a_failed_run_exits_1_with_on_finish_exit(graph: Graph) -> None:
-    """The object overlaps the clamped base, so the first state already breaks the run: the
-    simulator and a node watching it exit with status 1; with the default they stay up."""
+    """A free object pushed by a scripted force moves in the first step, beyond a kinetic
+    energy limit of 1 nJ, so the run fails at once: the simulator and a node watching it exit
+    with status 1; with the default they stay up. (An object overlapping the straight arm is
+    refused at start-up instead, exit 2: contgrasp_core.scenario.check_start.)"""
     common = ("-p", "on_finish:=exit")
     graph.start("boundary_sensor", "--ros-args", *common)
     time.sleep(3.0)  # (up before the simulator fails)
-    graph.start("rod_simulator", "--ros-args", "-p", "object_center:=[0.0, 0.0]", "-p", "wait_for_peers:=false", *common)
+    graph.start("rod_simulator", "--ros-args", "-p", "object_mode:=free", "-p", "disturbance_kind:=step",
+                "-p", "disturbance_wrench:=[0.0, -1.0, 0.0]", "-p", "max_kinetic_energy:=1.0e-9",
+                "-p", "lockstep:=false", "-p", "wait_for_peers:=false", *common)
     assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=60,
                             stop_on_failure=False)
     assert graph.procs["rod_simulator"].returncode == 1

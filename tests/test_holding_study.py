@@ -85,11 +85,16 @@ def test_a_rotated_base_grasps_the_same_and_expand_symmetric_turns_the_pose() ->
     assert np.allclose(quarter["stiffness"], r @ k @ r.T) and np.allclose(quarter["capacity"][0]["wrench"], [0.0, 0.03, 0.0])
 
 
-def test_an_arm_that_cannot_reach_the_object_is_a_no_contact_outcome() -> None:
+def test_an_arm_that_does_not_touch_the_object_is_a_no_contact_outcome() -> None:
+    """Within reach (4.5 cm from the boundary, the arm 7.85 cm long) but pointing away from the
+    object: a no-contact outcome. A base out of reach is refused before any run
+    (:func:`contgrasp_core.scenario.check_start`)."""
     spec = StudySpec(object="circle", nodes=31)
     with pytest.raises(GraspFailure, match="no node touched the object for 0.2 s") as info:
-        HoldExperiment(pose_scenario(spec, (0.0, -40.0, 0.0)), HoldSettings(contact_wait=0.2)).grasp()
+        HoldExperiment(pose_scenario(spec, (0.0, -14.0, -math.pi / 2)), HoldSettings(contact_wait=0.2)).grasp()
     assert info.value.outcome == "no contact"
+    with pytest.raises(InvalidParameterError, match="out of the arm's reach"):
+        pose_scenario(spec, (0.0, -40.0, 0.0))
 
 
 def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:

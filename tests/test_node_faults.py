@@ -716,6 +716,8 @@ def test_invalid_parameters_are_refused_at_run_time(make, which) -> None:  # typ
     ("simulator", {"timeout_fallback": "explode"}),
     ("simulator", {"object": "square"}),
     ("simulator", {"object_center": [0.08]}),
+    ("simulator", {"object": "circle:0.5"}),  # (the straight arm starts inside the object: check_start)
+    ("simulator", {"object_center": [1.0, 1.0]}),  # (the object out of the arm's reach)
     ("simulator", {"object": "outline"}),
     ("simulator", {"control_period": 0.01, "dt": 0.003}),
     ("simulator", {"max_kinetic_energy": -1.0}),
@@ -732,6 +734,17 @@ def test_invalid_parameters_are_refused_at_start_up(ros_context, which, params) 
 
     with pytest.raises((rclpy.exceptions.ParameterException, ContgraspError)):
         _node_classes()[which](context=ros_context, parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+
+
+def test_a_start_inside_the_object_is_refused_at_start_up(ros_context) -> None:  # type: ignore[no-untyped-def]
+    """The simulator refuses an object across its straight start as the core does
+    (:func:`contgrasp_core.scenario.check_start`), not by failing the run at t = 0."""
+    from contgrasp_core.errors import InvalidParameterError
+
+    with pytest.raises(InvalidParameterError, match="the arm starts inside the object"):
+        _node_classes()["simulator"](context=ros_context, parameter_overrides=[
+            Parameter("n_elements", value=6), Parameter("object", value="circle:0.02"),
+            Parameter("object_center", value=[0.1, 0.0])])
 
 
 def test_invalid_start_up_parameter_exits_with_code_2() -> None:
@@ -808,8 +821,17 @@ def test_divergence_stops_the_simulation(make, case, params, inject, cause) -> N
 
 
 def test_deep_penetration_fails_the_run_at_once(make) -> None:  # type: ignore[no-untyped-def]
-    """An object across the straight rod: the first state is already broken (t = 0)."""
-    sim = small_sim(make, object="circle:0.02", object_center=[0.1, 0.0])
+    """A first state across the object: the run is already broken at t = 0. (A straight start
+    inside the object is refused at start-up, :func:`contgrasp_core.scenario.check_start`: the
+    run starts here from a given state, the straight rod turned through the object's centre.)"""
+    from contgrasp_core.rod.integrator import RodState as CoreState
+    from contgrasp_core.rod.session import LoopSession
+
+    sim = small_sim(make, object="circle:0.02", object_center=[0.1, 0.03], start_paused=True)
+    assert not sim.failure
+    across = CoreState(t=0.0, theta=np.full(6, np.arctan2(0.03, 0.1)), omega=np.zeros(6))
+    sim.session = LoopSession(sim.system, sim.config, across)
+    sim._publish_first_observation()
     assert sim.failure.startswith("t = 0 s: simulation diverged: the rod surface is ")
     assert "max_penetration_limit" in sim.failure
     assert sim._status() == "failed" and not sim._can_step()

@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     settings = HoldSettings(areal_density=args.density, support=args.support, mu=args.mu, rate=args.rate,
                             ramp_time=args.ramp_time, directions=args.directions,
                             escape_distance=args.escape_distance, escape_angle=args.escape_angle)
-    scenario = replace(PAPER.with_object(obj), rod=rod, law=args.law, hold_law=hold_law_from_args(args))
+    scenario = PAPER.with_object(obj, rod=rod, law=args.law, hold_law=hold_law_from_args(args))
     t0 = time.perf_counter()
     progress = None if args.json else (lambda phase: print(f"contgrasp hold: {phase}", file=sys.stderr, flush=True))
     result = measure_holding(scenario, settings, progress)

@@ -18,11 +18,11 @@ from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.control import FeedbackGains, paper_gains
 from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
-from contgrasp_core.rod import Obstacle, RodModel, RodSystem
+from contgrasp_core.rod import RodModel, RodSystem
 from contgrasp_core.rod.body import MODES, ObjectDynamics
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
 from contgrasp_core.objects import ROD_SCALE
-from contgrasp_core.scenario import PAPER
+from contgrasp_core.scenario import PAPER, rod_system
 from contgrasp_core.tracking import contact_stats
 
 from .common import add_object_arguments, object_from_args
@@ -293,10 +293,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.hold != "zero-order" and args.control_period is None:
         raise InvalidParameterError(f"--hold {args.hold} holds a sampled couple: give --control-period too")
     cfg = loop_config(args)
+    system = rod_system(model, obj, object_dynamics(args))  # (refuses an impossible start: check_start)
     warning = zoh_warning(model, args.control_period, args.hold)
     if warning:
         print(f"contgrasp simulate: {warning}", file=sys.stderr)
-    system = RodSystem(model, Obstacle(boundary), body=object_dynamics(args).body(boundary))
     gains = paper_gains(model, r_obj)
     law = HoldController(model, r_obj, hold_law) if args.law == "hold" else None
     if args.hold == "first-order":

@@ -31,6 +31,7 @@ from contgrasp_core.cli import ArgumentParser, report
 from contgrasp_core.cli.common import add_object_arguments, object_from_args
 from contgrasp_core.errors import InvalidParameterError, exit_code, one_line
 from contgrasp_core.objects import ROD_SCALE
+from contgrasp_core.scenario import Scenario
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
 from contgrasp_ros.launcher.events import EventWriter, open_events
@@ -175,6 +176,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         for node, values in object_parameters(params, object_from_args(args, ROD_SCALE)).items():
             params[node].update(values)
         params_file = parameter_file(Path(tempfile.mkdtemp(prefix="contgrasp_params_")) / "params.yaml", params)
+    Scenario.from_ros_parameters(params)  # the scenario's checks (an impossible start: check_start) before any node
     domain = _domain_id(args.domain_id)
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     if events is not None:

@@ -120,7 +120,7 @@ def object_parameters(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> dic
     if obj.shape == "outline":
         obj = ObjectSpec.from_outline(Path(obj.source).resolve())
     scenario = Scenario.from_ros_parameters(params)
-    scenario = replace(scenario.with_object(obj), sensing=replace(scenario.sensing, reference=None))
+    scenario = scenario.with_object(obj, sensing=replace(scenario.sensing, reference=None))
     new = scenario.to_ros_parameters()
     return {node: new[node] for node in (SIMULATOR, CONTROLLER, QUALITY)}
 

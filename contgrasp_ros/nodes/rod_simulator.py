@@ -165,8 +165,9 @@ class RodSimulator(Node):
                 lo=0.0, hi=100.0)
         declare(self, "max_kinetic_energy", 10.0, "the run fails when the rod's kinetic energy exceeds this [J]", lo=1e-12, hi=1e12)
         dynamics, disturbance = motion_from_parameters(self._declare_motion(paper))
-        self.boundary = object_from_parameters(*obj).boundary()
-        self.system = rod_system(self.model, self.boundary, dynamics)
+        spec = object_from_parameters(*obj)
+        self.boundary = spec.boundary()
+        self.system = rod_system(self.model, spec, dynamics)  # (refuses an impossible start: check_start)
         self.wrenches = WrenchInput(disturbance)
 
         self.drops = DropCounter(self)
