@@ -114,16 +114,23 @@ class StudySpec:
         return ObjectSpec(spec.shape, params, PAPER.object.center, spec.angle)
 
 
+def base_si(spec: StudySpec, base_paper: tuple[float, float, float]) -> tuple[float, float, float]:
+    """A base pose in the paper's units about the object (x, y, heading) on the rod scenario
+    (m about the scenario's object centre, rad)."""
+    x, y, heading = base_paper
+    cx, cy = PAPER.object.center
+    return cx + spec.scale * x, cy + spec.scale * y, float(heading)
+
+
 def pose_scenario(spec: StudySpec, base_paper: tuple[float, float, float]) -> Scenario:
     """The rod scenario of one pose (module docstring, step 2): the arm of the map (length and
     radius) at the base ``base_paper`` (x, y, heading in the paper's units about the object)."""
-    x, y, heading = base_paper
-    cx, cy = PAPER.object.center
+    x, y, heading = base_si(spec, base_paper)
     obj = spec.rod_object()
     ms = spec.map_spec()
     rod = replace(PAPER.rod, n_elements=spec.nodes - 1, length=ms.length_fraction * obj.boundary().length,
                   radius_base=ms.arm_radius * spec.scale, radius_tip=ms.arm_radius * spec.scale,
-                  base_position=(cx + spec.scale * x, cy + spec.scale * y), base_angle=float(heading))
+                  base_position=(x, y), base_angle=heading)
     return PAPER.with_object(obj, rod=rod, loop=replace(PAPER.loop, duration=spec.duration))
 
 
@@ -131,12 +138,16 @@ def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float]
                static_q: tuple[float, float, float]) -> dict[str, Any]:
     """One pose of the study: the grasp from the base ``base_paper`` (x, y, heading in the
     paper's units about the object frame) on the rod scenario, measured (a failed grasp is a
-    result with its ``status``)."""
-    scenario = pose_scenario(spec, base_paper)
-    rod = scenario.rod
-    out: dict[str, Any] = {"key": key, "base": [float(v) for v in rod.base_position] + [float(rod.base_angle)],
+    result with its ``status``; so is a base the arm cannot start from, outcome ``refused``:
+    :func:`contgrasp_core.scenario.check_start`)."""
+    out: dict[str, Any] = {"key": key, "base": list(base_si(spec, base_paper)),
                            "static_Q1": static_q[0], "static_Q2": static_q[1], "static_Q3": static_q[2]}
     t0 = time.perf_counter()
+    try:
+        scenario = pose_scenario(spec, base_paper)
+    except InvalidParameterError as exc:  # (a --d-max beyond the arm's reach, say): one pose, not the study
+        out.update(status=f"refused: {exc}", outcome="refused", seconds=time.perf_counter() - t0)
+        return out
     try:
         result = measure_holding(scenario, spec.hold)
     except ContgraspError as exc:

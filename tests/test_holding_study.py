@@ -15,7 +15,7 @@ import pytest
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.holding import GraspFailure, HoldExperiment, HoldSettings
 from contgrasp_core.holding_study import (PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, load_results,
-                                          pose_scenario, run_study)
+                                          base_si, pose_scenario, run_study, study_pose)
 from contgrasp_core.rod.session import run_sampled
 from contgrasp_core.scenario import PAPER
 
@@ -95,6 +95,10 @@ def test_an_arm_that_does_not_touch_the_object_is_a_no_contact_outcome() -> None
     assert info.value.outcome == "no contact"
     with pytest.raises(InvalidParameterError, match="out of the arm's reach"):
         pose_scenario(spec, (0.0, -40.0, 0.0))
+    # in a study such a pose is one result, outcome "refused", not the end of the study
+    row = study_pose(spec, "grid:0,0", (0.0, -40.0, 0.0), (1.0, 2.0, 3.0))
+    assert row["outcome"] == "refused" and "out of the arm's reach" in row["status"]
+    assert row["base"] == pytest.approx(list(base_si(spec, (0.0, -40.0, 0.0))))
 
 
 def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
