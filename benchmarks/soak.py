@@ -67,7 +67,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from contgrasp_ros.plumbing import topics# noqa: E402
+from contgrasp_ros.plumbing import topics  # noqa: E402
 from contgrasp_ros.launcher.launch_handle import LaunchHandle  # noqa: E402
 from contgrasp_ros.launcher.cli import default_params_file  # noqa: E402
 

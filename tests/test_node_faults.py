@@ -36,7 +36,7 @@ from contgrasp_core.contact import sense  # noqa: E402
 from contgrasp_core.rod import RodModel  # noqa: E402
 from contgrasp_core.rod.integrator import StepFailedError  # noqa: E402
 from contgrasp_msgs.msg import ContactState, CoupleControl, ObjectBoundary, RodState  # noqa: E402
-from contgrasp_ros.plumbing import qos, topics# noqa: E402
+from contgrasp_ros.plumbing import qos, topics  # noqa: E402
 from contgrasp_ros.plumbing.convert import MAX_SAMPLES, boundary_to_msg  # noqa: E402
 from contgrasp_ros.plumbing.runtime import stamp_problem  # noqa: E402
 

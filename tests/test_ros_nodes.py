@@ -24,7 +24,7 @@ from contgrasp_core.contact import sense  # noqa: E402
 from contgrasp_core.quality import quality_of_state  # noqa: E402
 from contgrasp_core.scenario import PAPER, QUALITY  # noqa: E402
 from contgrasp_msgs.msg import ContactState, GraspQuality, ObjectBoundary, RodState  # noqa: E402
-from contgrasp_ros.plumbing import qos, topics# noqa: E402
+from contgrasp_ros.plumbing import qos, topics  # noqa: E402
 from contgrasp_ros.plumbing.convert import boundary_to_msg, contact_to_msg  # noqa: E402
 from contgrasp_ros.nodes.boundary_sensor import BoundarySensor  # noqa: E402
 from contgrasp_ros.nodes.grasp_quality import GraspQualityNode  # noqa: E402
