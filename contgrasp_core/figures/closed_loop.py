@@ -25,7 +25,7 @@ from .draw import save
 __all__ = ["snapshot_indices", "snapshot_colours", "plane_axes", "finish_profile_panels", "fig4_figure", "plot_fig4", "animate",
            "data_limits", "ratio_axis", "STATIC_LABEL", "SNAPSHOT_CMAP", "LENGTH_UNIT"]
 
-SNAPSHOT_CMAP = "viridis"
+SNAPSHOT_CMAP = "turbo"
 """Colour map of the arm snapshots (and their rho, alpha curves) in Fig. 4, its animation and the
 run figure of the ROS graph: ordered in time, successive snapshots distinguishable."""
 LENGTH_UNIT = "m"
@@ -34,10 +34,11 @@ LENGTH_UNIT = "m"
 
 def snapshot_colours(count: int) -> np.ndarray:
     """``count`` RGBA colours of :data:`SNAPSHOT_CMAP` for successive snapshots, earliest first:
-    evenly spaced over 0 (dark blue) .. 0.85 (green) of the map, so neighbours differ clearly
-    and the last one is the most distinct from the start (the map's pale yellow end, which
-    hardly shows on white, is left out)."""
-    return colormaps[SNAPSHOT_CMAP](np.linspace(0.0, 0.85, count) if count > 1 else [0.85])
+    evenly spaced over 0.05 (dark blue) .. 0.95 (dark red) of the map, so neighbours differ in
+    hue, not only in lightness (a one-hue map such as Purples made late snapshots, drawn
+    translucent and overlapping, look alike), and the final one is red (six snapshots: >= 0.47
+    apart in RGB; the map's near-black ends are left out)."""
+    return colormaps[SNAPSHOT_CMAP](np.linspace(0.05, 0.95, count) if count > 1 else [0.95])
 
 
 def plane_axes(ax: Axes) -> None:
@@ -98,10 +99,10 @@ def ratio_axis(ax: Axes, ratios: list[np.ndarray]) -> None:
 def finish_profile_panels(ax_r: Axes, ax_a: Axes, ratios: list[np.ndarray], alphas: list[np.ndarray], legend_on: Any,
                           *, ncols: int, fontsize: float) -> None:
     """The rho/rho_d and alpha panels along the arm (Fig. 4 and the run figure): the targets
-    rho = rho_d and alpha = pi/2 of the law, limits that show every curve, labels, and one legend
+    rho = rho_d and alpha = pi/2 of the law (grey dotted: no snapshot colour), limits that show every curve, labels, and one legend
     (the curves' labels and the alpha target) at the bottom of ``legend_on`` (a figure)."""
-    ax_r.axhline(1.0, color="tab:red", lw=0.8, ls=":", label=r"target $\rho = \rho_d$")
-    ax_a.axhline(0.5 * np.pi, color="tab:red", lw=0.8, ls=":", label=r"target $\alpha = \pi/2$")
+    ax_r.axhline(1.0, color="0.35", lw=1.0, ls=":", label=r"target $\rho = \rho_d$")
+    ax_a.axhline(0.5 * np.pi, color="0.35", lw=1.0, ls=":", label=r"target $\alpha = \pi/2$")
     ratio_axis(ax_r, ratios)
     ax_a.set_ylim(*data_limits(alphas, include=(0.0, np.pi)))
     for ax in (ax_r, ax_a):
