@@ -42,6 +42,8 @@ __all__ = [
     "solve_pose",
     "quality_map",
     "maximise",
+    "best_grid_pose",
+    "TIE_RTOL",
     "save_map",
     "load_map",
     "METRICS",
@@ -354,11 +356,35 @@ def quality_map(
 MAX_WORKERS = 1024
 
 
+TIE_RTOL = 1e-6
+"""Relative tolerance under which two quality values count as a tie (see :func:`maximise`)."""
+
+
+def best_grid_pose(grid: Array, rtol: float = TIE_RTOL) -> tuple[int, int]:
+    """Index (i, j) of the best grid pose of ``grid`` (psi x d, -inf where invalid) with a
+    deterministic tie rule: among the poses within ``rtol`` (relative) of the maximum, the
+    smallest polar angle psi, then the smallest distance d.
+
+    A circle's map is invariant under rotating the base about the centre (and an ellipse's under
+    a half turn), so a plain argmax would pick whichever psi the last digits of the solves
+    favour; this rule picks the same pose on every run."""
+    best = float(np.max(grid))
+    ties = grid >= best - rtol * abs(best) if np.isfinite(best) else grid == best
+    i, j = np.unravel_index(int(np.argmax(ties)), grid.shape)  # first True in (psi, d) order
+    return int(i), int(j)
+
+
 def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
     """Nelder-Mead maximisation of one metric over D (eq. (16)), from the best grid point.
 
     The search variables are (psi, d) with d bounded to [d_min, d_max] (scipy's bounded
     Nelder-Mead); psi is periodic. Invalid poses count as -inf quality.
+
+    Ties (the optimum of a rotation-invariant map is a whole ring of poses): the start is the
+    grid pose of :func:`best_grid_pose` (smallest psi among values within :data:`TIE_RTOL` of
+    the best, then smallest d), and Nelder-Mead's result replaces it only if it is better by more
+    than :data:`TIE_RTOL` (relative); so a circle's optimum is reported at the smallest grid psi,
+    on every run.
     """
     instance("qm", qm, QualityMap)
     if not isinstance(metric, str) or metric not in METRICS:
@@ -366,7 +392,7 @@ def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
     k = METRICS.index(metric)
     spec = qm.spec
     grid = np.where(qm.valid, qm.Q[k], -np.inf)
-    i, j = np.unravel_index(int(np.argmax(grid)), grid.shape)
+    i, j = best_grid_pose(grid)
     boundary = spec.boundary()
     cache: dict[tuple[float, float], PoseResult] = {}
 
@@ -399,7 +425,7 @@ def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
     psi, d = float(np.mod(res.x[0], 2 * np.pi)), float(np.clip(res.x[1], spec.d_min, spec.d_max))
     best = cache.get((round(psi, 12), round(d, 12)))
     grid_best = float(grid[i, j])
-    if best is None or not best.valid or best.Q[k] < grid_best:
+    if best is None or not best.valid or best.Q[k] <= grid_best + TIE_RTOL * abs(grid_best):
         psi, d = float(qm.psi[i]), float(qm.d[j])
         best = cache.get((round(psi, 12), round(d, 12))) or solve_pose(spec, psi, d)
     return {

@@ -36,6 +36,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
+from matplotlib.colors import to_rgb  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 UNIT = re.compile(r"\[[^\]]+\]")  # "x [cm]", "s / L [-]", "alpha [rad]"
@@ -169,3 +170,159 @@ def test_fig3_labels_legend_colour_bar_and_title() -> None:
     bars = [ax for ax in fig.get_axes() if ax.get_label() == "<colorbar>"]
     assert len(bars) == 3 and all(UNIT.search(ax.get_ylabel()) for ax in bars)
     assert fig.get_suptitle() == "grasp quality maps: circle:5"  # the object's text, not its repr
+
+
+# --- readable figures (issue 31 item 10) and figures the code reproduces (issue 31 item 7)
+
+FIGURES_DIR = Path(__file__).resolve().parents[1] / "docs" / "figures"
+MIN_RGB_STEP = 0.35
+"""Least Euclidean RGB distance (each channel in 0..1) between successive snapshot colours (and
+between the final one and every other): the old Purples at 0.35..1.0 (run figure) and Blues (Fig. 4)
+gave 0.17-0.21, a change of lightness only, so t = 0.15, 0.25 and 2.19 s read as one purple once
+drawn translucent; turbo at 0.05..0.95 gives >= 0.47."""
+
+
+def _snapshot_line_colours(ax: Axes) -> np.ndarray:
+    return np.array([to_rgb(ln.get_color()) for ln in ax.get_lines() if ln.get_label().startswith("t = ")])
+
+
+def _check_snapshot_colours(colours: np.ndarray) -> None:
+    assert len(colours) >= 3
+    steps = np.linalg.norm(np.diff(colours, axis=0), axis=1)
+    assert steps.min() >= MIN_RGB_STEP, f"successive snapshot colours too close: {steps}"
+    # the final snapshot is distinct from every other one
+    assert np.linalg.norm(colours[:-1] - colours[-1], axis=1).min() >= MIN_RGB_STEP
+
+
+def test_fig4_snapshot_colours_are_distinguishable_in_metres(short_grasp) -> None:  # type: ignore[no-untyped-def]
+    from contgrasp_core.figures.closed_loop import LENGTH_UNIT, SNAPSHOT_CMAP, fig4_figure, snapshot_colours
+
+    res, obj = short_grasp
+    fig = fig4_figure(res, obj.boundary(), obj.radius)
+    arm, rho, _ = _axes(fig)
+    colours = _snapshot_line_colours(rho)
+    _check_snapshot_colours(colours)
+    np.testing.assert_allclose(colours, snapshot_colours(len(colours))[:, :3])
+    assert SNAPSHOT_CMAP == "turbo" and LENGTH_UNIT == "m"
+    assert (arm.get_xlabel(), arm.get_ylabel()) == ("x [m]", "y [m]")
+    # the arm is drawn in metres: the 20 cm arm spans less than 1 unit of the axes
+    assert max(abs(v) for v in (*arm.get_xlim(), *arm.get_ylim())) < 1.0
+
+
+@pytest.mark.skipif(not SAMPLE_BAG.exists(), reason="the sample bag is not in this checkout")
+def test_run_figure_shares_fig4s_units_and_colour_map() -> None:
+    from contgrasp_core.figures.closed_loop import LENGTH_UNIT, snapshot_colours
+    from contgrasp_core.figures.run import build_run_figure
+    from contgrasp_ros.recordings.analysis import history, load_run
+
+    run = load_run(SAMPLE_BAG)
+    assert run.params is not None
+    fig = build_run_figure({"history": history(run)}, run.params)
+    arm, rho, _ = _axes(fig)
+    assert (arm.get_xlabel(), arm.get_ylabel()) == (f"x [{LENGTH_UNIT}]", f"y [{LENGTH_UNIT}]")
+    colours = _snapshot_line_colours(rho)
+    _check_snapshot_colours(colours)
+    np.testing.assert_allclose(colours, snapshot_colours(len(colours))[:, :3])  # Fig. 4's colours
+
+
+def test_quality_history_has_units_no_axis_offsets_and_explains_the_settled_line(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from contgrasp_core.figures.run import CREEP_NOTE, quality_history_figure
+
+    t = np.linspace(0.0, 2.2, 221)
+    # values like the paper run's: Q1 ~ 4e-5 m^3, Q2 ~ 4e-7 m^5, Q3 ~ 4.4e-4, with small changes
+    q = (4.2e-5 + 3e-6 * np.tanh(t), 3.2e-7 + 1.5e-7 * np.tanh(t), 4.8e-4 - 4e-5 * np.tanh(t))
+    fig = quality_history_figure(t, q, str(tmp_path / "q.png"), settle_time=1.89, settle_rule=(0.002, 0.3))
+    FigureCanvasAgg(fig).draw()
+    axes = _axes(fig)
+    assert len(axes) == 3
+    for ax, unit in zip(axes, ("[cm$^3$]", "[cm$^5$]", "[-]"), strict=True):
+        assert ax.get_ylabel().endswith(unit)
+        assert ax.yaxis.get_offset_text().get_text() == "", ax.get_ylabel()
+    labels = axes[0].get_legend_handles_labels()[1]
+    assert "settled: every node slower than 2 mm/s for 0.3 s" in labels
+    texts = [tx.get_text().replace("\n", " ") for tx in fig.texts]
+    assert CREEP_NOTE in texts and "Q2" in CREEP_NOTE
+
+
+def test_kinematics_title_keeps_numbers_whole_and_the_legend_off_the_object(tmp_path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    import contgrasp_core.figures.draw as draw
+    from contgrasp_core.cli import main
+
+    captured: list[Figure] = []
+    real_save = draw.save
+    monkeypatch.setattr(draw, "save", lambda fig, path, dpi=130: (captured.append(fig), real_save(fig, path, dpi))[1])
+    assert main(["kinematics", "--object", "deformed", "--plot", str(tmp_path / "k.png"), "--json"]) == 0
+    (fig,) = captured
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    title = fig.get_suptitle()
+    for line in title.split("\n"):  # a line break only at a space, and never in front of a number
+        assert line == line.strip() and not re.match(r"[-+(]?\d", line), title
+    assert re.search(r"max discrepancy \d\.\de-?\d+", title)
+    box = fig._suptitle.get_window_extent(renderer)  # type: ignore[union-attr]
+    assert box.x0 >= 0 and box.x1 <= fig.bbox.width
+    arm = _axes(fig)[0]
+    outline = max(arm.get_lines(), key=lambda ln: len(ln.get_xdata()))  # the object's closed outline (720 points)
+    legends = [leg for leg in [arm.get_legend(), *fig.legends, *(sf.legends for sf in fig.subfigs)] if leg]
+    flat = [leg for item in legends for leg in (item if isinstance(item, list) else [item])]
+    legend = next(leg for leg in flat if "object" in [tx.get_text() for tx in leg.get_texts()])
+    assert not legend.get_window_extent(renderer).overlaps(outline.get_window_extent(renderer))
+
+
+def test_fig2_panels_reproduce_the_committed_images(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``contgrasp figures --no-maps`` (the three Fig. 2 solves, ~1 s) redraws the committed
+    panels. Tolerance: RMS 2 of 255 grey levels (compare_images): matplotlib's own test tolerance
+    scale, which absorbs anti-aliasing and freetype differences between machines (<1 here: the
+    images are identical on the machine that made them), while a moved curve or marker fails
+    (the Fig. 3 circle's optimum moving across the panel gave RMS 8.3)."""
+    from matplotlib.testing.compare import compare_images
+
+    from contgrasp_core.cli import main
+
+    assert main(["figures", "--no-maps", "--out", str(tmp_path), "--json"]) == 0
+    for name in ("circle", "ellipse", "deformed"):
+        expected = FIGURES_DIR / f"fig2_{name}.png"
+        result = compare_images(str(expected), str(tmp_path / expected.name), tol=2.0, in_decorator=True)
+        assert result is None, result
+
+
+def test_quality_map_ties_go_to_the_smallest_polar_angle() -> None:
+    from contgrasp_core.quality_map import TIE_RTOL, best_grid_pose
+
+    grid = np.full((6, 3), -np.inf)
+    grid[4, 0] = 1.0
+    grid[2, 1] = 1.0 - 0.5 * TIE_RTOL  # a tie (within the tolerance), at a smaller psi
+    grid[1, 2] = 0.5
+    assert best_grid_pose(grid) == (2, 1)
+    grid[4, 0] = 1.0 + 2 * TIE_RTOL  # better beyond the tolerance: no tie
+    assert best_grid_pose(grid) == (4, 0)
+    grid[2, 0] = grid[4, 0]  # same psi row: the smaller d
+    grid[2, 1] = grid[4, 0]
+    assert best_grid_pose(grid) == (2, 0)
+
+
+def test_circle_map_optimum_is_at_the_smallest_polar_angle_on_every_run() -> None:
+    """A circle's map is flat along psi up to the solves' last digits: the optimum reported is
+    the pose at psi = 0 (the tie rule), not wherever those digits peak."""
+    from contgrasp_core.quality_map import MapSpec, quality_map
+
+    qm = quality_map(MapSpec("circle", psi_steps=6, d_steps=2, nodes=60), executor="serial", progress=False)
+    for opt in qm.optimum.values():
+        assert (opt["psi"], opt["d"]) == (0.0, 3.0)
+        assert (opt["base"]["x"], opt["base"]["y"]) == pytest.approx((8.0, 0.0), abs=1e-12)
+
+
+def test_committed_fig3_shows_the_documented_optimum() -> None:
+    """The metadata ``contgrasp figures`` writes beside Fig. 3 (the maps take minutes: not redrawn
+    here): the circle's optimum is at psi = 0, base (8, 0) (docs/quality.md), on the default grid;
+    the ellipse's is the first of its two point-symmetric optima (psi < pi)."""
+    import json
+
+    circle = json.loads((FIGURES_DIR / "fig3_circle.json").read_text())
+    assert (circle["psi_steps"], circle["d_steps"]) == (48, 11)
+    for opt in circle["optimum"].values():
+        assert (opt["psi"], opt["d"]) == (0.0, 3.0)
+        assert (opt["base"]["x"], opt["base"]["y"]) == pytest.approx((8.0, 0.0), abs=1e-9)
+    ellipse = json.loads((FIGURES_DIR / "fig3_ellipse.json").read_text())
+    assert all(0.0 <= opt["psi"] < np.pi for opt in ellipse["optimum"].values())

@@ -3,12 +3,14 @@
 ``grasp`` solves eq. (9) for one object with the paper's settings by default
 (arm L = 2 L_o / 3 tapered L/20 -> L/200, rho_d = r(s), alpha_d = pi/2, chi = 10, the
 paper's (rho0, alpha0) per object) with the fast solver or the paper's sweep.
-``figures`` regenerates the three Fig. 2 panels into a directory (default docs/figures).
+``figures`` regenerates the three Fig. 2 panels and the three Fig. 3 quality maps (with their
+optimum in ``fig3_<object>.json``) into a directory (default docs/figures).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -16,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import MAX_NODES
-from ..errors import InvalidParameterError
+from ..errors import InvalidParameterError, WriteError
 from ..objects import FIG2_SCALE, PAPER_OBJECTS, ObjectSpec
 from ..optimal import GraspResult, forward_backward, paper_problem, solve
 from .common import add_object_arguments, object_from_args
@@ -104,7 +106,8 @@ def run_grasp(args: argparse.Namespace) -> dict[str, Any]:
 
 def run_figures(args: argparse.Namespace) -> dict[str, Any]:
     """Solve the three Fig. 2 problems with the fast solver and save ``fig2_<object>.png``;
-    compute the three Fig. 3 quality maps (process executor) and save ``fig3_<object>.png``."""
+    compute the three Fig. 3 quality maps (process executor) and save ``fig3_<object>.png`` with
+    ``fig3_<object>.json`` beside it (grid, each metric's optimum, the tie rule's tolerance)."""
     from ..figures.grasp import save_grasp_figure
     from ..quality_map import MapSpec
 
@@ -133,14 +136,22 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
         }
     if not args.no_maps:
         from ..figures.quality_map import quality_map_figure
-        from ..quality_map import MapSpec, quality_map
+        from ..quality_map import TIE_RTOL, MapSpec, quality_map
 
         for name in PAPER_OBJECTS:
             qm = quality_map(MapSpec(ObjectSpec.parse(name), psi_steps=args.psi_steps, d_steps=args.d_steps), progress=not args.json)
             path = out_dir / f"fig3_{name}.png"
             quality_map_figure(qm).savefig(path, dpi=110)
             files.append(str(path))
-            summary[name]["quality_map"] = {"optimum": {m: {k: v for k, v in o.items() if k not in ("x", "y")}
-                                                         for m, o in qm.optimum.items()},
-                                             "n_valid": int(qm.valid.sum()), "wall_time_s": qm.wall_time}
+            meta = {"optimum": {m: {k: v for k, v in o.items() if k not in ("x", "y")} for m, o in qm.optimum.items()},
+                    "n_valid": int(qm.valid.sum()), "psi_steps": args.psi_steps, "d_steps": args.d_steps,
+                    "tie_rtol": TIE_RTOL}
+            # what the figure shows, beside it (no timings: the file changes only when the figure does)
+            meta_path = path.with_suffix(".json")
+            try:
+                meta_path.write_text(json.dumps(meta, indent=1) + "\n")
+            except OSError as exc:
+                raise WriteError(f"cannot write {meta_path}: {exc.strerror or exc}") from exc
+            files.append(str(meta_path))
+            summary[name]["quality_map"] = {**meta, "wall_time_s": qm.wall_time}
     return {"files": files, "objects": summary, "nodes": args.nodes}

@@ -159,7 +159,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.plot:
         from ..figures.draw import kinematics_figure, save
 
-        title = f"{obj.text()}: contact kinematics, eq. (8) against geometry (max discrepancy {max(d_rho / length, d_alpha, d_so / length):.1e})"
+        title = (f"{obj.text()}: contact kinematics, eq. (8) against geometry\n"
+                 f"max discrepancy {max(d_rho / length, d_alpha, d_so / length):.1e}")
         save(kinematics_figure(boundary, shape, radius, ode, geo, title=title), args.plot)
     return {
         "object": obj.text(),

@@ -22,7 +22,30 @@ from ..errors import output_error
 from ..rod.closed_loop import ClosedLoopResult
 from .draw import save
 
-__all__ = ["snapshot_indices", "finish_profile_panels", "fig4_figure", "plot_fig4", "animate", "data_limits", "ratio_axis", "STATIC_LABEL"]
+__all__ = ["snapshot_indices", "snapshot_colours", "plane_axes", "finish_profile_panels", "fig4_figure", "plot_fig4", "animate",
+           "data_limits", "ratio_axis", "STATIC_LABEL", "SNAPSHOT_CMAP", "LENGTH_UNIT"]
+
+SNAPSHOT_CMAP = "turbo"
+"""Colour map of the arm snapshots (and their rho, alpha curves) in Fig. 4, its animation and the
+run figure of the ROS graph: ordered in time, successive snapshots distinguishable."""
+LENGTH_UNIT = "m"
+"""Length unit of the plane (x, y) axes of Fig. 4, its animation and the run figure."""
+
+
+def snapshot_colours(count: int) -> np.ndarray:
+    """``count`` RGBA colours of :data:`SNAPSHOT_CMAP` for successive snapshots, earliest first:
+    evenly spaced over 0.05 (dark blue) .. 0.95 (dark red) of the map, so neighbours differ in
+    hue, not only in lightness (a one-hue map such as Purples made late snapshots, drawn
+    translucent and overlapping, look alike), and the final one is red (six snapshots: >= 0.47
+    apart in RGB; the map's near-black ends are left out)."""
+    return colormaps[SNAPSHOT_CMAP](np.linspace(0.05, 0.95, count) if count > 1 else [0.95])
+
+
+def plane_axes(ax: Axes) -> None:
+    """Equal aspect and x, y labels in :data:`LENGTH_UNIT` (Fig. 4, its animation, the run figure)."""
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"x [{LENGTH_UNIT}]")
+    ax.set_ylabel(f"y [{LENGTH_UNIT}]")
 
 
 def _draw_arm(ax: Axes, x: np.ndarray, r: np.ndarray, **kw: Any) -> None:
@@ -30,7 +53,7 @@ def _draw_arm(ax: Axes, x: np.ndarray, r: np.ndarray, **kw: Any) -> None:
     t /= np.hypot(t[:, 0], t[:, 1])[:, None]
     nrm = np.stack([-t[:, 1], t[:, 0]], axis=1)
     outline = np.concatenate([x + r[:, None] * nrm, (x - r[:, None] * nrm)[::-1]])
-    ax.fill(outline[:, 0] * 100, outline[:, 1] * 100, **kw)
+    ax.fill(outline[:, 0], outline[:, 1], **kw)
 
 
 def snapshot_indices(res: ClosedLoopResult, count: int = 6) -> np.ndarray:
@@ -76,10 +99,10 @@ def ratio_axis(ax: Axes, ratios: list[np.ndarray]) -> None:
 def finish_profile_panels(ax_r: Axes, ax_a: Axes, ratios: list[np.ndarray], alphas: list[np.ndarray], legend_on: Any,
                           *, ncols: int, fontsize: float) -> None:
     """The rho/rho_d and alpha panels along the arm (Fig. 4 and the run figure): the targets
-    rho = rho_d and alpha = pi/2 of the law, limits that show every curve, labels, and one legend
+    rho = rho_d and alpha = pi/2 of the law (grey dotted: no snapshot colour), limits that show every curve, labels, and one legend
     (the curves' labels and the alpha target) at the bottom of ``legend_on`` (a figure)."""
-    ax_r.axhline(1.0, color="tab:red", lw=0.8, ls=":", label=r"target $\rho = \rho_d$")
-    ax_a.axhline(0.5 * np.pi, color="tab:red", lw=0.8, ls=":", label=r"target $\alpha = \pi/2$")
+    ax_r.axhline(1.0, color="0.35", lw=1.0, ls=":", label=r"target $\rho = \rho_d$")
+    ax_a.axhline(0.5 * np.pi, color="0.35", lw=1.0, ls=":", label=r"target $\alpha = \pi/2$")
     ratio_axis(ax_r, ratios)
     ax_a.set_ylim(*data_limits(alphas, include=(0.0, np.pi)))
     for ax in (ax_r, ax_a):
@@ -93,7 +116,7 @@ def finish_profile_panels(ax_r: Axes, ax_a: Axes, ratios: list[np.ndarray], alph
 
 def fig4_figure(res: ClosedLoopResult, boundary: Boundary, obstacle_radius: float | None = None) -> Figure:
     """Paper Fig. 4 as a :class:`~matplotlib.figure.Figure`: six snapshots of the arm (with its
-    radius) around the object, shaded by simulated time (legend); rho/rho_d (log scale, limits
+    radius) around the object, coloured by simulated time (:func:`snapshot_colours`, legend); rho/rho_d (log scale, limits
     from the data, so every curve shows) and alpha along s at the same times, with the targets
     rho = rho_d and alpha = pi/2 and, for a circle, the static solution of eq. (20) dashed."""
     m = res.model
@@ -104,22 +127,18 @@ def fig4_figure(res: ClosedLoopResult, boundary: Boundary, obstacle_radius: floa
     ax0 = top.add_subplot(1, 1, 1)
     idx = snapshot_indices(res, 6)
     _, pts = boundary.sample(400)
-    ax0.fill(pts[:, 0] * 100, pts[:, 1] * 100, color="0.75", zorder=1, label="object")
-    shades = [0.15 + 0.7 * j / max(len(idx) - 1, 1) for j in range(len(idx))]
-    for shade, k in zip(shades, idx, strict=True):
-        _draw_arm(ax0, res.x[k], r, color="purple", alpha=shade, lw=0, zorder=2, label=f"t = {res.t[k]:.2f} s")
+    ax0.fill(pts[:, 0], pts[:, 1], color="0.75", zorder=1, label="object")
+    colours = snapshot_colours(len(idx))
+    for colour, k in zip(colours, idx, strict=True):
+        _draw_arm(ax0, res.x[k], r, color=colour, alpha=0.6, lw=0, zorder=2, label=f"t = {res.t[k]:.2f} s")
     ax0.plot(0, 0, "ks", ms=5, label="base (clamped)")
-    ax0.set_aspect("equal")
-    ax0.set_xlabel("x [cm]")
-    ax0.set_ylabel("y [cm]")
+    plane_axes(ax0)
     ax0.legend(title="arm at simulated time", fontsize=7, title_fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     ax0.set_title("closed-loop grasp (feedback law eq. (19)), six time instances")
     ax1, ax2 = bottom.subplots(1, 2)
     s_n = m.s_nodes / m.length
-    cmap = colormaps["Blues"]
     ratios, alphas = [], []
-    for j, k in enumerate(idx):
-        c = cmap(0.35 + 0.65 * (j + 1) / len(idx))
+    for c, k in zip(colours, idx, strict=True):
         ratios.append(res.rho[k] / r)
         alphas.append(res.alpha[k])
         ax1.plot(s_n, ratios[-1], color=c, lw=1.2, label=f"t = {res.t[k]:.2f} s")
@@ -140,7 +159,7 @@ def plot_fig4(res: ClosedLoopResult, boundary: Boundary, path: str, obstacle_rad
 
 
 def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 60) -> None:
-    """GIF of the arm (with its radius) wrapping the object."""
+    """GIF of the arm (with its radius) wrapping the object, coloured by time as in Fig. 4."""
     m = res.model
     r = m.radius(m.s_nodes)
     idx = snapshot_indices(res, frames)
@@ -148,21 +167,20 @@ def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 
     fig = Figure(figsize=(4.4, 4), layout="constrained")
     FigureCanvasAgg(fig)  # an animation draws frames through a canvas
     ax = fig.subplots()
-    # limits from every frame and the object (cm), so no frame is clipped
-    xs = np.concatenate([res.x[idx].reshape(-1, 2), pts]) * 100
-    pad = float(r.max()) * 100 + 0.5
+    # limits from every frame and the object, so no frame is clipped
+    xs = np.concatenate([res.x[idx].reshape(-1, 2), pts])
+    pad = float(r.max()) + 0.005
+    colours = dict(zip(idx.tolist(), snapshot_colours(len(idx)), strict=True))
     lo, hi = xs.min(axis=0) - pad, xs.max(axis=0) + pad
 
     def draw(k: int) -> None:
         ax.clear()
-        ax.fill(pts[:, 0] * 100, pts[:, 1] * 100, color="0.75")
-        _draw_arm(ax, res.x[k], r, color="purple", alpha=0.7, lw=0)
+        ax.fill(pts[:, 0], pts[:, 1], color="0.75")
+        _draw_arm(ax, res.x[k], r, color=colours[k], alpha=0.7, lw=0)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
-        ax.set_aspect("equal")
+        plane_axes(ax)
         ax.set_title(f"simulated time t = {res.t[k]:.2f} s")
-        ax.set_xlabel("x [cm]")
-        ax.set_ylabel("y [cm]")
 
     anim = FuncAnimation(fig, draw, frames=idx)
     try:

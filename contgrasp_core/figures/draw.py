@@ -6,6 +6,7 @@ so importing or using this package never selects or switches a backend: a notebo
 
 from __future__ import annotations
 
+import re
 import textwrap
 
 import numpy as np
@@ -18,7 +19,7 @@ from ..boundary import Boundary
 from ..contact import ContactKinematics, ContactState
 from ..errors import InvalidParameterError, output_error
 
-__all__ = ["draw_boundary", "draw_arm", "kinematics_figure", "save", "check_figure_path"]
+__all__ = ["draw_boundary", "draw_arm", "kinematics_figure", "save", "check_figure_path", "wrap_title"]
 
 
 def check_figure_path(path: object, option: str = "--plot") -> None:
@@ -43,6 +44,18 @@ def check_figure_path(path: object, option: str = "--plot") -> None:
             if not parent.is_dir():
                 raise InvalidParameterError(f"{option} {path}: {parent} is not a directory")
             break
+
+
+_KEEP_WITH_NUMBER = re.compile(r" (?=[-+(]?\d)")
+
+
+def wrap_title(title: str, width: int) -> str:
+    """``title`` wrapped at spaces to lines of at most ``width`` characters, its own line breaks
+    kept; a number stays on the line of the word before it ("max discrepancy 3.9e-09", "eq. (8)"
+    are never split), and hyphens are no break points."""
+    nbsp = "\u00a0"  # textwrap breaks at ASCII whitespace only
+    lines = (textwrap.fill(_KEEP_WITH_NUMBER.sub(nbsp, line), width, break_on_hyphens=False) for line in title.split("\n"))
+    return "\n".join(lines).replace(nbsp, " ")
 
 
 def draw_boundary(ax: Axes, boundary: Boundary, **kw: object) -> None:
@@ -82,7 +95,8 @@ def kinematics_figure(
 ) -> Figure:
     """Arm around the object with its shadow points; rho and alpha against s/L (ODE vs geometry).
     ``unit`` names the length unit of the axes (``-``: the paper's dimensionless Fig. 2 units);
-    the title is wrapped to the figure's width (constrained layout keeps it inside)."""
+    the title is wrapped to the figure's width by :func:`wrap_title` (constrained layout keeps it
+    inside); the legend is under the arm's axes, off the object."""
     fig = Figure(figsize=(10, 5.0), layout="constrained")
     grid = fig.add_gridspec(1, 2, width_ratios=(1.1, 1.0))
     left, right = fig.add_subfigure(grid[0]), fig.add_subfigure(grid[1])
@@ -97,9 +111,8 @@ def kinematics_figure(
     ax.set_aspect("equal")
     ax.set_xlabel(f"x [{unit}]")
     ax.set_ylabel(f"y [{unit}]")
-    ax.legend(loc="best", fontsize=8)
-    fig.suptitle(textwrap.fill(title or "arm and shadow curve", 90, break_on_hyphens=False),
-                 fontsize=10)
+    left.legend(loc="outside lower center", ncols=3, fontsize=8)  # below the axes: never over the object
+    fig.suptitle(wrap_title(title or "arm and shadow curve", 90), fontsize=10)
     sl = shape.s / shape.s[-1]
     ax1, ax2 = right.subplots(2, 1, sharex=True)
     ax1.plot(sl, ode.rho, "C0", label="rho (ODE, eq. (8))")

@@ -7,9 +7,13 @@ from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
 from .draw import draw_boundary
-from ..quality_map import METRICS, QualityMap
+from ..quality_map import METRICS, TIE_RTOL, QualityMap
 
-__all__ = ["quality_map_figure"]
+__all__ = ["quality_map_figure", "TIE_NOTE"]
+
+TIE_NOTE = (f"optimum: Nelder-Mead from the best grid pose; ties (values within {TIE_RTOL:g} relative, e.g. every "
+            "polar angle of a circle, or psi and psi + pi of an ellipse) go to the smallest polar angle psi, then the smallest d")
+"""The tie rule of :func:`contgrasp_core.quality_map.maximise`, printed under every Fig. 3."""
 
 
 def _ring_triangulation(qm: QualityMap) -> tuple[Triangulation, np.ndarray]:
@@ -31,7 +35,8 @@ def _ring_triangulation(qm: QualityMap) -> tuple[Triangulation, np.ndarray]:
 
 def quality_map_figure(qm: QualityMap, *, title: str | None = None) -> Figure:
     """One panel per metric: heatmap over D normalised by its maximum (darker = higher), the
-    object, the optimal base point (purple) and its arm configuration (purple dashed)."""
+    object, the optimal base point (purple) and its arm configuration (purple dashed); the tie
+    rule of the optimum (:data:`TIE_NOTE`) is printed under the panels."""
     fig = Figure(figsize=(13, 4.6))
     t, bad = _ring_triangulation(qm)
     for k, metric in enumerate(METRICS):
@@ -59,5 +64,6 @@ def quality_map_figure(qm: QualityMap, *, title: str | None = None) -> Figure:
         ax.set_title(f"{metric} / max {metric}" + (f"  (max {vmax:.3g})" if finite.any() else ""))
         fig.colorbar(pc, ax=ax, shrink=0.7, label=f"{metric} / max {metric} [-]")
     fig.suptitle(title or f"grasp quality maps: {qm.spec.object.text()}")
-    fig.tight_layout()
+    fig.text(0.5, 0.01, TIE_NOTE, ha="center", va="bottom", fontsize=8, color="0.3")
+    fig.tight_layout(rect=(0.0, 0.04, 1.0, 1.0))
     return fig

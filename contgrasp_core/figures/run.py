@@ -9,21 +9,21 @@ the object). Every time is the header stamp of the messages drawn (simulated tim
 
 from __future__ import annotations
 
+import textwrap
 from typing import Any
 
 import numpy as np
-from matplotlib import colormaps
 from matplotlib.figure import Figure
 
 from contgrasp_core.arm import ArmShape
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.control.law import adaptive_mu2, closed_loop_kinematics
-from contgrasp_core.figures.closed_loop import STATIC_LABEL, finish_profile_panels
+from contgrasp_core.figures.closed_loop import STATIC_LABEL, finish_profile_panels, plane_axes, snapshot_colours
 from contgrasp_core.figures.draw import draw_arm, draw_boundary, save
 from contgrasp_core.rod.body import to_world
 from contgrasp_core.scenario import Scenario
 
-__all__ = ["TIME_LABEL", "build_run_figure", "run_figure", "quality_history_figure"]
+__all__ = ["TIME_LABEL", "QUALITY_AXES", "CREEP_NOTE", "build_run_figure", "run_figure", "quality_history_figure"]
 
 
 TIME_LABEL = "simulated time t [s] (message header stamp)"
@@ -51,7 +51,7 @@ def build_run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]])
     top, bottom = fig.add_subfigure(grid[0]), fig.add_subfigure(grid[1])
     ax = top.add_subplot(1, 1, 1)
     draw_boundary(ax, boundary)
-    colours = colormaps["Purples"](np.linspace(0.35, 1.0, len(picks)))
+    colours = snapshot_colours(len(picks))
     for colour, i in zip(colours, picks, strict=True):
         h = hist[i]
         shape = ArmShape(np.asarray(h["s"]), np.stack([h["x"], h["y"]], -1), np.asarray(h["theta"]))
@@ -61,9 +61,7 @@ def build_run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]])
         _, pts = boundary.sample(720)
         moved = to_world(np.vstack([pts, pts[:1]]), np.asarray(last["object_q"]), np.asarray(last["object_centroid"]))
         ax.plot(moved[:, 0], moved[:, 1], "k--", lw=1.0, zorder=2, label=f"object at t = {last['t']:.2f} s")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
+    plane_axes(ax)
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, title=TIME_LABEL.replace(" (", "\n("),
               title_fontsize=8)
     ax.set_title("closed-loop grasp through the ROS graph (feedback law eq. (19))")
@@ -103,24 +101,48 @@ def run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]], path:
     save(build_run_figure(summary, params), path)
 
 
+QUALITY_AXES = (
+    ("Q1 = $\\lambda_{min}(W)$ [cm$^3$]", 1e6),
+    ("Q2 = det W [cm$^5$]", 1e10),
+    ("Q3 = $\\lambda_{min} / \\lambda_{max}$ [-]", 1.0),
+)
+"""Label and scale from SI of each metric's axis. W = int_S G G^T ds with rows (f_x, f_y, torque)
+(:mod:`contgrasp_core.quality`): its force block is in m, its torque block in m^3, so det W is
+in m^5 and lambda_min, for an object much smaller than 1 m, is the torque direction's, m^3;
+cm^3 and cm^5 give plain numbers (no 1e-5 / 1e-7 axis multipliers) for the paper's 2.5 cm circle."""
+
+CREEP_NOTE = ("'settled' means every node slower than the settle speed, not at rest: the arm still moves by fractions "
+              "of a mm, which moves the ends of the contact set and so W; Q2 = det W (a product of three eigenvalues) "
+              "changes most")
+"""Why Q1..Q3 still move after the settled line of :func:`quality_history_figure`."""
+
+
 def quality_history_figure(t: np.ndarray, q: tuple[np.ndarray, np.ndarray, np.ndarray], path: str, *,
                            recomputed_t: np.ndarray | None = None, recomputed: np.ndarray | None = None,
-                           settle_time: float | None = None) -> None:
+                           settle_time: float | None = None, settle_rule: tuple[float, float] | None = None) -> Figure:
     """Q1, Q2, Q3 (paper Sec. IV) over sim time ``t`` as recorded (lines), optionally recomputed
-    from the rod states (crosses, ``recomputed`` (K, 3) at ``recomputed_t``), to ``path``."""
-    fig = Figure(figsize=(8, 8))
+    from the rod states (crosses, ``recomputed`` (K, 3) at ``recomputed_t``), to ``path``; returns
+    the figure. Axes in the units of :data:`QUALITY_AXES` without offsets; ``settle_time`` is
+    drawn as a line whose legend entry states the settle rule (``settle_rule`` = (settle_speed
+    [m/s], settle_hold [s]) of the simulator) and :data:`CREEP_NOTE` says why the metrics still move."""
+    fig = Figure(figsize=(8, 8.4), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
-    labels = ("Q1 = lambda_min(W)", "Q2 = det W", "Q3 = lambda_min / lambda_max")
-    for n, (ax, rec_vals, label) in enumerate(zip(axes, q, labels, strict=True)):
-        ax.plot(t, rec_vals, "-", color="tab:blue", lw=1.2, label="recorded")
+    for n, (ax, rec_vals, (label, scale)) in enumerate(zip(axes, q, QUALITY_AXES, strict=True)):
+        ax.plot(t, np.asarray(rec_vals) * scale, "-", color="tab:blue", lw=1.2, label="recorded")
         if recomputed is not None and recomputed_t is not None and len(recomputed_t):
-            ax.plot(recomputed_t, recomputed[:, n], "x", color="tab:red", ms=5, label="recomputed")
+            ax.plot(recomputed_t, recomputed[:, n] * scale, "x", color="tab:red", ms=5, label="recomputed")
         if settle_time is not None:
-            ax.axvline(settle_time, color="0.5", ls=":", lw=1.0, label="settled")
+            rule = ("every node slower than settle_speed for settle_hold" if settle_rule is None else
+                    f"every node slower than {settle_rule[0] * 1e3:g} mm/s for {settle_rule[1]:g} s")
+            ax.axvline(settle_time, color="0.5", ls=":", lw=1.0, label=f"settled: {rule}")
         ax.set_ylabel(label)
+        ax.ticklabel_format(axis="y", style="plain", useOffset=False)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     axes[0].set_title("continuum grasp quality (Sec. IV) over the run")
     axes[-1].set_xlabel(TIME_LABEL)
-    fig.tight_layout()
+    if settle_time is not None:
+        fig.text(0.5, 0.0, textwrap.fill(CREEP_NOTE, 110), ha="center", va="bottom", fontsize=8, color="0.3")
+        fig.get_layout_engine().set(rect=(0.0, 0.05, 1.0, 0.95))  # type: ignore[union-attr, call-arg]
     save(fig, path)
+    return fig

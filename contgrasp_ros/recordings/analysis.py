@@ -744,6 +744,12 @@ def quality_plot_path(path: str | Path) -> Path:
     return p.with_name(f"{p.stem}_quality{p.suffix or '.png'}")
 
 
+def _settle_rule(run: RunData) -> tuple[float, float]:
+    """(settle_speed, settle_hold) of the simulator's settle rule, as :func:`recompute_parameters` finds them."""
+    par = recompute_parameters(run)
+    return float(par["settle_speed"]), float(par["settle_hold"])
+
+
 def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: float | None = None) -> dict[str, Any]:
     """Two figures: ``path``, the Fig. 4-style figure (:func:`contgrasp_core.figures.run.run_figure`,
     needs the run's parameters and paired rod/contact states), and :func:`quality_plot_path`,
@@ -766,7 +772,7 @@ def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: 
             return out
         qpath = quality_plot_path(path)
         quality_history_figure(q.t, (q.q1, q.q2, q.q3), str(qpath), recomputed_t=q.t[rc.quality_index],
-                               recomputed=rc.quality, settle_time=settle_time)
+                               recomputed=rc.quality, settle_time=settle_time, settle_rule=_settle_rule(run))
         out["quality"] = str(qpath)
     except (OSError, ValueError) as exc:
         if isinstance(exc, ContgraspError):
