@@ -196,7 +196,8 @@ def test_no_shipped_data_file_holds_a_path_of_the_machine_that_made_it() -> None
     import re
 
     root = Path(__file__).resolve().parents[1]
-    absolute = re.compile(rb"(/work/|/root/|/home/|/tmp/|/Users/|[A-Za-z]:\\\\)")
+    # (the usual homes and work folders; a bare drive letter would match inside compressed images)
+    absolute = re.compile(rb"(/work/|/root/|/home/|/tmp/|/Users/|[A-Z]:\\\\Users\\\\)")
     files = [p for d in ("bags", "docs/figures", "tests/data") for p in (root / d).rglob("*")
              if p.is_file() and not any(part.startswith("run_") for part in p.parts)]  # (runs: git-ignored)
     assert any(p.suffix == ".mcap" for p in files)
