@@ -113,7 +113,11 @@ def _pool_results(task: Callable[[Any], T], items: Sequence[Any], workers: int |
         done: dict[int, T] = {}
         following = 0
         while following < len(items):
-            ready: list[Any] = wait(list(busy))
+            # (a bounded wait: a Ctrl-C that the kernel hands to another thread of this process,
+            # tqdm's monitor say, leaves this thread asleep in poll(); waking twice a second lets
+            # it raise the KeyboardInterrupt even then, instead of at the next answer, which
+            # may be minutes away)
+            ready: list[Any] = wait(list(busy), timeout=0.5)
             for conn in ready:
                 try:
                     index, ok, value = conn.recv()
