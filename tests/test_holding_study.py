@@ -107,7 +107,7 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
     spec = StudySpec(object="ellipse", psi_steps=4, d_steps=1, nodes=31,
                      hold=HoldSettings(directions=1, ramp_time=0.4, hold_time=0.3, release_time=0.3))
     out = tmp_path / "study.jsonl"
-    qm, rows = run_study(spec, out, executor="serial")
+    qm, rows = run_study(spec, out, executor="processes", workers=2)  # (the process pool in a real study)
     # (rows 2 and 3 are the half-turns of rows 0 and 1)
     assert sorted(r["key"] for r in rows) == ["grid:0,0", "grid:1,0", "optimum:Q1", "optimum:Q2", "optimum:Q3"]
     assert all(r["outcome"] in ("held", "no contact", "not settled", "not held") for r in rows)
