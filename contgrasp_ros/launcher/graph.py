@@ -52,8 +52,8 @@ class Process:
 
     @property
     def module(self) -> str:
-        """The Python module the executable runs."""
-        return f"{PACKAGE}.{CONTAINER}" if self.executable == CONTAINER else f"{PACKAGE}.nodes.{self.executable}"
+        """The Python module the executable runs (every executable is a module of ``nodes/``)."""
+        return f"{PACKAGE}.nodes.{self.executable}"
 
 
 def compose_groups(texts: Sequence[str], nodes: Sequence[str] = LOOP) -> list[tuple[str, ...]]:
