@@ -224,7 +224,15 @@ def test_nodes_idle_without_a_simulator(tmp_path: Path) -> None:
     procs = [subprocess.Popen([sys.executable, "-m", f"contgrasp_ros.nodes.{n}"], env=env, stdout=subprocess.DEVNULL,
                               stderr=log.open("w")) for n, log in zip(NODES[1:], logs, strict=True)]
     try:
-        time.sleep(4.0)  # start-up
+        # start-up (imports, numba's cached kernels, discovery): until a second in which no node
+        # used more than 0.1 s of CPU, at most 30 s (on a loaded machine 4 s were not enough; a
+        # node in a busy loop never gets there and is caught below)
+        end = time.monotonic() + 30.0
+        while time.monotonic() < end:
+            before = [cpu_seconds(p.pid) for p in procs]
+            time.sleep(1.0)
+            if max(cpu_seconds(p.pid) - b for p, b in zip(procs, before, strict=True)) < 0.1:
+                break
         cpu0 = [cpu_seconds(p.pid) for p in procs]
         time.sleep(3.0)
         used = [cpu_seconds(p.pid) - c for p, c in zip(procs, cpu0, strict=True)]
