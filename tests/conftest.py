@@ -110,3 +110,33 @@ def pytest_sessionfinish(session, exitstatus):  # type: ignore[no-untyped-def]
     except ImportError:  # (a core-only environment)
         return
     clean_shared_memory()
+
+
+def _sigint_ignored() -> bool:
+    """Whether SIGINT is ignored in this process at the OS level (what a subprocess inherits;
+    C code can set it behind Python's back, so /proc, not :func:`signal.getsignal`)."""
+    import signal
+
+    try:
+        with open("/proc/self/status") as fh:
+            mask = next(int(line.split()[1], 16) for line in fh if line.startswith("SigIgn:"))
+    except (OSError, StopIteration):
+        return signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    return bool(mask & (1 << (signal.SIGINT - 1)))
+
+
+@pytest.fixture(autouse=True)
+def _sigint_not_left_ignored(request: pytest.FixtureRequest) -> Any:
+    """A test that leaves SIGINT ignored in this process is named (a warning) and Python's handler
+    is put back: an ignored SIGINT is inherited by every subprocess started afterwards, and the
+    tests that Ctrl-C a command (the study, replay, idle nodes) then wait in vain. In whole runs
+    of 2026-11-26 something did, after contgrasp_ros.plumbing.runtime's own leak was fixed; this
+    names it (see the warnings summary) without letting it fail unrelated tests."""
+    import signal
+    import warnings
+
+    before = _sigint_ignored()
+    yield
+    if _sigint_ignored() and not before:
+        warnings.warn(f"{request.node.nodeid} left SIGINT ignored; restored", RuntimeWarning, stacklevel=1)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
