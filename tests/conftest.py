@@ -125,6 +125,18 @@ def _sigint_ignored() -> bool:
     return bool(mask & (1 << (signal.SIGINT - 1)))
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _sigint_at_its_default() -> None:
+    """The tests start with SIGINT handled, whatever started them: a non-interactive shell starts
+    a background job (``cmd &``: how a CI runner or nohup may start ``.ci/run``) with SIGINT
+    ignored, every process below inherits that, and the tests that Ctrl-C a command (the study,
+    replay, idle nodes) then wait in vain. This is what failed them in whole runs on 2026-11-26."""
+    import signal
+
+    if _sigint_ignored():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 @pytest.fixture(autouse=True)
 def _sigint_not_left_ignored(request: pytest.FixtureRequest) -> Any:
     """A test that leaves SIGINT ignored in this process is named (a warning) and Python's handler
