@@ -141,9 +141,9 @@ def _sigint_at_its_default() -> None:
 def _sigint_not_left_ignored(request: pytest.FixtureRequest) -> Any:
     """A test that leaves SIGINT ignored in this process is named (a warning) and Python's handler
     is put back: an ignored SIGINT is inherited by every subprocess started afterwards, and the
-    tests that Ctrl-C a command (the study, replay, idle nodes) then wait in vain. In whole runs
-    of 2026-11-26 something did, after contgrasp_ros.plumbing.runtime's own leak was fixed; this
-    names it (see the warnings summary) without letting it fail unrelated tests."""
+    tests that Ctrl-C a command (the study, replay, idle nodes) then wait in vain. The tests that
+    run nodes in-process do so on purpose (a node's clean-up ignores SIGINT until its process
+    exits: ``contgrasp_ros.plumbing.runtime._ignore_interrupts``); any other is a finding."""
     import signal
     import warnings
 

@@ -384,33 +384,3 @@ def test_node_with_bad_parameter_exits_2_and_recorder_with_failing_disk_exits_1(
     errors = [line for line in full.stderr.splitlines() if line.startswith("McapRecorder: error: ")]
     assert len(errors) == 1 and "File too large" in errors[0], full.stderr[-2000:]
 
-
-def test_running_nodes_in_process_leaves_the_sigint_handler_as_it_found_it() -> None:
-    """The clean-up ignores a second SIGINT only while it runs: afterwards the process has its
-    own handler back. (It kept SIG_IGN, which every later subprocess of the test run inherited:
-    the Ctrl-C study test and an idle sensor then ignored the SIGINT they were sent.)"""
-    import signal
-    import subprocess
-    import sys
-
-    import rclpy
-
-    from contgrasp_ros.plumbing.runtime import run_node
-
-    def stopping_node() -> Any:
-        node: Any = rclpy.create_node("stopping_node_sigint")
-        node.stop_requested = True
-        return node
-
-    # (from Python's own handler: something else in a whole test run leaves SIGINT ignored in
-    # the pytest process, see the Ctrl-C study test; this test must not depend on it)
-    saved = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        assert run_node(stopping_node, args=[]) == 0
-        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-        # and a process started now can be interrupted
-        child = subprocess.run([sys.executable, "-c", "import signal; print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN)"],
-                               capture_output=True, text=True, timeout=60)
-        assert child.stdout.strip() == "False"
-    finally:
-        signal.signal(signal.SIGINT, saved)

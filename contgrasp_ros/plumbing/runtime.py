@@ -28,8 +28,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from typing import Any, TypeVar, cast
 
 import rclpy
@@ -609,20 +608,12 @@ class GuardedSpin:
             self.streak = 0
 
 
-@contextmanager
-def _interrupts_ignored() -> Iterator[None]:
-    """SIGINT does nothing inside (the process is already stopping), and its handler is put back
-    after: a process that ran nodes in-process (a test, an embedding program) keeps its Ctrl-C,
-    and so do the processes it starts (an ignored SIGINT is inherited through exec: it once made
-    later tests' subprocesses deaf to SIGINT)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
+def _ignore_interrupts() -> None:
+    """From here on SIGINT does nothing (the process is already stopping; a node process exits
+    right after, and a second Ctrl-C must not cut its clean-up short). Called in-process (tests),
+    it leaves SIGINT ignored, which later subprocesses inherit: tests/conftest.py puts it back."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
@@ -694,10 +685,10 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
         # A second SIGINT must not cut the clean-up short (a recorder finalising its file): a
         # terminal's Ctrl-C reaches every process and ros2 launch forwards one more to each child.
         # (SIGTERM still ends the process: what launchers escalate to when a clean-up hangs.)
-        with _interrupts_ignored():
-            for node in nodes:
-                node.destroy_node()
-                code = max(code, int(getattr(node, "exit_code", 0)))  # a failure during the node's own clean-up
-            if rclpy.ok():
-                rclpy.shutdown()
+        _ignore_interrupts()
+        for node in nodes:
+            node.destroy_node()
+            code = max(code, int(getattr(node, "exit_code", 0)))  # a failure during the node's own clean-up
+        if rclpy.ok():
+            rclpy.shutdown()
     return code
