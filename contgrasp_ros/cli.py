@@ -86,7 +86,8 @@ def _bag_recover(args: argparse.Namespace) -> dict[str, Any]:
 def _replay(args: argparse.Namespace) -> dict[str, Any]:
     from contgrasp_ros.recordings.replay import replay
 
-    return replay(args.bag, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start, end=args.end, delay=args.delay)
+    return replay(args.bag, rate=args.rate, topics=args.topics, loop=args.loop, start=args.start, end=args.end, delay=args.delay,
+                  wait_for_subscribers=args.wait_for_subscribers)
 
 
 def register(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
@@ -109,5 +110,7 @@ def register(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--start", type=float, default=None, help="seconds after the first message to start at")
     p.add_argument("--end", type=float, default=None, help="seconds after the first message to stop at")
     p.add_argument("--delay", type=float, default=1.0, help="wall seconds to let subscribers connect first")
+    p.add_argument("--wait-for-subscribers", action="store_true",
+                   help="before --delay, wait until every replayed topic has a subscriber (Ctrl-C stops the wait)")
     p.set_defaults(func=_replay)
     cli_analyze.add_parser(sub, parents)

@@ -19,7 +19,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-pytest.importorskip("rclpy")
+rclpy = pytest.importorskip("rclpy")
 
 from conftest import fresh_domain_id  # noqa: E402
 
@@ -436,7 +436,9 @@ def test_recorder_with_unwritable_output_exits_1_with_the_reason(tmp_path: Path)
 
 def test_replay_reproduces_sequence_and_timing(tmp_path: Path) -> None:
     """`contgrasp replay --rate 2` republishes a recording; a second recorder sees the same
-    messages in the same order, spaced by the recorded intervals / 2."""
+    messages in the same order, spaced by the recorded intervals / 2. (--wait-for-subscribers:
+    the recorder subscribes only once it has seen the replay's publishers; a fixed 2 s delay lost
+    the first 122 messages in CI's 3.12 leg.)"""
     from rclpy.serialization import serialize_message
 
     from contgrasp_msgs.msg import ObjectBoundary, RodState
@@ -456,7 +458,8 @@ def test_replay_reproduces_sequence_and_timing(tmp_path: Path) -> None:
     rec = _recorder(tmp_path / "copy", env, "-p", "topics:=['/contgrasp/rod_state','/contgrasp/object']")
     try:
         time.sleep(2.0)
-        proc = subprocess.run([str(BIN / "contgrasp"), "replay", str(src), "--rate", "2", "--delay", "2", "--json"],
+        proc = subprocess.run([str(BIN / "contgrasp"), "replay", str(src), "--rate", "2", "--delay", "1",
+                               "--wait-for-subscribers", "--json"],
                               capture_output=True, text=True, timeout=120, env=env)
         assert proc.returncode == 0, proc.stderr
         assert json.loads(proc.stdout)["published"] == 201
@@ -613,9 +616,30 @@ def test_replay_window_and_loop(tmp_path: Path) -> None:
                            "--rate", "10", "--json"], capture_output=True, text=True, timeout=120, env=env)
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout)["published"] == 101  # 100 ms .. 200 ms inclusive
+    # (a probe hears the loop's passes: Ctrl-C after more than one of them, however slow the
+    # replay's start-up; a fixed 4 s once ended it while it was still loading)
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import String
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=int(env["ROS_DOMAIN_ID"]))
+    probe = rclpy.create_node("loop_probe", context=ctx)
+    heard: list[str] = []
+    probe.create_subscription(String, "/chatter", lambda m: heard.append(m.data), 100)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(probe)
     loop = subprocess.Popen([str(BIN / "contgrasp"), "replay", str(path), "--loop", "--rate", "5", "--delay", "0", "--json"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    time.sleep(4.0)  # startup + more than one pass of 60 ms
+    try:
+        end = time.monotonic() + 120
+        while len(heard) <= 300 and time.monotonic() < end and loop.poll() is None:
+            ex.spin_once(timeout_sec=0.05)
+    finally:
+        ex.shutdown()
+        probe.destroy_node()
+        rclpy.shutdown(context=ctx)
+    assert len(heard) > 300, len(heard)
     loop.send_signal(signal.SIGINT)
     out, err = loop.communicate(timeout=60)
     assert loop.returncode == 0, err

@@ -55,13 +55,17 @@ def replay(
     start: float | None = None,
     end: float | None = None,
     delay: float = 1.0,
+    wait_for_subscribers: bool = False,
     ack_timeout: float = 5.0,
     node: Node | None = None,
 ) -> dict[str, Any]:
     """Republish a recording; ``start``/``end`` are seconds from its first message. Returns counts.
 
     ``delay`` wall seconds pass between creating the publishers and the first message, so
-    subscribers can match; at the end up to ``ack_timeout`` seconds are given to reliable
+    subscribers can match; with ``wait_for_subscribers`` the replay first waits (Ctrl-C stops it)
+    until every replayed topic has a matched subscriber (a recorder that learns a topic's type
+    from the replay's own publisher subscribes only after it saw it, however long that takes on a
+    loaded machine), then ``delay``; at the end up to ``ack_timeout`` seconds are given to reliable
     subscribers to acknowledge the last messages. With ``node`` given the caller owns rclpy's
     init and the node.
     """
@@ -98,6 +102,8 @@ def replay(
     pubs: dict[str, Any] = {}
     try:
         pubs = {t: node.create_publisher(classes[t], t, _qos(known[t]["offered_qos_profiles"])) for t in chosen}
+        while wait_for_subscribers and not all(pub.get_subscription_count() > 0 for pub in pubs.values()):
+            time.sleep(0.05)
         time.sleep(max(delay, 0.0))
         wall0 = time.monotonic()
         while True:
