@@ -125,30 +125,22 @@ def _sigint_ignored() -> bool:
     return bool(mask & (1 << (signal.SIGINT - 1)))
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _sigint_at_its_default() -> None:
-    """The tests start with SIGINT handled, whatever started them: a non-interactive shell starts
-    a background job (``cmd &``: how a CI runner or nohup may start ``.ci/run``) with SIGINT
-    ignored, every process below inherits that, and the tests that Ctrl-C a command (the study,
-    replay, idle nodes) then wait in vain. This is what failed them in whole runs on 2026-11-26."""
-    import signal
-
-    if _sigint_ignored():
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-
-
 @pytest.fixture(autouse=True)
-def _sigint_not_left_ignored(request: pytest.FixtureRequest) -> Any:
-    """A test that leaves SIGINT ignored in this process is named (a warning) and Python's handler
-    is put back: an ignored SIGINT is inherited by every subprocess started afterwards, and the
-    tests that Ctrl-C a command (the study, replay, idle nodes) then wait in vain. The tests that
-    run nodes in-process do so on purpose (a node's clean-up ignores SIGINT until its process
-    exits: ``contgrasp_ros.plumbing.runtime._ignore_interrupts``); any other is a finding."""
+def _sigint_handled(request: pytest.FixtureRequest) -> Any:
+    """Every test starts with SIGINT handled, and one that leaves it ignored is named (a warning).
+    An ignored SIGINT is inherited by every subprocess started afterwards, and the tests that
+    Ctrl-C a command (the study, replay, idle nodes) then wait in vain. Two sources: whatever
+    started the run (a non-interactive shell starts a background job, ``cmd &``, as a CI runner
+    or nohup may start ``.ci/run``, with SIGINT ignored: what failed them in whole runs on
+    2026-11-26), put back silently; and a test: those that run nodes in-process do so on purpose
+    (a node's clean-up ignores SIGINT until its process exits:
+    ``contgrasp_ros.plumbing.runtime._ignore_interrupts``), any other is a finding."""
     import signal
     import warnings
 
-    before = _sigint_ignored()
+    if _sigint_ignored():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     yield
-    if _sigint_ignored() and not before:
+    if _sigint_ignored():
         warnings.warn(f"{request.node.nodeid} left SIGINT ignored; restored", RuntimeWarning, stacklevel=1)
         signal.signal(signal.SIGINT, signal.default_int_handler)

@@ -149,11 +149,9 @@ def test_ctrl_c_stops_a_study_with_two_workers_at_once(tmp_path: Path) -> None:
 
     cmd = [sys.executable, "-m", "contgrasp_core.cli", "holding-study", "--object", "ellipse", "--psi-steps", "8",
            "--d-steps", "2", "--nodes", "31", "--executor", "processes", "--workers", "2", "--out", str(tmp_path / "s.jsonl")]
-    # (SIGINT at its default in the child, as in a terminal's shell: in a whole test run something
-    # leaves it ignored in the pytest process, and an ignored SIGINT is inherited through exec)
+    # (the child inherits a handled SIGINT: tests/conftest.py sees to it)
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            env=dict(os.environ, MPLBACKEND="Agg"),
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                            env=dict(os.environ, MPLBACKEND="Agg"))
     try:
         end = time.monotonic() + 120
         while len(_children(proc.pid)) < 2 and proc.poll() is None and time.monotonic() < end:
