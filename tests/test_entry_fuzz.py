@@ -745,7 +745,7 @@ def figures_argv(draw: Any, files: dict[str, Path]) -> list[str]:
 def simulate_argv(draw: Any, files: dict[str, Path]) -> list[str]:
     opts = {
         "--object": (st.sampled_from(["circle", "circle:0.02", "ellipse:0.03,0.02", "deformed"]),
-                     st.sampled_from(["circle:x", "circle:-1", "circle:nan", "circle:1,2", "ellipse:1", "ellipse:0.03,x",
+                     st.sampled_from(["circle:x", "circle:-1", "circle:nan", "circle:1,2", "ellipse:0.5,0.5", "ellipse:0.03,x",
                                       "ellipse:0,1", "deformed:inf", "square", "", ":"])),
         "--duration": (st.sampled_from(["0.5"]), st.sampled_from(["nan", "inf", "-1", "0", "x"])),
         "--control-period": (st.sampled_from(["0.01"]), st.sampled_from(["nan", "inf", "-1", "0", "x"])),

@@ -16,7 +16,7 @@ import pytest
 
 from contgrasp_core.cli import main as cli_main
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.objects import ObjectSpec
+from contgrasp_core.objects import ROD_SCALE, ObjectSpec
 from contgrasp_core.scenario import PAPER, check_start
 
 KIDNEY = Path(__file__).parent / "data" / "kidney_outline.csv"
@@ -61,6 +61,18 @@ def test_an_object_across_the_straight_arm_is_refused() -> None:
     assert msg.startswith("the arm starts inside the object: its straight start at base (0, 0) heading 0 rad passes "
                           "0.426 m inside the object (circle of radius 0.5 m)"), msg
     assert "move the base or shrink the object" in msg and "in metres" not in msg and "\n" not in msg
+
+
+def test_a_long_bar_beside_the_arm_is_a_valid_start(capsys: pytest.CaptureFixture[str]) -> None:
+    """``ellipse:1`` at the rod scale is ellipse:1,0.02 (the omitted semi-axis from the scale): a
+    2 m bar whose near side runs 6 cm above the straight arm. The arm is outside it and within
+    reach of it, so the start is valid (the fuzz once listed it as bad input), while the same
+    bar turned across the arm is refused."""
+    bar = ObjectSpec.parse("ellipse:1", ROD_SCALE)
+    assert bar.params == (1.0, 0.02)
+    check_start(PAPER.rod, bar)
+    code, line = _cli(capsys, ["simulate", "--object", "ellipse:0.02,1", "--duration", "0.1"])
+    assert code == 2 and line.startswith("contgrasp simulate: error: the arm starts inside the object"), line
 
 
 def test_the_arm_surface_counts_not_only_its_centreline() -> None:
