@@ -14,7 +14,7 @@ parameters per node (the layout of ``contgrasp_ros/config/default.yaml``, tested
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -34,11 +34,14 @@ if TYPE_CHECKING:
 
 __all__ = ["GainSettings", "SensingSettings", "Scenario", "PAPER", "ROD_PARAMETERS", "NODES", "SIMULATOR", "SENSOR",
            "CONTROLLER", "QUALITY", "object_from_parameters", "motion_from_parameters", "motion_parameters", "rod_system",
-           "check_start"]
+           "check_start", "HOLD_PREFIX"]
 
 SIMULATOR, SENSOR, CONTROLLER, QUALITY = "rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"
 NODES = (SIMULATOR, SENSOR, CONTROLLER, QUALITY)
 """The graph's nodes whose parameters the scenario sets."""
+
+HOLD_PREFIX = "hold_"
+"""The controller's parameters of the holding law: ``hold_<field>`` of :class:`HoldLawSettings`."""
 
 ROD_PARAMETERS = ("length", "n_elements", "radius_base", "radius_tip", "density", "youngs_modulus", "damping",
                   "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction",
@@ -145,10 +148,10 @@ class Scenario:
     # ------------------------------------------------------------------ ROS parameters
     def to_ros_parameters(self) -> dict[str, dict[str, Any]]:
         """Parameters per node, plain types: ``{"/**": rod, "rod_simulator": object + loop, ...}``
-        (the layout of a ROS 2 parameter file; ``/**`` applies to every node). The graph runs the
-        paper's law only: a scenario with another ``law`` is refused."""
-        if self.law != "paper":
-            raise InvalidParameterError(f"the ROS graph's controller runs the paper's law only, not law {self.law!r}")
+        (the layout of a ROS 2 parameter file; ``/**`` applies to every node). The controller
+        takes the ``law``, the holding law's settings as ``hold_<name>``
+        (:class:`~contgrasp_core.control.hold_law.HoldLawSettings`) and the ``control_period`` (the
+        simulator's: the holding law's phases run in time)."""
         m = self.rod
         rod = {name: _plain(getattr(m, name)) for name in ROD_PARAMETERS if name not in ("base_x", "base_y")}
         rod["base_x"], rod["base_y"] = float(m.base_position[0]), float(m.base_position[1])
@@ -164,7 +167,8 @@ class Scenario:
         g = self.gains
         ctl = {"mu1": g.mu1, "mu2": g.mu2, "adaptive_mu2": g.adaptive_mu2,
                "object_radius": float(o.radius if g.object_radius is None else g.object_radius),
-               "length_unit": g.length_unit}
+               "length_unit": g.length_unit, "law": self.law, "control_period": sim["control_period"]}
+        ctl.update({f"{HOLD_PREFIX}{f.name}": float(getattr(self.hold_law, f.name)) for f in fields(HoldLawSettings)})
         s = self.sensing
         ref = self.reference
         quality = {"rate_hz": s.quality_rate_hz, "reference_x": float(ref[0]), "reference_y": float(ref[1])}
@@ -197,11 +201,13 @@ class Scenario:
                                 settle_hold=float(sim["settle_hold"]), min_time=float(sim["min_time"]))
         gains = GainSettings(mu1=float(ctl["mu1"]), mu2=float(ctl["mu2"]), adaptive_mu2=bool(ctl["adaptive_mu2"]),
                              object_radius=float(ctl["object_radius"]), length_unit=float(ctl["length_unit"]))
+        hold_law = HoldLawSettings(**{f.name: float(ctl[f"{HOLD_PREFIX}{f.name}"]) for f in fields(HoldLawSettings)})
         sensing = SensingSettings(contact_tolerance=float(sen["contact_tolerance"]),
                                   quality_rate_hz=float(qual["rate_hz"]),
                                   reference=(float(qual["reference_x"]), float(qual["reference_y"])))
         dynamics, disturbance = motion_from_parameters(sim)
-        return cls(rod=rod, object=obj, loop=loop, gains=gains, sensing=sensing, dynamics=dynamics, disturbance=disturbance)
+        return cls(rod=rod, object=obj, loop=loop, gains=gains, sensing=sensing, dynamics=dynamics, disturbance=disturbance,
+                   law=str(ctl["law"]), hold_law=hold_law)
 
     def with_object(self, obj: ObjectSpec, **changes: Any) -> Scenario:
         """The same scenario around another object (the adaptive gain follows its nominal radius),

@@ -44,6 +44,8 @@ def messages(draw: Any, msg_type: Any) -> tuple[dict[str, Any], Any]:
             values[name] = draw(st.integers(0, 2**64 - 1))
         elif kind == "double":
             values[name] = draw(floats)
+        elif kind == "bool":
+            values[name] = draw(st.booleans())
         elif kind == "float64[]":
             values[name] = np.array(draw(st.lists(floats, min_size=n, max_size=n)), dtype=float)
         else:
@@ -96,8 +98,10 @@ def test_a_big_endian_message_is_read() -> None:
     payload += struct.pack(">I", 2) + b"\x00" * 4 + struct.pack(">2d", 0.5, 1.5)  # s (count at 32, values 8-aligned at 40)
     payload += struct.pack(">I", 2) + b"\x00" * 4 + struct.pack(">2d", -3.0, 4.25)  # u
     payload += struct.pack(">4I", 0, 0, 0, 0)  # the four empty expansion fields
+    payload += struct.pack(">I", 0) + b"\x00" * 4 + struct.pack(">d", 2.5) + b"\x01"  # kappa_ref (empty at 96), hold_gain (104), transition
     msg = Codec(CoupleControl).decode(b"\x00\x00\x00\x00" + payload)
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id, msg.step) == (7, 5, "world", 42)
+    assert msg.kappa_ref.size == 0 and msg.hold_gain == 2.5 and msg.transition is True
     assert msg.s.tolist() == [0.5, 1.5] and msg.u.tolist() == [-3.0, 4.25] and msg.du_dalpha.size == 0
     assert deserialize_message(Codec(CoupleControl).encode({"s": msg.s, "u": msg.u, "step": 42}), CoupleControl).u.tolist() == [-3.0, 4.25]
 

@@ -36,6 +36,7 @@ from contgrasp_ros.plumbing.convert import (  # noqa: E402
     boundary_to_msg,
     contact_arrays,
     couple_arrays,
+    HeldShape,
     rod_state_arrays,
 )
 
@@ -225,20 +226,32 @@ def couple_cases(draw: st.DrawFn) -> Case:
     # only finiteness is required of the couple and the gains: huge finite values are accepted
     big = st.floats(-1e300, 1e300, allow_nan=False)
     f: dict[str, Any] = {"s": s, "u": draw(st.lists(big, min_size=n, max_size=n))}
-    with_expansion = draw(st.booleans())
-    cols = (*COUPLE, *EXPANSION) if with_expansion else COUPLE
+    kind = draw(st.sampled_from(["plain", "expansion", "hold"]))
+    cols = {"plain": COUPLE, "expansion": (*COUPLE, *EXPANSION), "hold": (*COUPLE, "kappa_ref")}[kind]
     for k in EXPANSION:
-        f[k] = draw(st.lists(big, min_size=n, max_size=n)) if with_expansion else []
+        f[k] = draw(st.lists(big, min_size=n, max_size=n)) if kind == "expansion" else []
+    if kind == "hold":  # the holding law's hold: a rest curvature and a gain >= 0
+        f["kappa_ref"] = draw(st.lists(big, min_size=n, max_size=n))
+        f["hold_gain"] = draw(st.floats(0.0, 1e6))
+    f["transition"] = draw(st.booleans())
     reason = draw(_defect(f, cols, max_abs=False))
-    if reason is None and with_expansion and draw(st.booleans()):
+    if reason is None and kind == "expansion" and draw(st.booleans()):
         f[draw(st.sampled_from(EXPANSION))] = []  # a partial expansion
         reason = "length mismatch"
+    elif reason is None and kind == "hold" and draw(st.booleans()):
+        if draw(st.booleans()):
+            f["hold_gain"] = draw(st.sampled_from([-1.0, math.nan, math.inf]))
+            reason = "out of range"
+        else:  # a hold with an expansion: which would the simulator apply?
+            f[draw(st.sampled_from(EXPANSION))] = [0.0] * n
+            reason = "hold and expansion"
     return f, reason, True
 
 
 @counting
 def test_couple(outcomes: Counter[str]) -> Callable[[], None]:
-    """CoupleControl: accepted -> (step, s, u) or the FeedbackExpansion, equal to the message's."""
+    """CoupleControl: accepted -> (step, s, u) or the FeedbackExpansion or the hold (HeldShape),
+    equal to the message's, and its transition flag."""
 
     @settings(max_examples=200, deadline=None)
     @given(case=couple_cases(), step=st.integers(0, 2**40))
@@ -247,16 +260,19 @@ def test_couple(outcomes: Counter[str]) -> Callable[[], None]:
         out = convert(couple_arrays, CoupleControl(step=step, **f), reason, structured, outcomes)
         if out is None:
             return
-        k, s, couple = out
-        assert k == step and _equal(s, f["s"])
+        k, s, couple, transition = out
+        assert k == step and _equal(s, f["s"]) and transition == f.get("transition", False)
         assert s.flags.writeable  # (numba compiles read-only arrays separately: the simulator's kernels see these)
-        if any(len(f[e]) for e in EXPANSION):
+        if len(f.get("kappa_ref", [])):
+            assert isinstance(couple, HeldShape) and couple.gain == f["hold_gain"]
+            assert _equal(couple.u, f["u"]) and _equal(couple.kappa_ref, f["kappa_ref"])
+        elif any(len(f[e]) for e in EXPANSION):
             assert isinstance(couple, FeedbackExpansion)
             assert _equal(couple.u, f["u"])
             for field, name in (("rho_ref", "rho_ref"), ("alpha_ref", "alpha_ref"), ("g_rho", "du_drho"), ("g_alpha", "du_dalpha")):
                 assert _equal(getattr(couple, field), f[name]), name
         else:
-            assert not isinstance(couple, FeedbackExpansion) and _equal(couple, f["u"])
+            assert not isinstance(couple, (FeedbackExpansion, HeldShape)) and _equal(couple, f["u"])
 
     return prop
 

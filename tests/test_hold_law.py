@@ -25,7 +25,7 @@ from contgrasp_core.rod import Obstacle, RodSystem, chain
 from contgrasp_core.rod.body import ObjectDynamics
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
 from contgrasp_core.rod.integrator import RodLoads
-from contgrasp_core.scenario import PAPER
+from contgrasp_core.scenario import PAPER, Scenario
 
 R = 0.025  # the paper scenario's circle (m)
 CIRCLE = PAPER.object.boundary()
@@ -218,8 +218,12 @@ def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
             HoldLawSettings(**bad)
     with pytest.raises(InvalidParameterError, match="unknown law"):
         replace(PAPER, law="grip")
-    with pytest.raises(InvalidParameterError, match="paper's law only"):
-        replace(PAPER, law="hold").to_ros_parameters()
+    hold = replace(PAPER, law="hold", hold_law=HoldLawSettings(squeeze=0.001))  # (the graph's parameters, both ways)
+    assert Scenario.from_ros_parameters(hold.to_ros_parameters()) == hold
+    params = hold.to_ros_parameters()
+    params["grasp_controller"].update(hold_close_gap=0.007)  # (beyond the clearance)
+    with pytest.raises(InvalidParameterError, match="hold law close_gap"):
+        Scenario.from_ros_parameters(params)
     cli = [sys.executable, "-m", "contgrasp_core.cli"]
     for args in (["simulate", "--law", "hold", "--hold-gain", "-1"], ["hold", "--law", "hold", "--squeeze", "-0.001"],
                  ["simulate", "--law", "grip"], ["simulate", "--friction", "-0.5"]):

@@ -203,14 +203,15 @@ class LoopSession:
         self._observed = obs
         return obs
 
-    def check_divergence(self, limits: DivergenceLimits) -> Observation:
-        """The current observation, or :class:`SimulationDivergedError` naming the cause when the
-        state has NaN/Inf, its penetration exceeds ``limits.max_penetration`` or its kinetic
-        energy ``limits.max_kinetic_energy``."""
+    def check_divergence(self, limits: DivergenceLimits, ready: bool = True) -> Observation:
+        """The current observation (:meth:`observe` with ``ready``), or
+        :class:`SimulationDivergedError` naming the cause when the state has NaN/Inf, its
+        penetration exceeds ``limits.max_penetration`` or its kinetic energy
+        ``limits.max_kinetic_energy``."""
         st = self.state
         if not (np.all(np.isfinite(st.theta)) and np.all(np.isfinite(st.omega))):
             raise SimulationDivergedError("simulation diverged: NaN/Inf in the rod state")
-        obs = self.observe()
+        obs = self.observe(ready)
         if not np.isfinite(obs.kinetic_energy) or obs.kinetic_energy > limits.max_kinetic_energy:
             raise SimulationDivergedError(
                 f"simulation diverged: kinetic energy {obs.kinetic_energy:.3g} J above the limit "

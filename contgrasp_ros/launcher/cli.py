@@ -29,13 +29,15 @@ import numpy as np
 
 from contgrasp_core.cli import ArgumentParser, report
 from contgrasp_core.cli.common import add_object_arguments, object_from_args
+from contgrasp_core.control.hold_law import LAWS
 from contgrasp_core.errors import InvalidParameterError, exit_code, one_line
 from contgrasp_core.objects import ROD_SCALE
+from contgrasp_core.rod.body import MODES
 from contgrasp_core.scenario import Scenario
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
 from contgrasp_ros.launcher.events import EventWriter, open_events
-from contgrasp_ros.launcher.graph import compose_groups, default_params_file, load_params, object_parameters, parameter_file
+from contgrasp_ros.launcher.graph import compose_groups, default_params_file, launch_overrides, load_params, parameter_file
 
 
 __all__ = ["main", "default_params_file", "load_params"]
@@ -89,6 +91,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="ROS_DOMAIN_ID for the graph (default: $ROS_DOMAIN_ID when set, else a random id 1..101); "
                         "printed on stderr at start")
     add_object_arguments(p, ROD_SCALE)
+    p.add_argument("--law", choices=LAWS, default=None,
+                   help="the controller's law: paper (eq. (19)) or hold (docs/holding.md) (default: the parameter file's)")
+    p.add_argument("--object-mode", choices=MODES, default=None,
+                   help="how the object moves: fixed (the paper), spring or free (default: the parameter file's)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds to run at most (overrides the parameter file)")
     p.add_argument("--in-process", action="store_true", help="run all nodes in this process on one executor")
     p.add_argument("--executor", choices=("lean", "single", "events"), default=None,
@@ -150,7 +156,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.events == "-" and args.json:
                 raise InvalidParameterError("--events - and --json both write to stdout: give --events a file")
             events = open_events(args.events)
-        return _launch(args, argv, events)
+        with tempfile.TemporaryDirectory(prefix="contgrasp_params_") as folder:  # (a changed scenario's file)
+            return _launch(args, argv, Path(folder), events)
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback (--debug shows it)
         if events is not None:
             events("finished", exit_code=exit_code(exc), error=one_line(exc) or type(exc).__name__)
@@ -163,7 +170,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             events.close()
 
 
-def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventWriter | None = None) -> int:
+def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, events: EventWriter | None = None) -> int:
     if not (np.isfinite(args.timeout) and args.timeout > 0):
         raise InvalidParameterError(f"--timeout must be a finite number > 0 (wall-clock seconds), got {args.timeout}")
     params_file = args.params or default_params_file()
@@ -172,10 +179,12 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, events: EventW
         if not (np.isfinite(args.duration) and args.duration > 0):
             raise InvalidParameterError(f"--duration must be a finite number > 0 (simulated seconds), got {args.duration}")
         params["rod_simulator"]["duration"] = float(args.duration)
-    if args.object is not None or args.outline is not None:
-        for node, values in object_parameters(params, object_from_args(args, ROD_SCALE)).items():
+    obj = object_from_args(args, ROD_SCALE) if args.object is not None or args.outline is not None else None
+    changes = launch_overrides(params, obj, args.law, args.object_mode)
+    if changes:  # (the nodes read the changed scenario from a file of their own, removed at the end)
+        for node, values in changes.items():
             params[node].update(values)
-        params_file = parameter_file(Path(tempfile.mkdtemp(prefix="contgrasp_params_")) / "params.yaml", params)
+        params_file = parameter_file(folder / "params.yaml", params)
     Scenario.from_ros_parameters(params)  # the scenario's checks (an impossible start: check_start) before any node
     domain = _domain_id(args.domain_id)
     os.environ["ROS_DOMAIN_ID"] = str(domain)

@@ -25,7 +25,8 @@ from contgrasp_ros.plumbing import topics
 from contgrasp_ros.launcher.supervision import RECORDER
 
 __all__ = ["PACKAGE", "RECORDER", "CONTAINER", "LOOP", "PLANT", "COMPOSABLE", "DECIMATED_STREAMS", "Process",
-           "compose_groups", "processes", "default_params_file", "load_params", "object_parameters", "recorder_params",
+           "compose_groups", "processes", "default_params_file", "load_params", "object_parameters", "launch_overrides",
+           "recorder_params",
            "parameter_file"]
 
 PACKAGE = "contgrasp_ros"
@@ -123,6 +124,21 @@ def object_parameters(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> dic
     scenario = scenario.with_object(obj, sensing=replace(scenario.sensing, reference=None))
     new = scenario.to_ros_parameters()
     return {node: new[node] for node in (SIMULATOR, CONTROLLER, QUALITY)}
+
+
+def launch_overrides(params: dict[str, dict[str, Any]], obj: ObjectSpec | None = None, law: str | None = None,
+                     object_mode: str | None = None) -> dict[str, dict[str, Any]]:
+    """The parameters per node that a launch's options change: the object (:func:`object_parameters`),
+    the controller's ``law`` and the simulator's ``object_mode`` (None: unchanged); the result,
+    merged into ``params``, is checked as a scenario (:meth:`Scenario.from_ros_parameters`: an
+    unknown law or mode, an impossible start)."""
+    out = {} if obj is None else object_parameters(params, obj)
+    if law is not None:
+        out.setdefault(CONTROLLER, {})["law"] = law
+    if object_mode is not None:
+        out.setdefault(SIMULATOR, {})["object_mode"] = object_mode
+    Scenario.from_ros_parameters({node: {**params[node], **out.get(node, {})} for node in params})
+    return out
 
 
 def recorder_params(record: dict[str, Any]) -> dict[str, Any]:

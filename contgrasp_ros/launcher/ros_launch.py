@@ -22,8 +22,10 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
+from contgrasp_core.control.hold_law import LAWS
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+from contgrasp_core.rod.body import MODES
 from contgrasp_core.scenario import SIMULATOR
 from contgrasp_ros.launcher.graph import (
     COMPOSABLE,
@@ -31,8 +33,8 @@ from contgrasp_ros.launcher.graph import (
     RECORDER,
     compose_groups,
     default_params_file,
+    launch_overrides,
     load_params,
-    object_parameters,
     parameter_file,
     processes,
     recorder_params,
@@ -49,6 +51,10 @@ def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
                               description="built-in object NAME[:PARAMS] in metres: circle[:R], ellipse[:a,b], "
                                           "deformed[:R,amplitude,lobes,phase] (default: the parameter file's)"),
         DeclareLaunchArgument("outline", default_value="", description="your own object: a CSV outline, rows x, y in metres"),
+        DeclareLaunchArgument("law", default_value="", choices=["", *LAWS],
+                              description="the controller's law: paper (eq. (19)) or hold (docs/holding.md) (default: the parameter file's)"),
+        DeclareLaunchArgument("object_mode", default_value="", choices=["", *MODES],
+                              description="how the object moves: fixed (the paper), spring or free (default: the parameter file's)"),
         DeclareLaunchArgument("lockstep", default_value=str(lockstep).lower(), choices=["true", "false"],
                               description="true: lock-step simulated time, deterministic; false: the wall clock (real time)"),
         DeclareLaunchArgument("duration", default_value="", description="simulated seconds at most (default: the parameter file's)"),
@@ -68,16 +74,16 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node | Register
     """The graph's node processes with the launch arguments applied (the launcher's rules:
     an override file beside the scenario's parameter file, removed when the launch ends)."""
     arg = {name: LaunchConfiguration(name).perform(context) for name in
-           ("params_file", "object", "outline", "lockstep", "duration", "compose", "record", "bag", "on_finish")}
+           ("params_file", "object", "outline", "law", "object_mode", "lockstep", "duration", "compose", "record", "bag",
+            "on_finish")}
     params_file = Path(arg["params_file"]) if arg["params_file"] else default_params_file()
     params = load_params(params_file)
     record = arg["record"] == "true"
     overrides: dict[str, dict[str, Any]] = {name: {"use_sim_time": True, "on_finish": arg["on_finish"]} for name in nodes}
-    if arg["object"] or arg["outline"]:
-        obj = ObjectSpec.from_cli(arg["object"] or None, arg["outline"] or None, ROD_SCALE)
-        for name, values in object_parameters(params, obj).items():
-            if name in overrides:
-                overrides[name].update(values)
+    obj = ObjectSpec.from_cli(arg["object"] or None, arg["outline"] or None, ROD_SCALE) if arg["object"] or arg["outline"] else None
+    for name, values in launch_overrides(params, obj, arg["law"] or None, arg["object_mode"] or None).items():
+        if name in overrides:
+            overrides[name].update(values)
     sim = overrides[SIMULATOR]
     sim["lockstep"] = arg["lockstep"] == "true"
     if arg["duration"]:

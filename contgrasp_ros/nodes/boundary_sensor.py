@@ -11,7 +11,9 @@ Thin wrapper of :func:`contgrasp_core.contact.sense` of the rod state's arm shap
 (4), (5), Definition 1; the object's ``Boundary.project``). When the object moves, the rod state
 carries the object's displacement of the same step and the arm is sensed in the object's
 start-pose frame (:attr:`~contgrasp_ros.plumbing.convert.RodArrays.sensed_shape`): the contact state
-(its feet ``shadow_x/y`` included) is then in that frame, against the boundary as published. Malformed rod states or objects, bad
+(its feet ``shadow_x/y`` included) is then in that frame, against the boundary as published. The
+arm's own shape (``theta``, ``kappa`` of the rod state, unchanged; none when the rod state has no
+``kappa``) goes out with it: what the holding law senses besides (rho, alpha). Malformed rod states or objects, bad
 stamps and states whose sensing fails are dropped with a throttled warning and counted per
 reason (``/diagnostics``); see :mod:`contgrasp_ros.plumbing.runtime`.
 """
@@ -110,7 +112,8 @@ class BoundarySensor(Node):
         except ContgraspError as exc:
             self.drops.drop_error(topics.ROD_STATE, exc)
             return
-        out = self.contact_codec.encode(contact_fields(state, msg.header, rod.step))
+        shape = (rod.theta, rod.kappa) if rod.kappa.size else None  # (a rod state may leave kappa out)
+        out = self.contact_codec.encode(contact_fields(state, msg.header, rod.step, shape))
         self.pub.publish(out)
         self.answered.keep(data, out)
         self.sensed += 1

@@ -1,10 +1,20 @@
-"""grasp_controller: contact state -> internal couple control u(s) (paper eq. (19)).
+"""grasp_controller: contact state -> internal couple control u(s) (paper eq. (19), or the
+holding law of docs/holding.md).
 
-Thin wrapper of :func:`contgrasp_core.rod.session.feedback_at_joints`: the same function the
-core-only closed loop calls, so a lock-step ROS run reproduces it exactly. Gains (mu1, mu2 or
-the adaptive mu2 of Appendix IV, the law's length unit) are parameters; a change takes effect
-at the next contact message (a set that gives unusable gains is refused). The rod geometry
-parameters (read-only) must match the simulator's. Malformed contact states, bad stamps and
+Thin wrapper of the core's laws: the ``law`` parameter (read-only) chooses the paper's, eq.
+(19) through :func:`contgrasp_core.control.feedback_at_joints`, or the holding law,
+:class:`contgrasp_core.control.hold_law.HoldController` ((H1)-(H6); its settings are the
+read-only ``hold_<name>`` parameters): the same functions the core-only closed loop calls, so a
+lock-step ROS run reproduces it exactly. The holding law keeps a state (its phase) along the
+run: it is stepped once per rod state, by the steps elapsed times ``control_period`` (the
+simulator's), and starts afresh with a new run (step 0, or a step below the last one: the
+simulator was reset); it senses the arm's own shape (``theta``, ``kappa`` of the contact state)
+and a contact state without it is dropped. Its hold goes out as the rest curvature
+``kappa_ref`` and ``hold_gain`` (the simulator applies it in the state), and every couple says
+whether the law is still in ``transition``. The paper law's gains (mu1, mu2 or the adaptive mu2
+of Appendix IV, the law's length unit) are parameters; a change takes effect at the next contact
+message (a set that gives unusable gains is refused). The rod geometry parameters (read-only)
+must match the simulator's. Malformed contact states, bad stamps and
 states of another rod size are dropped and counted (``/diagnostics``). A contact state taken
 again (the answer to a rod state the simulator re-sent) is answered again with the couple
 published for it, not computed twice (:class:`~contgrasp_ros.nodes.lockstep.Answered`).
@@ -12,18 +22,20 @@ published for it, not computed twice (:class:`~contgrasp_ros.nodes.lockstep.Answ
 
 from __future__ import annotations
 
+from dataclasses import fields
 from typing import Any
 
 import numpy as np
 from rclpy.node import Node
 
 from contgrasp_core.control import FeedbackGains, feedback_at_joints, paper_gains
+from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, ShapeHold
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
-from contgrasp_core.scenario import PAPER
+from contgrasp_core.scenario import HOLD_PREFIX, PAPER
 from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros.plumbing import qos, topics
 from contgrasp_ros.plumbing.cdr import Codec
-from contgrasp_ros.plumbing.convert import MessageError, contact_arrays, couple_fields, require_finite
+from contgrasp_ros.plumbing.convert import ContactArrays, MessageError, contact_arrays, couple_fields, require_finite
 from contgrasp_ros.nodes.lockstep import Answered
 from contgrasp_ros.nodes.rod_params import declare_rod_model
 from contgrasp_ros.plumbing.runtime import (
@@ -55,6 +67,16 @@ class GraspController(Node):
         declare(self, "adaptive_mu2", paper["adaptive_mu2"], "use mu2(s) = r(s) - 1/(r_obj + r(s)) (paper App. IV)")
         declare(self, "object_radius", paper["object_radius"], "object radius r_obj for the adaptive mu2 [m]", lo=1e-9, hi=1e3)
         declare(self, "length_unit", paper["length_unit"], "metres per length unit of the law (paper: cm)", lo=1e-9, hi=1e3)
+        self.law_name = declare(self, "law", paper["law"], "the closed loop's law: paper (eq. (19)) or hold (docs/holding.md)",
+                                choices=LAWS, read_only=True)
+        self.period = declare(self, "control_period", paper["control_period"], "the simulator's control period: the "
+                              "holding law's phases run in time [s]", lo=1e-6, hi=10.0, read_only=True)
+        self.hold_settings = HoldLawSettings(**{
+            f.name: declare(self, f"{HOLD_PREFIX}{f.name}", paper[f"{HOLD_PREFIX}{f.name}"],
+                            f"holding law: {f.name} (contgrasp_core.control.hold_law.HoldLawSettings)", read_only=True)
+            for f in fields(HoldLawSettings)})
+        self.hold: HoldController | None = None  # (the holding law's state in this run)
+        self.hold_step = -1  # (the step it answered last)
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
         self.diagnostics = Diagnostics(self, self.drops)
@@ -105,14 +127,34 @@ class GraspController(Node):
                     reason="wrong node count",
                 )
             self.stamps.admit(topics.CONTACT, msg.header, c.step)
-            u = feedback_at_joints(self.model, self.gains, c.rho, c.alpha)
-            require_finite("the couple", u.u, u.g_rho, u.g_alpha)
+            command, transition = (self.gains, False) if self.law_name == "paper" else self._hold_command(c)
+            if isinstance(command, ShapeHold):
+                u: Any = command
+                require_finite("the hold", command.kappa_ref)
+            else:
+                u = feedback_at_joints(self.model, command, c.rho, c.alpha)
+                require_finite("the couple", u.u, u.g_rho, u.g_alpha)
         except ContgraspError as exc:
             self.drops.drop_error(topics.CONTACT, exc)
             return
-        out = self.couple_codec.encode(couple_fields(self.model.joint_s, u, msg.header, c.step))
+        out = self.couple_codec.encode(couple_fields(self.model.joint_s, u, msg.header, c.step, transition))
         self.pub.publish(out)
         self.answered.keep(data, out)
+
+    def _hold_command(self, c: ContactArrays) -> tuple[FeedbackGains | ShapeHold, bool]:
+        """The holding law's command for the contact state ``c`` and whether the law is still in
+        transition (:meth:`HoldController.command` over the control periods since the last
+        state; a fresh law for a new run)."""
+        if c.theta.size == 0:
+            raise MessageError("the holding law senses the arm's shape: the contact state has no theta and kappa",
+                               reason="no arm shape")
+        if self.hold is None or c.step <= self.hold_step:  # (step 0 again, or below: the simulator's new run)
+            p = self.get_parameter
+            self.hold = HoldController(self.model, p("object_radius").value, self.hold_settings, p("length_unit").value)
+            self.hold_step = c.step - 1
+        command = self.hold.command(c.rho, c.alpha, c.theta, c.kappa[:-1], self.period * (c.step - self.hold_step))
+        self.hold_step = c.step
+        return command, not self.hold.holding
 
 
 def main(args: list[str] | None = None) -> int:

@@ -46,6 +46,12 @@ scripted disturbance (``disturbance_*``) plus the live inputs, ``/contgrasp/obje
 control period on (:class:`contgrasp_core.rod.disturbance.WrenchInput`), so the wrench of
 every period is fixed when its state goes out and a lock-step run stays deterministic. Inputs
 for a fixed object are refused (dropped and counted; the service answers ``success`` false).
+
+Either law drives it (the controller's ``law``): a couple with its expansion (the paper's law,
+the holding law's cage) or the holding law's hold (``kappa_ref`` and ``hold_gain``: the rod
+engine applies ``-EI kappa_ref + G EI (kappa - kappa_ref)`` in the state, eq. (H4) of
+docs/holding.md). A couple flagged ``transition`` (the holding law before its hold is
+complete) keeps the next state from counting as settled, as in the core loop.
 """
 
 from __future__ import annotations
@@ -71,11 +77,19 @@ from contgrasp_core.rod.disturbance import KINDS, WrenchInput
 from contgrasp_core.rod.session import DivergenceLimits, LoopSession, Observation, preload
 from contgrasp_core.scenario import PAPER, motion_from_parameters, object_from_parameters, rod_system
 from contgrasp_core.control import FeedbackExpansion
+from contgrasp_core.control.hold_law import ShapeHold
 from contgrasp_msgs.msg import CoupleControl, ObjectBoundary, RodState
 from contgrasp_msgs.srv import ApplyWrench
 from contgrasp_ros.plumbing import qos, topics
 from contgrasp_ros.plumbing.cdr import Codec
-from contgrasp_ros.plumbing.convert import MessageError, boundary_to_msg, couple_arrays, rod_state_fields, wrench_arrays
+from contgrasp_ros.plumbing.convert import (
+    HeldShape,
+    MessageError,
+    boundary_to_msg,
+    couple_arrays,
+    rod_state_fields,
+    wrench_arrays,
+)
 from contgrasp_ros.nodes.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
 from contgrasp_ros.plumbing.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
@@ -243,7 +257,8 @@ class RodSimulator(Node):
     # ------------------------------------------------------------------ loop
     def _reset_session(self) -> None:
         self.session = LoopSession(self.system, self.config)
-        self.last_couple: np.ndarray | FeedbackExpansion = np.zeros(self.model.n_elements)
+        self.last_couple: np.ndarray | FeedbackExpansion | ShapeHold = np.zeros(self.model.n_elements)
+        self.law_ready = True  # (the last couple's law was not in transition: its next state may count as settled)
         self.rule.reset()
         self.taken.reset()
         self.wall.reset()
@@ -271,7 +286,7 @@ class RodSimulator(Node):
     def _publish_observation(self) -> None:
         try:
             with np.errstate(all="ignore"):  # a diverging state overflows; it is reported below, not warned about
-                obs = self.session.check_divergence(self.limits())
+                obs = self.session.check_divergence(self.limits(), self.law_ready)
         except ContgraspError as exc:
             self._fail(str(exc))
             return
@@ -346,7 +361,7 @@ class RodSimulator(Node):
     def _publish_status(self) -> None:
         self.diagnostics.publish(_stamp(float(self.session.state.t)))
 
-    def _advance(self, couple: np.ndarray | FeedbackExpansion) -> None:
+    def _advance(self, couple: np.ndarray | FeedbackExpansion | ShapeHold) -> None:
         try:
             with np.errstate(all="ignore"):  # (as in _publish_observation)
                 self.session.advance(couple, self.wrenches.freeze(self.session.k, float(self.session.state.t)))
@@ -388,10 +403,11 @@ class RodSimulator(Node):
             return  # a second answer to a state sent twice (LockStep.resend_due): taken already
         try:
             msg = self.couple_codec.message(data)
-            step, s, u = couple_arrays(msg)
-            n = len(u.u) if isinstance(u, FeedbackExpansion) else len(u)
+            step, s, taken, transition = couple_arrays(msg)
+            n = len(taken.u if isinstance(taken, (FeedbackExpansion, HeldShape)) else taken)
             if n != self.model.n_elements or len(s) != n or np.max(np.abs(s - self.model.joint_s)) > 1e-12:
                 raise MessageError(f"couple must be given at the {self.model.n_elements} joints s = k h", reason="wrong joints")
+            u = taken.hold(self.model) if isinstance(taken, HeldShape) else taken
             if self.session.finished or self.failure:
                 return  # the answer to the final state (or a failed run): nothing to do with it
             if self.lockstep and step != self.session.k:
@@ -401,6 +417,7 @@ class RodSimulator(Node):
         except ContgraspError as exc:
             self.drops.drop_error(topics.COUPLE, exc)
             return
+        self.law_ready = not transition
         if not self.lockstep:
             self.last_couple = u
             self.loop_closed = True

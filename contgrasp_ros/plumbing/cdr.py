@@ -16,8 +16,8 @@ The encoding is OMG CDR version 1 (what rmw_fastrtps sends): a 4-byte encapsulat
 size counted from the end of that header; a string is its length (with the terminating NUL)
 and its bytes, a sequence its uint32 count and its elements. Big-endian payloads (``00 00``) are
 read too. A :class:`Codec` handles messages whose fields are ``std_msgs/Header``, ``uint64``,
-``double``, ``sequence<double>`` and ``sequence<boolean>`` (the loop's three types); other
-types are refused when the codec is made.
+``double``, ``boolean`` (one byte, 0 or 1), ``sequence<double>`` and ``sequence<boolean>`` (the
+loop's three types); other types are refused when the codec is made.
 
 :meth:`Codec.decode` gives a :class:`MessageView`: the message's fields as attributes (arrays as
 writable, aligned float64 / bool numpy arrays, the header as ``header.stamp.sec`` ...), so
@@ -43,8 +43,8 @@ __all__ = ["Codec", "MessageView", "Stamp", "HeaderView"]
 
 _ENCAPSULATION_LE = b"\x00\x01\x00\x00"
 _ENCAPSULATION_BE = b"\x00\x00\x00\x00"
-_KINDS = {"std_msgs/Header": "header", "uint64": "uint64", "double": "double", "sequence<double>": "float64[]",
-          "sequence<boolean>": "bool[]"}
+_KINDS = {"std_msgs/Header": "header", "uint64": "uint64", "double": "double", "boolean": "bool",
+          "sequence<double>": "float64[]", "sequence<boolean>": "bool[]"}
 _PAD = tuple(b"\x00" * n for n in range(8))
 
 
@@ -107,6 +107,8 @@ class Codec:
                 chunk = _PAD[-offset % 8] + struct.pack("<Q", int(value or 0))
             elif kind == "double":
                 chunk = _PAD[-offset % 8] + struct.pack("<d", float(value or 0.0))
+            elif kind == "bool":
+                chunk = b"\x01" if value else b"\x00"
             else:
                 data: np.ndarray = np.ascontiguousarray(() if value is None else value, dtype=np.float64 if kind == "float64[]" else np.bool_)
                 if data.ndim != 1:
@@ -164,6 +166,10 @@ class Codec:
                     (value,) = struct.unpack_from(order + ("Q" if kind == "uint64" else "d"), raw, offset)
                     setattr(view, name, value)
                     offset += 8
+                elif kind == "bool":
+                    (value,) = struct.unpack_from("?", raw, offset)  # (a byte: no alignment, no order)
+                    setattr(view, name, value)
+                    offset += 1
                 else:
                     offset += -offset % 4
                     (count,) = struct.unpack_from(order + "I", raw, offset)

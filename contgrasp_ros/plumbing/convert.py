@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from array import array
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -26,6 +27,7 @@ from contgrasp_core.rod.body import shape_in_object_frame
 from contgrasp_core.quality import GraspQuality
 from contgrasp_core.objects import ObjectSpec
 from contgrasp_core.control import FeedbackExpansion
+from contgrasp_core.control.hold_law import ShapeHold
 
 if TYPE_CHECKING:
     from contgrasp_msgs.msg import ContactState as ContactStateMsg
@@ -52,6 +54,7 @@ __all__ = [
     "couple_fields",
     "couple_to_msg",
     "couple_arrays",
+    "HeldShape",
     "quality_to_msg",
     "boundary_to_msg",
     "boundary_from_msg",
@@ -246,19 +249,25 @@ def wrench_arrays(msg: WrenchStamped) -> Array:
     return w[:3]
 
 
-def contact_fields(state: ContactState, header: Header | Any, step: int) -> dict[str, Any]:
+def contact_fields(state: ContactState, header: Header | Any, step: int,
+                   shape: tuple[Array, Array] | None = None) -> dict[str, Any]:
     """The fields of the ContactState message of a sensed contact state (arrays as numpy
-    arrays: for :class:`~contgrasp_ros.plumbing.cdr.Codec` or :func:`contact_to_msg`)."""
-    return {"header": header, "step": int(step), "s": state.s, "rho": state.rho, "alpha": state.alpha, "delta": state.delta,
-            "s_o": state.s_o, "shadow_x": state.foot[:, 0], "shadow_y": state.foot[:, 1],
-            "in_contact": np.asarray(state.in_contact, dtype=bool), "contact_tolerance": float(state.tol)}
+    arrays: for :class:`~contgrasp_ros.plumbing.cdr.Codec` or :func:`contact_to_msg`), with the
+    arm's own shape ``(theta, kappa)`` at the nodes when given (what the holding law senses)."""
+    fields = {"header": header, "step": int(step), "s": state.s, "rho": state.rho, "alpha": state.alpha,
+              "delta": state.delta, "s_o": state.s_o, "shadow_x": state.foot[:, 0], "shadow_y": state.foot[:, 1],
+              "in_contact": np.asarray(state.in_contact, dtype=bool), "contact_tolerance": float(state.tol)}
+    if shape is not None:
+        fields["theta"], fields["kappa"] = (np.asarray(a, dtype=float) for a in shape)
+    return fields
 
 
-def contact_to_msg(state: ContactState, header: Header, step: int) -> ContactStateMsg:
-    """ContactState message of a sensed contact state."""
+def contact_to_msg(state: ContactState, header: Header, step: int,
+                   shape: tuple[Array, Array] | None = None) -> ContactStateMsg:
+    """ContactState message of a sensed contact state (and the arm's shape, :func:`contact_fields`)."""
     from contgrasp_msgs.msg import ContactState as ContactStateMsg
 
-    return ContactStateMsg(**_typed(contact_fields(state, header, step)))
+    return ContactStateMsg(**_typed(contact_fields(state, header, step, shape)))
 
 
 def _typed(fields: dict[str, Any]) -> dict[str, Any]:
@@ -274,7 +283,8 @@ def _typed(fields: dict[str, Any]) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class ContactArrays:
-    """Arrays of a ContactState message (SI)."""
+    """Arrays of a ContactState message (SI); ``theta`` and ``kappa`` at the nodes, the arm's own
+    shape, are empty when the message does not carry them (a recording made before they existed)."""
 
     step: int
     t: float
@@ -286,6 +296,8 @@ class ContactArrays:
     shadow: Array
     in_contact: NDArray[np.bool_]
     tol: float
+    theta: Array = dataclass_field(default_factory=lambda: np.empty(0))
+    kappa: Array = dataclass_field(default_factory=lambda: np.empty(0))
 
 
 def contact_arrays(msg: ContactStateMsg) -> ContactArrays:
@@ -298,6 +310,10 @@ def contact_arrays(msg: ContactStateMsg) -> ContactArrays:
     tol = float(msg.contact_tolerance)
     if not np.isfinite(tol) or not 0.0 <= tol <= MAX_ABS:
         raise MessageError(f"ContactState: contact_tolerance must be finite and >= 0, got {tol}", reason="out of range")
+    shape = {}
+    if len(getattr(msg, "theta", ())) or len(getattr(msg, "kappa", ())):  # (the arm's shape, when sent)
+        shape = _arrays(msg, ("s", "theta", "kappa"))
+        del shape["s"]
     return ContactArrays(
         int(msg.step),
         stamp_seconds(msg.header),
@@ -309,41 +325,86 @@ def contact_arrays(msg: ContactStateMsg) -> ContactArrays:
         np.stack([a["shadow_x"], a["shadow_y"]], -1),
         flags,
         tol,
+        **shape,
     )
 
 
-def couple_fields(s: Array, couple: Array | FeedbackExpansion, header: Header | Any, step: int) -> dict[str, Any]:
+@dataclass(frozen=True)
+class HeldShape:
+    """The holding law's hold as a CoupleControl message carries it (eq. (H4) of
+    docs/holding.md): the couple ``u`` (its held part ``-EI kappa_ref``), the rest curvature
+    ``kappa_ref`` at the joints and the stiffness gain ``gain``. :meth:`hold` makes the
+    :class:`~contgrasp_core.control.hold_law.ShapeHold` the rod engine applies."""
+
+    u: Array
+    kappa_ref: Array
+    gain: float
+
+    def hold(self, model: Any) -> ShapeHold:
+        """The hold on ``model`` (a :class:`~contgrasp_core.rod.model.RodModel`), computed from
+        ``kappa_ref`` and ``gain`` as the controller computed it; :class:`MessageError` when the
+        message's ``u`` is not ``-EI kappa_ref`` of this rod (another rod's hold)."""
+        held = ShapeHold(model, self.kappa_ref, self.gain)
+        if not np.allclose(self.u, held.couple, rtol=1e-9, atol=0.0):
+            raise MessageError("CoupleControl: u is not -EI kappa_ref of this rod's stiffness (a hold computed for "
+                               "another rod?)", reason="inconsistent hold")
+        return held
+
+
+Couple = Array | FeedbackExpansion | HeldShape
+"""What a CoupleControl message carries: a plain couple, the paper law's expansion or a hold."""
+
+
+def couple_fields(s: Array, couple: Array | FeedbackExpansion | ShapeHold, header: Header | Any, step: int,
+                  transition: bool = False) -> dict[str, Any]:
     """The fields of the CoupleControl message of the couple u (N m) at the joint arclengths s,
-    with the law's first-order expansion when given a :class:`FeedbackExpansion` (arrays as
-    numpy arrays: for :class:`~contgrasp_ros.plumbing.cdr.Codec` or :func:`couple_to_msg`)."""
-    fields = {"header": header, "step": int(step), "s": np.asarray(s, dtype=float)}
+    with the law's first-order expansion when given a :class:`FeedbackExpansion`, or the
+    holding law's rest curvature and gain when given a
+    :class:`~contgrasp_core.control.hold_law.ShapeHold` (u its held part), and the law's
+    ``transition`` flag (arrays as numpy arrays: for :class:`~contgrasp_ros.plumbing.cdr.Codec`
+    or :func:`couple_to_msg`)."""
+    fields = {"header": header, "step": int(step), "s": np.asarray(s, dtype=float), "transition": bool(transition)}
     if isinstance(couple, FeedbackExpansion):
         fields.update(u=couple.u, rho_ref=couple.rho_ref, alpha_ref=couple.alpha_ref, du_drho=couple.g_rho,
                       du_dalpha=couple.g_alpha)
+    elif isinstance(couple, ShapeHold):
+        fields.update(u=couple.couple, kappa_ref=np.asarray(couple.kappa_ref, dtype=float), hold_gain=float(couple.gain))
     else:
         fields["u"] = np.asarray(couple, dtype=float)
     return fields
 
 
-def couple_to_msg(s: Array, couple: Array | FeedbackExpansion, header: Header, step: int) -> CoupleControl:
-    """CoupleControl message: the couple u (N m) at the joint arclengths s, with the law's
-    first-order expansion when given a :class:`FeedbackExpansion`."""
+def couple_to_msg(s: Array, couple: Array | FeedbackExpansion | ShapeHold, header: Header, step: int,
+                  transition: bool = False) -> CoupleControl:
+    """CoupleControl message of :func:`couple_fields`."""
     from contgrasp_msgs.msg import CoupleControl
 
-    return CoupleControl(**_typed(couple_fields(s, couple, header, step)))
+    return CoupleControl(**_typed(couple_fields(s, couple, header, step, transition)))
 
 
-def couple_arrays(msg: CoupleControl) -> tuple[int, Array, Array | FeedbackExpansion]:
-    """Validated (step, s, couple) of a CoupleControl message; the couple is a
-    :class:`FeedbackExpansion` when the message carries the expansion, else the array u."""
+def couple_arrays(msg: CoupleControl) -> tuple[int, Array, Couple, bool]:
+    """Validated (step, s, couple, transition) of a CoupleControl message; the couple is a
+    :class:`FeedbackExpansion` when the message carries the expansion, a :class:`HeldShape` when
+    it carries a hold's ``kappa_ref`` (the expansion then empty), else the array u.
+    ``transition``: the law is still moving to its hold (False in a message without the field)."""
     # The couple and the gains scale with the rod's stiffness: only finiteness is required of
     # them (an absurd but finite couple is the simulator's divergence detection's business).
-    if len(msg.rho_ref) == len(msg.alpha_ref) == len(msg.du_drho) == len(msg.du_dalpha) == 0:
+    expansion = len(msg.rho_ref) + len(msg.alpha_ref) + len(msg.du_drho) + len(msg.du_dalpha) > 0
+    transition = bool(getattr(msg, "transition", False))
+    if len(getattr(msg, "kappa_ref", ())):
+        if expansion:
+            raise MessageError("CoupleControl: a hold (kappa_ref) and an expansion at once", reason="hold and expansion")
+        gain = float(msg.hold_gain)
+        if not (np.isfinite(gain) and gain >= 0.0):
+            raise MessageError(f"CoupleControl: hold_gain must be finite and >= 0, got {gain}", reason="out of range")
+        a = _arrays(msg, ("s", "u", "kappa_ref"), max_abs=None)
+        return int(msg.step), a["s"], HeldShape(a["u"], a["kappa_ref"], gain), transition
+    if not expansion:
         a = _arrays(msg, ("s", "u"), max_abs=None)
-        return int(msg.step), a["s"], a["u"]
+        return int(msg.step), a["s"], a["u"], transition
     a = _arrays(msg, ("s", "u", "rho_ref", "alpha_ref", "du_drho", "du_dalpha"), max_abs=None)
     exp = FeedbackExpansion(u=a["u"], rho_ref=a["rho_ref"], alpha_ref=a["alpha_ref"], g_rho=a["du_drho"], g_alpha=a["du_dalpha"])
-    return int(msg.step), a["s"], exp
+    return int(msg.step), a["s"], exp, transition
 
 
 def quality_to_msg(q: GraspQuality, header: Header, step: int, tol: float) -> GraspQualityMsg:

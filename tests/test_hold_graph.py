@@ -1,0 +1,172 @@
+"""The holding law through the ROS graph (issue 29, point 4; docs/holding.md, "A law that
+holds"): the controller's ``law`` parameter, the arm's shape in the contact state, the hold
+(``kappa_ref``, ``hold_gain``) and the ``transition`` flag in the couple, the simulator applying
+the hold in the state; a lock-step run with a free object pushed while held equals the core-only
+loop bit for bit."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from contgrasp_core.control.hold_law import HoldController, ShapeHold
+from contgrasp_core.scenario import Scenario
+
+pytest.importorskip("contgrasp_msgs.msg")
+
+from contgrasp_msgs.msg import ContactState, CoupleControl  # noqa: E402
+from contgrasp_core.rod.session import run_sampled  # noqa: E402
+from contgrasp_ros.bag.reader import iter_decoded, open_recording  # noqa: E402
+from contgrasp_ros.launcher.graph import default_params_file, load_params  # noqa: E402
+from contgrasp_ros.plumbing import topics  # noqa: E402
+from contgrasp_ros.recordings.analysis import load_run  # noqa: E402
+
+from conftest import Sink, fresh_domain_id  # noqa: E402
+
+BIN = Path(sys.executable).parent
+LIB = Path(sys.prefix) / "lib" / "contgrasp_ros"
+PUSH_START, PUSH = 2.801, (0.02, 0.0, 0.0)  # (between two control steps: a stamp rounded to ns is on the same side)
+
+
+class _Logged:
+    """A law that notes, for every command, whether it was the hold and whether the law was
+    still in transition afterwards (what the couple message carries)."""
+
+    def __init__(self, law: HoldController) -> None:
+        self.law, self.log = law, []  # type: list[tuple[bool, bool]]
+
+    @property
+    def holding(self) -> bool:
+        return self.law.holding
+
+    def command(self, *args: Any) -> Any:
+        out = self.law.command(*args)
+        self.log.append((isinstance(out, ShapeHold), not self.law.holding))
+        return out
+
+
+def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_path: Path) -> None:
+    """``contgrasp-launch --law hold --object-mode free``: the paper's arm (N = 100, 2 ms), the
+    circle free, Coulomb friction 0.5, and a 20 mN push along x from 2.801 s, once the hold is
+    complete (2.54 s). Separate node processes in lock-step equal run_sampled of the same
+    scenario bit for bit (arm, object pose and velocity); the recording has the hold and the
+    transition flag of every couple as the core law gave them, the arm's shape in every contact
+    state, the push in the rod states; the held object moved under the push by less than a
+    millimetre and is at rest."""
+    data = yaml.safe_load(default_params_file().read_text())
+    data["/**"]["ros__parameters"]["friction"] = 0.5
+    data["rod_simulator"]["ros__parameters"].update(duration=3.2, disturbance_kind="step", disturbance_wrench=list(PUSH),
+                                                    disturbance_start=PUSH_START)
+    data["grasp_quality"]["ros__parameters"]["rate_hz"] = 0.0
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump(data))
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--params", str(params),
+                           "--law", "hold", "--object-mode", "free", "--bag", str(tmp_path / "bag"), "--json"],
+                          capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads(proc.stdout)
+    assert summary["missed_deadlines"] == 0
+
+    p = load_params(params)
+    p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "hold", "free"
+    scenario = Scenario.from_ros_parameters(p)
+    assert scenario.law == "hold" and scenario.dynamics.mode == "free" and scenario.rod.friction == 0.5
+    law = scenario.controller()
+    assert isinstance(law, HoldController)
+    logged = _Logged(law)
+    session = run_sampled(scenario, law=logged)  # type: ignore[arg-type]
+    obs = session.observe()
+    assert obs.body is not None and summary["steps"] == obs.k == 1600
+    np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
+    np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
+    assert summary["final"]["object_q"] == obs.body.q.tolist() and summary["final"]["object_v"] == obs.body.v.tolist()
+
+    rec = open_recording(tmp_path / "bag")
+    couples = {int(m.step): (len(m.kappa_ref) > 0, bool(m.transition), float(m.hold_gain))
+               for _, m in iter_decoded(rec, [topics.COUPLE])}
+    assert [couples[k][:2] for k in range(obs.k)] == logged.log
+    held = [k for k in range(obs.k) if couples[k][0]]
+    assert held and held == list(range(held[0], obs.k)) and {couples[k][2] for k in held} == {3000.0}
+    complete = next(k for k in range(obs.k) if not couples[k][1])
+    assert held[0] < complete < PUSH_START / 0.002  # (the hold is complete before the push)
+    run = load_run(tmp_path / "bag")
+    assert run.rod.object is not None
+    contact = {int(m.step): m for _, m in iter_decoded(rec, [topics.CONTACT])}
+    rods = {int(m.step): m for _, m in iter_decoded(rec, [topics.ROD_STATE])}
+    for i in (0, complete, obs.k - 1):
+        np.testing.assert_array_equal(contact[i].theta, rods[i].theta)
+        np.testing.assert_array_equal(contact[i].kappa, rods[i].kappa)
+    assert scenario.disturbance is not None
+    np.testing.assert_array_equal(run.rod.object.wrench, [scenario.disturbance.wrench_at(t) for t in run.rod.t])
+    pushed = run.rod.object.wrench[:, 0] != 0.0
+    assert np.all(run.rod.object.wrench[pushed] == PUSH) and abs(run.rod.t[np.argmax(pushed)] - PUSH_START) < 0.003
+    at_push = run.rod.object.q[np.argmax(pushed)]
+    moved = np.hypot(*(obs.body.q[:2] - at_push[:2]))
+    assert 0.0 < moved < 1e-3 and np.hypot(*obs.body.v[:2]) < 1e-3, (moved, obs.body.v)
+
+
+def _wrapped_contact(model: Any, step: int, with_shape: bool = True) -> ContactState:
+    """A contact state the holding law reads as an arm wrapped 4 rad around the object at its
+    cage gap (rho = r + 5 mm, alpha = pi/2; not a sensed one: the controller does not check that)."""
+    s = model.s_nodes
+    n = len(s)
+    theta = np.linspace(0.0, 4.0, n)
+    kappa = np.append(np.diff(theta) / np.diff(s), 0.0)
+    msg = ContactState(step=step, s=s.tolist(), rho=(model.radius(s) + 0.005).tolist(), alpha=[np.pi / 2] * n,
+                       delta=[-0.005] * n, s_o=s.tolist(), shadow_x=[0.0] * n, shadow_y=[0.0] * n,
+                       in_contact=[False] * n, contact_tolerance=0.0005,
+                       theta=theta.tolist() if with_shape else [], kappa=kappa.tolist() if with_shape else [])
+    msg.header.stamp.sec = 1 + step
+    return msg
+
+
+def test_the_controller_steps_the_holding_law_once_per_state_and_afresh_for_a_new_run(make) -> None:  # type: ignore[no-untyped-def]
+    """law: hold, a close so fast that the hold begins at the first state: the squeeze's
+    progress grows by one control period per state (steps 0, 1 answer different rest curvatures,
+    both in transition), the same state again is answered again without stepping the law, and
+    step 0 again (the simulator's reset) starts a fresh law (the first answer again). A contact
+    state without the arm's shape is dropped and counted."""
+    from contgrasp_ros.nodes.grasp_controller import GraspController
+
+    node = make(GraspController, law="hold", hold_close_rate=10.0)
+    node.pub = Sink(CoupleControl)
+    first = _wrapped_contact(node.model, 0)
+    for msg in (first, _wrapped_contact(node.model, 1), _wrapped_contact(node.model, 1), first):
+        node.on_contact(msg)
+    answers = node.pub.msgs
+    assert [int(m.step) for m in answers] == [0, 1, 1, 0] and all(m.transition for m in answers)
+    assert all(len(m.kappa_ref) == node.model.n_elements and m.hold_gain == 3000.0 and len(m.rho_ref) == 0 for m in answers)
+    assert list(answers[0].kappa_ref) != list(answers[1].kappa_ref)
+    assert list(answers[2].kappa_ref) == list(answers[1].kappa_ref)  # (the same state: the same answer)
+    assert list(answers[3].kappa_ref) == list(answers[0].kappa_ref)  # (a new run: a fresh law)
+    np.testing.assert_allclose(answers[0].u, -node.model.joint_ei * np.asarray(answers[0].kappa_ref), rtol=0, atol=0)
+    node.on_contact(_wrapped_contact(node.model, 2, with_shape=False))
+    assert node.drops.counts == {"/contgrasp/contact: no arm shape": 1} and len(node.pub.msgs) == 4
+
+
+@pytest.mark.parametrize(("parameter", "message"), [
+    ("law:=grip", "law: must be one of 'paper', 'hold', got 'grip'"),
+    ("hold_close_gap:=0.01", "hold law close_gap must be in (0, clearance = 0.006) m, got 0.01"),
+    ("hold_stiffness_gain:=-1.0", "hold law stiffness_gain must be >= 0, got -1.0"),
+])
+def test_bad_law_parameters_stop_the_controller_with_one_line(parameter: str, message: str) -> None:
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(fresh_domain_id()))
+    proc = subprocess.run([str(LIB / "grasp_controller"), "--ros-args", "-p", parameter], capture_output=True, text=True,
+                          env=env, timeout=60)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and message in lines[0], proc.stderr
+
+
+def test_the_launcher_refuses_an_unknown_law_in_one_line() -> None:
+    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--law", "grip"], capture_output=True, text=True, timeout=60)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and "--law: invalid choice: 'grip'" in lines[-1], proc.stderr
