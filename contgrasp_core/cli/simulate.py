@@ -193,8 +193,8 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     from contgrasp_core.rod import chain
     from contgrasp_core.rod.session import LoopSession
 
-    m, obstacle = system.model, system.obstacle
-    assert obstacle is not None and config.control_period is not None
+    m = system.model
+    assert system.obstacle is not None and config.control_period is not None
     rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / config.control_period)))
     rec: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
     wall0 = time.perf_counter()
@@ -203,6 +203,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     max_ratio = 0.0
     while True:
         obs = session.observe(True if law is None else law.holding)
+        obstacle = system.obstacle_at(session.state)  # (a movable object: sensed where it is, as the graph does)
         sn = sense(obs.shape, obstacle, obs.radius)
         command = gains if law is None else law.command(sn.rho, sn.alpha, obs.theta, obs.kappa[:-1], period)
         expansion: FeedbackExpansion | ShapeHold
