@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from .arm import BasePose
 from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
 from .executors import run_tasks
 from .holding import GraspFailure, HoldSettings, measure_holding
@@ -40,9 +41,11 @@ from .scenario import PAPER, Scenario
 __all__ = ["StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose",
            "expand_symmetric", "pose_scenario"]
 
-PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "Q1", "Q2", "Q3", "Q1_force", "Q2_force", "Q3_force")
-"""The quality measures: the static map's (the paper's optimal grasp), the settled grasp's, and
-the settled grasp's weighted by its contact forces (:func:`contgrasp_core.holding.force_weighted_quality`)."""
+PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "static_QH", "Q1", "Q2", "Q3", "Q1_force", "Q2_force", "Q3_force")
+"""The quality measures: the static map's (the paper's optimal grasp) Q1-Q3 and wrench capacity
+Q_H (:func:`contgrasp_core.holding_measure.static_capacity`, with the study's friction), the
+settled grasp's, and the settled grasp's weighted by its contact forces
+(:func:`contgrasp_core.holding.force_weighted_quality`)."""
 RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min", "grasped")
 """The holding measures: lambda_min and det of K's scaled symmetric part, the worst capacity
 (over the poses that grasped), and whether the closed loop made a settled grasp that held at all
@@ -216,6 +219,7 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
     done = {r["key"] for r in earlier}
     todo = [(spec, key, tuple(float(v) for v in base), tuple(float(v) for v in q))
             for key, base, q in tasks if key not in done]
+    static_h = _static_capacities(spec, tasks)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
         with p.open("a") as fh:
@@ -223,11 +227,27 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
                 fh.write(json.dumps({"key": "spec", **_spec_dict(spec)}) + "\n")
             for row in run_tasks(_task, todo, executor, workers=workers, scheduler=scheduler,
                                  progress=f"holding study {spec.object}" if progress else None, unit="pose"):
+                row.setdefault("static_QH", static_h.get(row["key"], float("nan")))
                 fh.write(json.dumps(row, allow_nan=True) + "\n")
                 fh.flush()
     except OSError as exc:
         raise WriteError(f"cannot write the study results to {p}: {exc.strerror or exc}") from exc
-    return qm, [r for r in load_results(p) if r["key"] != "spec"]
+    # (results written before Q_H existed get it now; the file keeps them as they were)
+    return qm, [{"static_QH": static_h.get(r["key"], float("nan")), **r} for r in load_results(p) if r["key"] != "spec"]
+
+
+def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...], tuple[float, ...]]]) -> dict[str, float]:
+    """Q_H of the optimal grasp from each task's base (paper units), with the study's friction
+    (NaN where the grasp cannot be solved from a cold start)."""
+    from contgrasp_core.holding_measure import static_capacity
+
+    ms, out = spec.map_spec(), {}
+    for key, base, _ in tasks:
+        try:
+            out[key] = static_capacity(ms, BasePose(*base), spec.hold.mu).measure
+        except ContgraspError:
+            out[key] = float("nan")
+    return out
 
 
 def _spec_dict(spec: StudySpec) -> dict[str, Any]:

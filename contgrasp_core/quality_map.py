@@ -27,7 +27,7 @@ from scipy.optimize import brentq, minimize
 from ._validate import MAX_NODES, instance, integer, real
 from .arm import Arm, BasePose
 from .boundary import Boundary
-from .errors import ContgraspError, InvalidParameterError, WriteError
+from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
 from .objects import FIG2_SCALE, ObjectSpec
 from .quality import grasp_quality
 
@@ -40,6 +40,7 @@ __all__ = [
     "QualityMap",
     "disc_pose",
     "solve_pose",
+    "optimal_grasp",
     "quality_map",
     "maximise",
     "best_grid_pose",
@@ -184,14 +185,17 @@ def _problem(spec: MapSpec, boundary: Boundary, base: BasePose) -> GraspProblem:
     )
 
 
-def _evaluate(spec: MapSpec, boundary: Boundary, psi: float, d: float, base: BasePose, warm: Any) -> tuple[PoseResult, Any]:
+def optimal_grasp(spec: MapSpec, boundary: Boundary, base: BasePose, warm: Any = None) -> tuple[GraspProblem, Any]:
+    """The inner optimal grasp (eq. (9)) from ``base``: the warm start ``warm`` first, the
+    solver's own cold starts as fall-backs (deterministic order); the first converged solution
+    within the constraints, else the first one found. :class:`ContgraspError` when the initial
+    state is invalid ("invalid initial state: ...") or no start solves ("inner solve failed: ...")."""
     from .optimal import solve
 
     try:
         problem = _problem(spec, boundary, base)
     except ContgraspError as exc:
-        return PoseResult(psi, d, (base.x, base.y, base.theta), False, f"invalid initial state: {exc}"), None
-    # Warm start first; the solver's own cold starts as fall-backs (deterministic order).
+        raise InvalidParameterError(f"invalid initial state: {exc}") from exc
     res, errors = None, []
     for initial in ([warm] if warm is not None else []) + ["approach", "zero"]:
         try:
@@ -204,7 +208,15 @@ def _evaluate(spec: MapSpec, boundary: Boundary, psi: float, d: float, base: Bas
         if res.converged and res.constraints.ok:
             break
     if res is None:
-        return PoseResult(psi, d, (base.x, base.y, base.theta), False, f"inner solve failed: {errors[-1]}"), None
+        raise RunFailure(f"inner solve failed: {errors[-1]}")
+    return problem, res
+
+
+def _evaluate(spec: MapSpec, boundary: Boundary, psi: float, d: float, base: BasePose, warm: Any) -> tuple[PoseResult, Any]:
+    try:
+        problem, res = optimal_grasp(spec, boundary, base, warm)
+    except ContgraspError as exc:
+        return PoseResult(psi, d, (base.x, base.y, base.theta), False, str(exc)), None
     s = problem.s
     delta = problem.arm.radius(s) - res.rho
     q = grasp_quality(s, boundary.point(res.s_o), boundary.tangent_angle(res.s_o), delta, tol=spec.contact_tol)

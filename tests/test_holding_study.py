@@ -3,12 +3,12 @@ relations, a tiny real study that resumes without recomputing, and its figure.""
 
 from __future__ import annotations
 
+import json
+import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-
-import math
-from dataclasses import replace
 
 import pytest
 
@@ -116,6 +116,13 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
     for r in ok:
         assert np.asarray(r["stiffness"]).shape == (3, 3) and len(r["capacity"]) == 3 and r["Q1"] > 0
     lines = out.read_text().splitlines()
+    # the static wrench capacity Q_H of each pose's optimal grasp (docs/holding.md (M3)) is in every row, written too
+    from contgrasp_core.arm import BasePose
+    from contgrasp_core.holding_measure import static_capacity
+
+    assert all(json.loads(line)["static_QH"] >= 0.0 for line in lines[1:])
+    grid = next(r for r in rows if r["key"] == "grid:0,0")
+    assert grid["static_QH"] == static_capacity(spec.map_spec(), BasePose(*qm.base[0, 0]), spec.hold.mu).measure
     qm2, rows2 = run_study(spec, out, executor="serial")
     assert out.read_text().splitlines() == lines and rows2 == rows
     assert load_results(out)[0]["key"] == "spec"

@@ -1,0 +1,152 @@
+"""Which grasps hold, before simulating: the wrench capacity of a continuum contact (beyond the
+paper; docs/holding.md, "A measure that predicts holding", eqs. (M1)-(M3)).
+
+Q1-Q3 (Sec. IV) measure how well the contact set spans the wrench space, not what it can
+resist: a contact that can only push cannot hold an object pulled away from it, however well
+its grasp map is conditioned. Discrete grasping answers with friction-cone wrench spaces; this
+is their continuum analogue. The arm presses the object along its contact set ``S``
+(Definition 1) with a line pressure ``0 <= p(s) <= p_max`` (N per metre of arm) and Coulomb
+friction ``|q(s)| <= mu p(s)`` along the boundary, so the wrenches it can exert form
+
+    K = { int_S (f, (gamma - c) x f / a) ds : f = p n + q t, 0 <= p <= p_max, |q| <= mu p }   (M1)
+
+(``n`` the boundary's inward normal and ``t`` its tangent at the contact point ``gamma(s)``,
+``c`` the wrench reference, ``a`` the length that scales torque to force). ``K`` is the
+integral of per-point triangles with a vertex at the origin, so its support function is
+
+    h(d) = p_max int_S max(0, d . g+(s), d . g-(s)) ds,   g+- = (n +- mu t, (gamma - c) x (n +- mu t) / a)   (M2)
+
+and the measure is the radius of the largest ball about the origin inside ``K``,
+
+    Q_H = min_{|d| = 1} h(d)   (M3)
+
+the largest wrench (``|(f_x, f_y, tau / a)|``) resisted in every direction. Per unit pressure
+bound (``p_max = 1`` N/m) it is a length, in metres. ``Q_H = 0`` when some direction cannot be
+resisted at all (no force closure: a frictionless wrap under half a turn, a torque without
+friction). Closed forms (tested): a full wrap of a circle of radius ``R`` about its centre with
+``a = R`` has ``h = 2 R (sqrt(1 + mu^2) + mu)`` for any pure force and ``2 pi R mu`` for the pure
+torque. The integral is the arm-grid quadrature of Q1-Q3 (:func:`contgrasp_core.quality.contact_weights`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import minimize
+
+from ._validate import float_array, real
+from .errors import InvalidParameterError
+from .quality import contact_weights
+
+if TYPE_CHECKING:
+    from .arm import BasePose
+    from .quality_map import MapSpec
+
+__all__ = ["WrenchCapacity", "wrench_generators", "support", "wrench_capacity", "static_capacity", "SEARCH_DIRECTIONS"]
+
+Array = NDArray[np.float64]
+
+SEARCH_DIRECTIONS = 2000
+"""Directions of the first search for (M3)'s minimum (a Fibonacci sphere), each of the best
+refined by Nelder-Mead."""
+
+
+@dataclass(frozen=True)
+class WrenchCapacity:
+    """(M3): ``measure`` Q_H (m: N of wrench per N/m of pressure bound), the weakest
+    ``direction`` (unit, in ``(f_x, f_y, tau / a)``) and the ``contact_length`` (m) integrated."""
+
+    measure: float
+    direction: Array
+    contact_length: float
+
+
+def wrench_generators(gamma: ArrayLike, phi: ArrayLike, mu: float, ref: ArrayLike = (0.0, 0.0),
+                      scale: float = 1.0) -> Array:
+    """The two edge wrenches ``g+-`` of (M2) at each contact point ``gamma`` (n, 2) of a
+    counter-clockwise boundary with tangent angle ``phi`` (n,): shape (n, 2, 3)."""
+    g = float_array("contact points", gamma)
+    p = float_array("tangent angles", phi)
+    if g.ndim != 2 or g.shape[1] != 2 or p.shape != (len(g),) or not (np.isfinite(g).all() and np.isfinite(p).all()):
+        raise InvalidParameterError(f"contact points must be (n, 2) and tangent angles (n,), finite; got {g.shape}, {p.shape}")
+    mu = real("friction coefficient mu", mu, lo=0.0)
+    a = real("torque scale", scale, lo=0.0, lo_open=True)
+    c = float_array("reference point", ref)
+    if c.shape != (2,) or not np.isfinite(c).all():
+        raise InvalidParameterError(f"reference point must be two finite numbers, got {ref!r}")
+    t = np.stack([np.cos(p), np.sin(p)], axis=-1)
+    n = np.stack([-t[:, 1], t[:, 0]], axis=-1)  # (the object lies to the left of a counter-clockwise tangent)
+    lever = g - c
+    out = np.empty((len(g), 2, 3))
+    for k, sign in enumerate((1.0, -1.0)):
+        f = n + sign * mu * t
+        out[:, k, :2] = f
+        out[:, k, 2] = (lever[:, 0] * f[:, 1] - lever[:, 1] * f[:, 0]) / a
+    return out
+
+
+def support(generators: Array, weights: Array, directions: ArrayLike) -> Array:
+    """(M2) per unit pressure bound for each row of ``directions`` (k, 3): ``sum_i w_i max(0,
+    d . g+_i, d . g-_i)``."""
+    d = np.atleast_2d(np.asarray(directions, dtype=float))
+    proj = np.einsum("ijc,kc->kij", generators, d)  # (k, n, 2)
+    return np.asarray(np.maximum(proj.max(axis=2), 0.0) @ weights, dtype=float)
+
+
+def _sphere(count: int) -> Array:
+    """``count`` nearly uniform unit vectors (Fibonacci sphere)."""
+    i = np.arange(count) + 0.5
+    z = 1.0 - 2.0 * i / count
+    r = np.sqrt(1.0 - z * z)
+    ang = np.pi * (1.0 + 5.0**0.5) * i
+    return np.stack([r * np.cos(ang), r * np.sin(ang), z], axis=-1)
+
+
+def wrench_capacity(s: ArrayLike, gamma: ArrayLike, phi: ArrayLike, delta: ArrayLike, *, mu: float,
+                    tol: float | ArrayLike = 0.0, ref: ArrayLike = (0.0, 0.0), scale: float = 1.0) -> WrenchCapacity:
+    """Q_H (M3) of a grasp given along the arm grid ``s`` as Q1-Q3 take it
+    (:func:`contgrasp_core.quality.grasp_quality`): contact points ``gamma``, boundary tangent
+    angles ``phi``, contact depth ``delta``, tolerance ``tol``; Coulomb ``mu``; torques about
+    ``ref`` scaled by ``scale`` (m; the object's nominal radius). The minimum over the sphere:
+    the best of :data:`SEARCH_DIRECTIONS` directions, the five best refined by Nelder-Mead."""
+    w = contact_weights(s, delta, tol)
+    gen = wrench_generators(gamma, phi, mu, ref, scale)
+    if len(gen) != len(w):
+        raise InvalidParameterError(f"contact points ({len(gen)}) and the arm grid ({len(w)}) differ in length")
+    length = float(w.sum())
+    if length == 0.0:
+        return WrenchCapacity(0.0, np.array([1.0, 0.0, 0.0]), 0.0)
+    on = w > 0
+    gen, w = gen[on], w[on]
+    dirs = _sphere(SEARCH_DIRECTIONS)
+    h = support(gen, w, dirs)
+
+    def on_sphere(x: Array) -> float:
+        norm = float(np.linalg.norm(x))
+        return float(support(gen, w, x / norm)[0]) if norm > 0 else np.inf
+
+    best_value, best_dir = float(h.min()), dirs[int(np.argmin(h))]
+    for k in np.argsort(h)[:5]:
+        res = minimize(on_sphere, dirs[k], method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-14 * length,
+                                                                           "maxiter": 4000})
+        if res.fun < best_value:
+            best_value, best_dir = float(res.fun), res.x / np.linalg.norm(res.x)
+    return WrenchCapacity(max(best_value, 0.0), np.asarray(best_dir, dtype=float), length)
+
+
+def static_capacity(spec: MapSpec, base: BasePose, mu: float) -> WrenchCapacity:
+    """Q_H (M3) of the optimal grasp of Sec. III from ``base`` (the quality map's problem and
+    contact set, paper units: :func:`contgrasp_core.quality_map.optimal_grasp` from its cold
+    starts), with Coulomb ``mu``, torques about the object frame origin scaled by the object's
+    nominal radius: the measure before any simulation. :class:`ContgraspError` when the grasp
+    cannot be solved from ``base``."""
+    from .quality_map import optimal_grasp
+
+    boundary = spec.boundary()
+    problem, res = optimal_grasp(spec, boundary, base)
+    s = problem.s
+    return wrench_capacity(s, boundary.point(res.s_o), boundary.tangent_angle(res.s_o), problem.arm.radius(s) - res.rho,
+                           mu=mu, tol=spec.contact_tol, scale=spec.object.radius)

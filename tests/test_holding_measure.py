@@ -1,0 +1,98 @@
+"""The wrench capacity of a continuum contact, Q_H (docs/holding.md eqs. (M1)-(M3)), against
+closed forms: a full wrap of a circle, the frictionless torque, a contact that can only push,
+invariance under a rigid rotation, monotonicity in mu, and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.holding_measure import support, wrench_capacity, wrench_generators
+from contgrasp_core.quality import contact_weights
+
+R = 0.025
+
+
+def arc(start: float, stop: float, n: int = 2001, centre: tuple[float, float] = (0.0, 0.0)) -> dict[str, np.ndarray]:
+    """An arm lying on the circle of radius R (counter-clockwise from polar angle ``start`` to
+    ``stop``), in contact all along: its grid, feet, tangent angles and depth."""
+    ang = np.linspace(start, stop, n)
+    s = R * (ang - start)
+    gamma = np.stack([centre[0] + R * np.cos(ang), centre[1] + R * np.sin(ang)], axis=-1)
+    return {"s": s, "gamma": gamma, "phi": ang + np.pi / 2, "delta": np.zeros(n)}
+
+
+def h(c: dict[str, np.ndarray], mu: float, d: list[float], ref: tuple[float, float] = (0.0, 0.0)) -> float:
+    gen = wrench_generators(c["gamma"], c["phi"], mu, ref, R)
+    return float(support(gen, contact_weights(c["s"], c["delta"]), [d])[0])
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.3, 1.0])
+def test_the_full_wrap_has_the_closed_form_support(mu: float) -> None:
+    """Full wrap, a = R: h = 2 R (sqrt(1 + mu^2) + mu) for every pure force, 2 pi R mu for the
+    pure torque (trapezoidal quadrature of a periodic integrand with kinks: 1e-6)."""
+    full = arc(0.0, 2 * np.pi)
+    for angle in (0.0, 0.7, 2.0):
+        assert h(full, mu, [np.cos(angle), np.sin(angle), 0.0]) == pytest.approx(2 * R * (np.hypot(1, mu) + mu), rel=1e-6)
+    assert h(full, mu, [0.0, 0.0, 1.0]) == pytest.approx(2 * np.pi * R * mu, rel=1e-9, abs=1e-15)
+
+
+def test_a_partial_wrap_matches_its_integral() -> None:
+    """A 3 rad wrap, mu = 0.4, a mixed direction: (M2) against scipy's quad of the integrand."""
+    mu, d = 0.4, np.array([0.3, -0.8, 0.5]) / np.linalg.norm([0.3, -0.8, 0.5])
+    c = arc(-1.0, 2.0)
+
+    def integrand(a: float) -> float:
+        n, t = -np.array([np.cos(a), np.sin(a)]), np.array([-np.sin(a), np.cos(a)])
+        best = 0.0
+        for sign in (1.0, -1.0):
+            f = n + sign * mu * t
+            torque = (R * np.cos(a) * f[1] - R * np.sin(a) * f[0]) / R
+            best = max(best, d[0] * f[0] + d[1] * f[1] + d[2] * torque)
+        return best * R
+
+    want = quad(integrand, -1.0, 2.0, limit=200, points=np.linspace(-1.0, 2.0, 30))[0]
+    assert h(c, mu, list(d)) == pytest.approx(want, rel=1e-5)
+
+
+def test_the_measure_of_a_full_wrap_is_at_most_its_weakest_pure_direction_and_zero_without_friction() -> None:
+    full = arc(0.0, 2 * np.pi, n=721)
+    frictionless = wrench_capacity(full["s"], full["gamma"], full["phi"], full["delta"], mu=0.0, scale=R)
+    assert frictionless.measure < 1e-9 and abs(frictionless.direction[2]) == pytest.approx(1.0, abs=1e-4)
+    assert frictionless.contact_length == pytest.approx(2 * np.pi * R)
+    rough = wrench_capacity(full["s"], full["gamma"], full["phi"], full["delta"], mu=0.5, scale=R)
+    assert 0.0 < rough.measure <= min(2 * R * (np.hypot(1, 0.5) + 0.5), 2 * np.pi * R * 0.5) * (1 + 1e-6)
+
+
+def test_a_contact_that_can_only_push_resists_nothing_pulled_away() -> None:
+    """The upper half of the circle, frictionless: no force can pull the object up (+y), so
+    Q_H = 0 (+y among its weakest directions)."""
+    upper = arc(0.0, np.pi, n=401)
+    cap = wrench_capacity(upper["s"], upper["gamma"], upper["phi"], upper["delta"], mu=0.0, scale=R)
+    assert cap.measure < 1e-9 and h(upper, 0.0, [0.0, 1.0, 0.0]) < 1e-15  # (zero up to the end points' rounding)
+
+
+def test_the_measure_grows_with_friction_and_does_not_see_a_rotation() -> None:
+    c = arc(0.3, 4.5, n=401, centre=(0.08, 0.08))
+    caps = [wrench_capacity(c["s"], c["gamma"], c["phi"], c["delta"], mu=mu, ref=(0.08, 0.08), scale=R).measure
+            for mu in (0.2, 0.5, 1.0)]
+    assert 0.0 < caps[0] < caps[1] < caps[2]
+    beta = 1.1
+    rot = np.array([[np.cos(beta), -np.sin(beta)], [np.sin(beta), np.cos(beta)]])
+    turned = wrench_capacity(c["s"], c["gamma"] @ rot.T, c["phi"] + beta, c["delta"], mu=0.5,
+                             ref=tuple(rot @ [0.08, 0.08]), scale=R)
+    assert turned.measure == pytest.approx(caps[1], rel=1e-6)
+
+
+def test_no_contact_is_no_capacity_and_bad_input_is_refused() -> None:
+    c = arc(0.0, 1.0, n=11)
+    apart = wrench_capacity(c["s"], c["gamma"], c["phi"], c["delta"] - 1.0, mu=0.5, scale=R)
+    assert apart.measure == 0.0 and apart.contact_length == 0.0
+    for kwargs, match in ((dict(mu=-0.1), "mu"), (dict(mu=float("nan")), "mu"), (dict(mu=0.5, scale=0.0), "torque scale"),
+                          (dict(mu=0.5, ref=(0.0, float("inf"))), "reference point")):
+        with pytest.raises(InvalidParameterError, match=match):
+            wrench_capacity(c["s"], c["gamma"], c["phi"], c["delta"], **kwargs)  # type: ignore[arg-type]
+    with pytest.raises(InvalidParameterError, match="tangent angles"):
+        wrench_capacity(c["s"], c["gamma"], c["phi"][:-1], c["delta"], mu=0.5)
