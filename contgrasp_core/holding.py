@@ -52,11 +52,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.quality import GraspQuality, quality_of_state
 from contgrasp_core.rod.body import BodyState, ObjectDynamics, mass_properties
 from contgrasp_core.rod.integrator import RodState
+from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.session import LoopSession, Observation, drive, run_sampled, sensed_shape
 from contgrasp_core.scenario import Scenario
 
@@ -150,6 +152,8 @@ class HoldResult:
     settle_time: float | None
     held: bool = True
     release_reason: str = ""
+    pressure_max: float = float("nan")
+    friction_bound: tuple[float, ...] = ()
 
     @property
     def capacity_min(self) -> float:
@@ -165,7 +169,11 @@ class HoldResult:
             "support_stiffness": self.support.tolist(),
             "stiffness_eigenvalues": None if self.stiffness_eigenvalues is None else self.stiffness_eigenvalues.tolist(),
             "capacity": [{"direction": list(c.direction), "wrench": list(c.wrench), "magnitude": c.magnitude,
-                          "held": c.held, "reason": c.reason} for c in self.capacity],
+                          "held": c.held, "reason": c.reason, "friction_bound": bound,
+                          "bound_ratio": c.magnitude / bound if bound > 0 else None}
+                         for c, bound in zip(self.capacity, self.friction_bound or [float("nan")] * len(self.capacity),
+                                             strict=True)],
+            "pressure_max": self.pressure_max,
             "capacity_min": self.capacity_min,
             "Q1": self.Q1, "Q2": self.Q2, "Q3": self.Q3,
             "Q1_force": self.force_weighted.Q1, "Q2_force": self.force_weighted.Q2, "Q3_force": self.force_weighted.Q3,
@@ -187,6 +195,24 @@ def force_weighted_quality(scenario: Scenario, theta: Array) -> GraspQuality:
     force = m.h * m.contact_stiffness * np.maximum(m.r_centres - proj.signed_distance, 0.0)
     w = weighted_gramian(proj.foot, proj.phi, force, scenario.reference)
     return metrics_from_gramian(w, float(m.h * np.count_nonzero(force)))
+
+
+def friction_bound(rod: RodModel, boundary: Boundary, theta: Array, mu: float, directions: Array,
+                   ref: tuple[float, float], scale: float) -> tuple[float, Array]:
+    """The friction bound of the rod at rest in ``theta`` on the object's ``boundary``
+    (docs/holding.md, (M2)): the largest line pressure ``p_max = k max(pen, 0)`` (N/m) at the
+    rod's element centres and ``p_max h(d)`` (N) for each row of ``directions`` (scaled wrench
+    space: torque about ``ref`` over ``scale``): what the contact could resist along ``d`` with
+    its pressure nowhere above today's largest and Coulomb ``mu`` (the role the capstan law
+    plays for a belt)."""
+    from contgrasp_core.holding_measure import support, wrench_generators
+    from contgrasp_core.rod import chain
+
+    proj = boundary.project(chain.centres(rod, theta))
+    pen = np.maximum(rod.r_centres - proj.signed_distance, 0.0)
+    p_max = float(rod.contact_stiffness * pen.max())
+    gen = wrench_generators(proj.foot, proj.phi, mu, ref, scale)
+    return p_max, p_max * support(gen, np.where(pen > 0, rod.h, 0.0), directions)
 
 
 def wrench_directions(n_force: int) -> Array:
@@ -358,6 +384,9 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
     say("release")
     q0 = exp.release()
     assert exp.grasped is not None
+    p_max, bound = friction_bound(scenario.rod, exp.boundary, exp.grasped.state.theta, settings.mu,
+                                  wrench_directions(settings.directions), scenario.reference, exp.scale)
+    bounds = tuple(float(b) for b in bound)
     if exp.release_reason:
         return HoldResult(stiffness=None, support=np.diag(exp.dynamics.stiffness), stiffness_eigenvalues=None,
                           capacity=[Capacity(direction=tuple(float(x) for x in d),  # type: ignore[arg-type]
@@ -366,7 +395,7 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
                                     for d in wrench_directions(settings.directions)],
                           Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, force_weighted=forced, scale=exp.scale,
                           released_displacement=q0, settle_time=exp.grasped.settle_time, held=False,
-                          release_reason=exp.release_reason)
+                          release_reason=exp.release_reason, pressure_max=p_max, friction_bound=bounds)
     say("stiffness")
     stiffness, _ = exp.stiffness()
     d = np.diag([1.0, 1.0, 1.0 / exp.scale])
@@ -379,4 +408,5 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
     return HoldResult(stiffness=stiffness, support=np.diag(exp.dynamics.stiffness), stiffness_eigenvalues=eig,
                       capacity=capacity, Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, force_weighted=forced,
                       scale=exp.scale,
-                      released_displacement=q0, settle_time=exp.grasped.settle_time)
+                      released_displacement=q0, settle_time=exp.grasped.settle_time,
+                      pressure_max=p_max, friction_bound=bounds)

@@ -32,6 +32,7 @@ import numpy as np
 
 from .arm import BasePose
 from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
+from .control.hold_law import LAWS
 from .executors import run_tasks
 from .holding import GraspFailure, HoldSettings, measure_holding
 from .objects import FIG2_SCALE, SHAPES, SYNTAX, ObjectSpec
@@ -57,8 +58,10 @@ class StudySpec:
     """The study of one object (``object``: a built-in shape in the paper's units, e.g.
     ``circle`` or ``ellipse``): the map grid, ``scale`` (m per paper unit), the rod's ``nodes``,
     how long the closed loop may take to settle (``duration``, s: the rod scenario's 4 s leave
-    some close poses still creeping at just above the settle speed) and how each grasp is
-    loaded (``hold``)."""
+    some close poses still creeping at just above the settle speed), how each grasp is loaded
+    (``hold``: its ``support`` 0 releases the object entirely free), the closed loop's ``law``
+    (``paper`` or ``hold``, docs/holding.md) and the arm's length as a fraction of the object's
+    perimeter (``length_fraction``: the map's and the rod's; 0.5 the paper's map)."""
 
     object: str = "circle"
     psi_steps: int = 24
@@ -69,6 +72,8 @@ class StudySpec:
     nodes: int = 51
     duration: float = 8.0
     hold: HoldSettings = field(default_factory=lambda: HoldSettings(directions=4))
+    law: str = "paper"
+    length_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         self.map_spec()  # validates object and grid
@@ -78,6 +83,8 @@ class StudySpec:
             raise InvalidParameterError(f"nodes must be an integer in [3, 1001], got {self.nodes!r}")
         if not (np.isfinite(self.duration) and self.duration > 0):
             raise InvalidParameterError(f"duration must be a finite number > 0 (s), got {self.duration!r}")
+        if self.law not in LAWS:
+            raise InvalidParameterError(f"unknown law {self.law!r}; the laws are {', '.join(LAWS)}")
 
     def object_spec(self) -> ObjectSpec:
         """The object in the paper's units; :class:`InvalidParameterError` for anything but a
@@ -91,7 +98,7 @@ class StudySpec:
     def map_spec(self) -> MapSpec:
         """The static quality map's specification (paper units)."""
         return MapSpec(object=self.object_spec(), psi_steps=self.psi_steps,
-                       d_steps=self.d_steps, d_min=self.d_min, d_max=self.d_max)
+                       d_steps=self.d_steps, d_min=self.d_min, d_max=self.d_max, length_fraction=self.length_fraction)
 
     def distinct_rows(self) -> int:
         """How many polar-angle rows of the grid differ: a rotation of the object onto itself by
@@ -134,7 +141,7 @@ def pose_scenario(spec: StudySpec, base_paper: tuple[float, float, float]) -> Sc
     rod = replace(PAPER.rod, n_elements=spec.nodes - 1, length=ms.length_fraction * obj.boundary().length,
                   radius_base=ms.arm_radius * spec.scale, radius_tip=ms.arm_radius * spec.scale,
                   base_position=(x, y), base_angle=heading)
-    return PAPER.with_object(obj, rod=rod, loop=replace(PAPER.loop, duration=spec.duration))
+    return PAPER.with_object(obj, rod=rod, loop=replace(PAPER.loop, duration=spec.duration), law=spec.law)
 
 
 def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float],
@@ -250,9 +257,17 @@ def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...]
     return out
 
 
+_LATER_FIELDS = {"law": "paper", "length_fraction": 0.5}
+"""StudySpec's fields added after studies were recorded, with their defaults: written only when
+they differ, so a file recorded before them resumes (it holds a study at those defaults)."""
+
+
 def _spec_dict(spec: StudySpec) -> dict[str, Any]:
     d = asdict(spec)
     d["hold"] = asdict(spec.hold)
+    for name, default in _LATER_FIELDS.items():
+        if d[name] == default:
+            del d[name]
     return d
 
 

@@ -237,4 +237,6 @@ def test_hold_command_reports_the_paper_law_released_free_as_not_holding() -> No
            "--directions", "1", "--json"]
     out = json.loads(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)
     assert out["held"] is False and out["release_reason"] and out["capacity_min"] == 0.0
+    # the contact's friction bound (docs/holding.md (M2)) is reported all the same: the grasp pressed the fixed object
+    assert out["pressure_max"] > 0 and all(c["friction_bound"] >= 0 and c["bound_ratio"] in (0.0, None) for c in out["capacity"])
     assert out["stiffness"] is None and out["law"] == "paper" and out["support"] == 0.0

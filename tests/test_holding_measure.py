@@ -96,3 +96,20 @@ def test_no_contact_is_no_capacity_and_bad_input_is_refused() -> None:
             wrench_capacity(c["s"], c["gamma"], c["phi"], c["delta"], **kwargs)  # type: ignore[arg-type]
     with pytest.raises(InvalidParameterError, match="tangent angles"):
         wrench_capacity(c["s"], c["gamma"], c["phi"][:-1], c["delta"], mu=0.5)
+
+
+def test_the_friction_bound_of_a_flat_contact_is_mu_times_its_normal_bound() -> None:
+    """The straight paper arm's base resting 0.1 mm deep on a circle so large that the contact is flat:
+    p_max = k * 0.1 mm, nothing can pull the object towards the arm, and the tangential bound is
+    mu times the normal one (to the contact's tilt, 1e-3 here)."""
+    from contgrasp_core.boundary import circle
+    from contgrasp_core.holding import friction_bound
+    from contgrasp_core.scenario import PAPER
+
+    rod, big, depth = PAPER.rod, 100.0, 1e-4
+    r = float(rod.r_centres[0])  # (the tapered arm is thickest at its first element: it rests there deepest)
+    centre = (0.5 * rod.h, -(r + big - depth))
+    directions = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
+    p_max, bound = friction_bound(rod, circle(big, centre), np.zeros(rod.n_elements), 0.5, directions, centre, big)
+    assert rod.contact_stiffness * depth * 0.99 < p_max <= rod.contact_stiffness * depth * (1 + 1e-9)
+    assert bound[1] > 0 and bound[2] == 0.0 and bound[0] / bound[1] == pytest.approx(0.5, abs=1e-3)

@@ -181,3 +181,25 @@ def test_ctrl_c_stops_a_study_with_two_workers_at_once(tmp_path: Path) -> None:
     assert lines == ["contgrasp holding-study: interrupted"], err[-2000:]
     time.sleep(0.5)
     assert not [w for w in workers if Path(f"/proc/{w}").exists() and "zombie" not in Path(f"/proc/{w}/status").read_text()]
+
+
+def test_the_study_takes_the_holding_law_a_free_release_and_a_longer_arm(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--law hold --support 0 --length-fraction F``: the map's arm and the rod's are F
+    perimeters long, every pose's scenario runs the holding law, the spec records the options
+    (and leaves them out at their defaults, so a file recorded before they existed resumes)."""
+    from contgrasp_core.cli import main
+    from contgrasp_core.holding_study import _spec_dict
+
+    spec = StudySpec(object="circle", law="hold", length_fraction=1.0, hold=HoldSettings(support=0.0))
+    assert spec.map_spec().length_fraction == 1.0
+    scenario = pose_scenario(spec, (0.0, -8.0, 0.0))
+    assert scenario.law == "hold" and scenario.rod.length == pytest.approx(2 * np.pi * 0.025)
+    assert _spec_dict(spec)["law"] == "hold" and _spec_dict(spec)["hold"]["support"] == 0.0
+    assert "law" not in _spec_dict(StudySpec()) and "length_fraction" not in _spec_dict(StudySpec())
+    with pytest.raises(InvalidParameterError, match="unknown law 'grip'"):
+        StudySpec(law="grip")
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_info:
+        main(["holding-study", "--law", "grip", "--out", "x.jsonl"])
+    assert exit_info.value.code == 2
+    assert "invalid choice: 'grip'" in capsys.readouterr().err

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from ..executors import EXECUTORS
+from ..control.hold_law import LAWS
 from ..holding import HoldSettings
 from ..holding_study import PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
 from ..objects import SYNTAX
@@ -42,6 +43,13 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--nodes", type=int, default=d.nodes, help=f"rod nodes (default {d.nodes})")
     p.add_argument("--duration", type=float, default=d.duration,
                    help=f"longest closed-loop grasp before a pose counts as not settled, s (default {d.duration:g})")
+    p.add_argument("--law", choices=LAWS, default=d.law,
+                   help="the closed loop's law: paper (eq. (19)) or hold (docs/holding.md, 'A law that holds')")
+    p.add_argument("--support", type=float, default=d.hold.support,
+                   help=f"support stiffness under the released object, N/m (default {d.hold.support:g}; 0: entirely free)")
+    p.add_argument("--length-fraction", type=float, default=d.length_fraction,
+                   help=f"arm length over the object's perimeter, the map's and the rod's (default {d.length_fraction:g}, "
+                   "the paper's map; the holding law closes only past a half-turn wrap)")
     p.add_argument("--directions", type=int, default=d.hold.directions,
                    help=f"force directions of the capacity ramps, plus two torques (default {d.hold.directions})")
     p.add_argument("--out", required=True, metavar="FILE.jsonl", help="results, one pose per line (resumed if present)")
@@ -74,8 +82,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.workers is not None and args.workers < 1:
         raise InvalidParameterError(f"--workers must be >= 1, got {args.workers}")
     spec = StudySpec(object=args.object, psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
-                     d_max=args.d_max, nodes=args.nodes, duration=args.duration,
-                     hold=HoldSettings(directions=args.directions))
+                     d_max=args.d_max, nodes=args.nodes, duration=args.duration, law=args.law,
+                     length_fraction=args.length_fraction, hold=HoldSettings(directions=args.directions, support=args.support))
     qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,
                          progress=not args.json)
     ok = [r for r in rows if r.get("status") == "ok"]
