@@ -183,16 +183,24 @@ class HoldResult:
         }
 
 
+def _penetration(rod: RodModel, boundary: Boundary, theta: Array) -> tuple[Any, Array]:
+    """The projection of the rod's element centres in ``theta`` onto ``boundary`` and the depth
+    of the rod surface inside it there, ``max(r - distance, 0)`` (m): where the penalty contact acts."""
+    from contgrasp_core.rod import chain
+
+    proj = boundary.project(chain.centres(rod, theta))
+    return proj, np.maximum(rod.r_centres - proj.signed_distance, 0.0)
+
+
 def force_weighted_quality(scenario: Scenario, theta: Array) -> GraspQuality:
     """Q1-Q3 of ``W_f = sum_i f_i G_i G_i^T``: the point grasp maps (paper Sec. IV-A) at the
     feet of the rod's element centres, weighted by their penalty contact forces ``f_i = h k
     max(pen_i, 0)`` (N) instead of arclength (the rod at rest on the fixed object)."""
     from contgrasp_core.quality import metrics_from_gramian, weighted_gramian
-    from contgrasp_core.rod import chain
 
     m = scenario.rod
-    proj = scenario.object.boundary().project(chain.centres(m, theta))
-    force = m.h * m.contact_stiffness * np.maximum(m.r_centres - proj.signed_distance, 0.0)
+    proj, pen = _penetration(m, scenario.object.boundary(), theta)
+    force = m.h * m.contact_stiffness * pen
     w = weighted_gramian(proj.foot, proj.phi, force, scenario.reference)
     return metrics_from_gramian(w, float(m.h * np.count_nonzero(force)))
 
@@ -206,10 +214,8 @@ def friction_bound(rod: RodModel, boundary: Boundary, theta: Array, mu: float, d
     its pressure nowhere above today's largest and Coulomb ``mu`` (the role the capstan law
     plays for a belt)."""
     from contgrasp_core.holding_measure import support, wrench_generators
-    from contgrasp_core.rod import chain
 
-    proj = boundary.project(chain.centres(rod, theta))
-    pen = np.maximum(rod.r_centres - proj.signed_distance, 0.0)
+    proj, pen = _penetration(rod, boundary, theta)
     p_max = float(rod.contact_stiffness * pen.max())
     gen = wrench_generators(proj.foot, proj.phi, mu, ref, scale)
     return p_max, p_max * support(gen, np.where(pen > 0, rod.h, 0.0), directions)
