@@ -328,6 +328,26 @@ def test_rod_simulator_survives_hostile_couples(make) -> None:  # type: ignore[n
     assert expect.outcomes[True] > 0 and expect.outcomes[False] > 0
 
 
+def test_rod_simulator_applies_a_hold_and_drops_one_made_for_another_rod(make) -> None:  # type: ignore[no-untyped-def]
+    """The holding law's hold (kappa_ref, hold_gain): one whose couple u is not -EI kappa_ref of
+    this rod is dropped and counted, and the run does not advance; a consistent one is applied
+    (one step), and its ``transition`` flag is what the next state's settle check gets."""
+    sim = small_sim(make)
+    m = sim.model
+    kappa_ref = np.full(m.n_elements, 2.0)
+
+    def hold(u: np.ndarray, step: int) -> bytes:
+        msg = CoupleControl(step=step, s=m.joint_s.tolist(), u=u.tolist(), kappa_ref=kappa_ref.tolist(), hold_gain=10.0,
+                            transition=True)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 0, 0
+        return serialize_message(msg)
+
+    sim.on_couple(hold(-2.0 * m.joint_ei * kappa_ref, 0))  # (twice the stiffness: another rod's hold)
+    assert sim.drops.counts == {"/contgrasp/couple: inconsistent hold": 1} and sim.session.k == 0
+    sim.on_couple(hold(-m.joint_ei * kappa_ref, 0))
+    assert sim.session.k == 1 and sim.drops.total == 1 and not sim.law_ready
+
+
 @st.composite
 def outlines(draw: Callable[..., Any]) -> tuple[list[float], list[float]]:
     kind = draw(st.sampled_from(["random", "polygon", "bowtie", "collinear", "duplicate", "mismatch"]))
