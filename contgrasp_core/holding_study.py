@@ -6,11 +6,14 @@ each metric, :func:`run_study`
 
 1. takes the static map's Q1-Q3 (the paper's optimal grasp of eq. (9) from that base,
    :func:`contgrasp_core.quality_map.quality_map`, in the paper's dimensionless units);
-2. places the rod scenario's arm, with the map's length (half the object's perimeter) and
-   radius (uniform), at the same pose scaled to metres (``scale`` m per paper unit about the
-   object's centre: the paper's R = 5 circle becomes the rod scenario's 2.5 cm one), runs its
-   closed loop to settlement and measures Q1-Q3 of the settled contact, the grasp stiffness K
+2. places the rod at the same pose scaled to metres (``scale`` m per paper unit about the
+   object frame's origin: the paper's R = 5 circle becomes the rod scenario's 2.5 cm one), runs
+   its closed loop to settlement and measures Q1-Q3 of the settled contact, the grasp stiffness K
    and the holding capacity (:func:`contgrasp_core.holding.measure_holding`).
+
+The arm (``arm``) is the map's, uniform with a length a fraction of the object's perimeter
+(``map``, the paper's Sec. IV-C), or the rod scenario's own tapered arm for both the map and the
+rod (``rod``: its length and base and tip radii in the paper's units, rho_d = r(s)).
 
 Poses run as independent tasks (serial, processes or Dask, :mod:`contgrasp_core.executors`);
 each result is appended to a JSON-lines file as it arrives, so an interrupted study resumes
@@ -35,11 +38,11 @@ from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteErro
 from .control.hold_law import LAWS
 from .executors import run_tasks
 from .holding import GraspFailure, HoldSettings, measure_holding
-from .objects import FIG2_SCALE, SHAPES, SYNTAX, ObjectSpec
+from .objects import FIG2_SCALE, OUTLINE, SHAPES, SYNTAX, ObjectSpec
 from .quality_map import MapSpec, QualityMap, quality_map
 from .scenario import PAPER, Scenario
 
-__all__ = ["StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose",
+__all__ = ["ARMS", "StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose",
            "expand_symmetric", "pose_scenario"]
 
 PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "static_QH", "Q1", "Q2", "Q3", "Q1_force", "Q2_force", "Q3_force")
@@ -53,15 +56,21 @@ RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min", "grasped")
 (1 or 0, over every pose: only the static map's measures exist for the poses that did not)."""
 
 
+ARMS = ("map", "rod")
+"""The study's arms (module docstring)."""
+
+
 @dataclass(frozen=True)
 class StudySpec:
     """The study of one object (``object``: a built-in shape in the paper's units, e.g.
-    ``circle`` or ``ellipse``): the map grid, ``scale`` (m per paper unit), the rod's ``nodes``,
+    ``circle`` or ``ellipse``, or ``outline:FILE.csv`` in the paper's units about an origin inside
+    it): the map grid, ``scale`` (m per paper unit), the rod's ``nodes``,
     how long the closed loop may take to settle (``duration``, s: the rod scenario's 4 s leave
     some close poses still creeping at just above the settle speed), how each grasp is loaded
     (``hold``: its ``support`` 0 releases the object entirely free), the closed loop's ``law``
     (``paper`` or ``hold``, docs/holding.md) and the arm's length as a fraction of the object's
-    perimeter (``length_fraction``: the map's and the rod's; 0.5 the paper's map)."""
+    perimeter (``length_fraction``: the map's and the rod's; 0.5 the paper's map) or the rod
+    scenario's arm (``arm``: module docstring)."""
 
     object: str = "circle"
     psi_steps: int = 24
@@ -74,8 +83,14 @@ class StudySpec:
     hold: HoldSettings = field(default_factory=lambda: HoldSettings(directions=4))
     law: str = "paper"
     length_fraction: float = 0.5
+    arm: str = "map"
 
     def __post_init__(self) -> None:
+        if self.arm not in ARMS:
+            raise InvalidParameterError(f"unknown arm {self.arm!r}; the arms are {', '.join(ARMS)}")
+        if self.arm == "rod" and self.length_fraction != StudySpec.length_fraction:
+            raise InvalidParameterError("the length fraction sets the map's arm only; the rod's arm has its own length "
+                                        f"({PAPER.rod.length:g} m)")
         self.map_spec()  # validates object and grid
         if not (np.isfinite(self.scale) and self.scale > 0):
             raise InvalidParameterError(f"scale must be a finite number > 0 (m per paper unit), got {self.scale!r}")
@@ -87,18 +102,21 @@ class StudySpec:
             raise InvalidParameterError(f"unknown law {self.law!r}; the laws are {', '.join(LAWS)}")
 
     def object_spec(self) -> ObjectSpec:
-        """The object in the paper's units; :class:`InvalidParameterError` for anything but a
-        built-in shape (the static map is scaled to the rod's metres about the shape's centre,
-        which an outline in absolute coordinates does not have), naming only the shapes taken."""
-        if not isinstance(self.object, str) or self.object.strip().partition(":")[0] not in SHAPES:
-            raise InvalidParameterError(f"the holding study takes a built-in shape in the paper's units: {SYNTAX}; "
-                                        f"got {self.object!r} (outlines: grasp, kinematics, quality-map, simulate, hold)")
+        """The object in the paper's units (a built-in shape or an outline)."""
+        if not isinstance(self.object, str):
+            raise InvalidParameterError(f"the study's object must be text, {SYNTAX} or outline:FILE.csv; "
+                                        f"got {self.object!r}")
         return ObjectSpec.parse(self.object, FIG2_SCALE)
 
     def map_spec(self) -> MapSpec:
         """The static quality map's specification (paper units)."""
-        return MapSpec(object=self.object_spec(), psi_steps=self.psi_steps,
-                       d_steps=self.d_steps, d_min=self.d_min, d_max=self.d_max, length_fraction=self.length_fraction)
+        obj = self.object_spec()
+        arm: dict[str, Any] = {"length_fraction": self.length_fraction}
+        if self.arm == "rod":
+            rod = PAPER.rod
+            arm = {"length_fraction": rod.length / self.scale / obj.boundary().length,
+                   "arm_radius": rod.radius_base / self.scale, "arm_radius_tip": rod.radius_tip / self.scale, "rho_d": None}
+        return MapSpec(object=obj, psi_steps=self.psi_steps, d_steps=self.d_steps, d_min=self.d_min, d_max=self.d_max, **arm)
 
     def distinct_rows(self) -> int:
         """How many polar-angle rows of the grid differ: a rotation of the object onto itself by
@@ -108,6 +126,8 @@ class StudySpec:
         (:func:`expand_symmetric`): 1 for a circle, ``psi_steps / 2`` for an ellipse (its half
         turn), ``psi_steps / gcd(lobes, psi_steps)`` for a deformed circle."""
         spec = self.object_spec()
+        if spec.shape == OUTLINE:
+            return self.psi_steps
         p = dict(zip(SHAPES[spec.shape], spec.params, strict=True))
         if spec.shape == "circle" or (spec.shape == "ellipse" and p["a"] == p["b"]) or (
                 spec.shape == "deformed" and p["amplitude"] == 0):
@@ -116,9 +136,12 @@ class StudySpec:
         return self.psi_steps // math.gcd(max(order, 1), self.psi_steps)
 
     def rod_object(self) -> ObjectSpec:
-        """The object in metres: the paper's shape scaled by ``scale`` about its centre, placed
-        at the rod scenario's object centre."""
+        """The object in metres: the paper's shape scaled by ``scale`` about the object frame's
+        origin, placed at the rod scenario's object centre."""
         spec = self.object_spec()
+        if spec.shape == OUTLINE:
+            c = np.asarray(PAPER.object.center)
+            return replace(spec, points=tuple(map(tuple, (self.scale * np.asarray(spec.points) + c).tolist())), source="")
         params = tuple(p * self.scale if name in ("R", "a", "b") else p
                        for name, p in zip(SHAPES[spec.shape], spec.params, strict=True))
         return ObjectSpec(spec.shape, params, PAPER.object.center, spec.angle)
@@ -133,14 +156,15 @@ def base_si(spec: StudySpec, base_paper: tuple[float, float, float]) -> tuple[fl
 
 
 def pose_scenario(spec: StudySpec, base_paper: tuple[float, float, float]) -> Scenario:
-    """The rod scenario of one pose (module docstring, step 2): the arm of the map (length and
-    radius) at the base ``base_paper`` (x, y, heading in the paper's units about the object)."""
+    """The rod scenario of one pose (module docstring, step 2): the study's arm at the base
+    ``base_paper`` (x, y, heading in the paper's units about the object)."""
     x, y, heading = base_si(spec, base_paper)
     obj = spec.rod_object()
-    ms = spec.map_spec()
-    rod = replace(PAPER.rod, n_elements=spec.nodes - 1, length=ms.length_fraction * obj.boundary().length,
-                  radius_base=ms.arm_radius * spec.scale, radius_tip=ms.arm_radius * spec.scale,
-                  base_position=(x, y), base_angle=heading)
+    rod = replace(PAPER.rod, n_elements=spec.nodes - 1, base_position=(x, y), base_angle=heading)
+    if spec.arm == "map":
+        ms = spec.map_spec()
+        rod = replace(rod, length=ms.length_fraction * obj.boundary().length, radius_base=ms.arm_radius * spec.scale,
+                      radius_tip=ms.arm_radius * spec.scale)
     return PAPER.with_object(obj, rod=rod, loop=replace(PAPER.loop, duration=spec.duration), law=spec.law)
 
 
@@ -257,7 +281,7 @@ def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...]
     return out
 
 
-_LATER_FIELDS = {"law": "paper", "length_fraction": 0.5}
+_LATER_FIELDS = {"law": "paper", "length_fraction": 0.5, "arm": "map"}
 """StudySpec's fields added after studies were recorded, with their defaults: written only when
 they differ, so a file recorded before them resumes (it holds a study at those defaults)."""
 

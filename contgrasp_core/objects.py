@@ -1,8 +1,7 @@
 """How an object is named: one syntax for the built-in shapes and a user's outline.
 
-Every entry point that takes an object (``contgrasp kinematics|grasp|quality-map|simulate|hold``,
-``contgrasp-launch``, the simulator node, the scenario model; ``contgrasp holding-study`` the
-built-in shapes only) names it with an :class:`ObjectSpec`, written as text ``NAME[:P1,P2,...]``
+Every entry point that takes an object (``contgrasp kinematics|grasp|quality-map|simulate|hold|holding-study``,
+``contgrasp-launch``, the simulator node, the scenario model) names it with an :class:`ObjectSpec`, written as text ``NAME[:P1,P2,...]``
 or given as an outline file:
 
 =============  ==========================================  =======================================

@@ -66,7 +66,9 @@ class MapSpec:
     rays from it).
 
     Paper defaults (Sec. IV-C): d in [3, 13], arm of constant unit radius and length L_o/2,
-    rho_d = 1, alpha_d = pi/2, chi = 10. ``contact_tol`` is the contact tolerance of
+    rho_d = 1, alpha_d = pi/2, chi = 10. ``arm_radius_tip`` tapers the arm linearly from
+    ``arm_radius`` at the base (Sec. III-A's arm; None: constant); ``rho_d = None`` tracks the
+    arm's own radius r(s) (Sec. III-A's choice). ``contact_tol`` is the contact tolerance of
     Definition 1 used for Q1..Q3 (delta >= -tol); since rho_d equals the arm radius the depth
     hovers around zero, so a small positive tolerance (default 0.05 = 5 % of the radius)
     counts the tracked part of the arm as in contact. ``nodes`` is the inner grid size.
@@ -79,9 +81,10 @@ class MapSpec:
     d_max: float = 13.0
     nodes: int = 200
     chi: float = 10.0
-    rho_d: float = 1.0
+    rho_d: float | None = 1.0
     alpha_d: float = 0.5 * np.pi
     arm_radius: float = 1.0
+    arm_radius_tip: float | None = None
     length_fraction: float = 0.5
     contact_tol: float = 0.05
     solver_tol: float = 1e-8
@@ -99,8 +102,9 @@ class MapSpec:
         d_max = real("d_max", self.d_max, lo=0.0, lo_open=True)
         if not d_min <= d_max:
             raise InvalidParameterError(f"need 0 < d_min <= d_max, got [{self.d_min}, {self.d_max}]")
-        for name in ("chi", "rho_d", "arm_radius", "length_fraction", "solver_tol"):
-            real(name, getattr(self, name), lo=0.0, lo_open=True)
+        for name in ("chi", "rho_d", "arm_radius", "arm_radius_tip", "length_fraction", "solver_tol"):
+            if getattr(self, name) is not None or name not in ("rho_d", "arm_radius_tip"):
+                real(name, getattr(self, name), lo=0.0, lo_open=True)
         real("alpha_d", self.alpha_d, lo=0.0, hi=np.pi, lo_open=True, hi_open=True)
         real("contact_tol", self.contact_tol, lo=0.0)
         object.__setattr__(self, "object", ObjectSpec.coerce(self.object, FIG2_SCALE))
@@ -179,7 +183,7 @@ def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
 def _problem(spec: MapSpec, boundary: Boundary, base: BasePose) -> GraspProblem:
     from .optimal import problem_from_base
 
-    arm = Arm(spec.length_fraction * boundary.length, spec.arm_radius)
+    arm = Arm(spec.length_fraction * boundary.length, spec.arm_radius, spec.arm_radius_tip)
     return problem_from_base(
         boundary, base, arm=arm, nodes=spec.nodes, rho_d=spec.rho_d, alpha_d=spec.alpha_d, chi=spec.chi
     )

@@ -203,3 +203,42 @@ def test_the_study_takes_the_holding_law_a_free_release_and_a_longer_arm(capsys:
         main(["holding-study", "--law", "grip", "--out", "x.jsonl"])
     assert exit_info.value.code == 2
     assert "invalid choice: 'grip'" in capsys.readouterr().err
+
+
+def test_the_rod_arm_is_the_rod_scenarios_for_the_map_and_the_rod() -> None:
+    """``arm="rod"``: the map's inner problem and every pose's rod are the rod scenario's tapered
+    arm (length and radii in the paper's units through ``scale``, rho_d = r(s)); a length
+    fraction with it is refused (it sets the map's arm only), and the spec leaves ``arm`` out at
+    its default so older result files resume."""
+    from contgrasp_core.holding_study import _spec_dict
+
+    spec = StudySpec(object="ellipse", arm="rod", law="hold")
+    ms = spec.map_spec()
+    perimeter = ms.boundary().length
+    assert ms.length_fraction * perimeter * spec.scale == pytest.approx(PAPER.rod.length)
+    assert (ms.arm_radius * spec.scale, ms.arm_radius_tip * spec.scale) == pytest.approx(
+        (PAPER.rod.radius_base, PAPER.rod.radius_tip))
+    assert ms.rho_d is None
+    rod = pose_scenario(spec, (0.0, -12.0, 0.0)).rod
+    assert (rod.length, rod.radius_base, rod.radius_tip) == (PAPER.rod.length, PAPER.rod.radius_base, PAPER.rod.radius_tip)
+    assert rod.base_position == pytest.approx(base_si(spec, (0.0, -12.0, 0.0))[:2])
+    assert _spec_dict(spec)["arm"] == "rod" and "arm" not in _spec_dict(StudySpec())
+    with pytest.raises(InvalidParameterError, match="the length fraction sets the map's arm only"):
+        StudySpec(arm="rod", length_fraction=1.0)
+    with pytest.raises(InvalidParameterError, match="unknown arm 'claw'"):
+        StudySpec(arm="claw")
+
+
+def test_the_study_takes_an_outline_scaled_about_its_origin() -> None:
+    """An outline in the paper's units (the kidney of tests/data) is scaled by ``scale`` about
+    its own origin onto the rod scenario's object centre, and every polar angle is its own row
+    (no symmetry assumed)."""
+    path = Path(__file__).parent / "data" / "kidney_outline.csv"
+    spec = StudySpec(object=f"outline:{path}", psi_steps=8, arm="rod")
+    pts = np.loadtxt(path, delimiter=",", skiprows=2)
+    rod_obj = spec.rod_object()
+    assert np.asarray(rod_obj.points) == pytest.approx(spec.scale * pts + np.asarray(PAPER.object.center))
+    assert rod_obj.boundary().length == pytest.approx(spec.scale * spec.object_spec().boundary().length, rel=1e-9)
+    assert spec.distinct_rows() == 8
+    with pytest.raises(InvalidParameterError, match="must be text"):
+        StudySpec(object=3)  # type: ignore[arg-type]

@@ -103,3 +103,21 @@ def test_bad_specs_rejected(tmp_path) -> None:  # type: ignore[no-untyped-def]
         quality_map(MapSpec("circle", psi_steps=1, d_steps=1, **FAST), executor="dask")
     with pytest.raises(InvalidParameterError):
         load_map(tmp_path / "missing")
+
+
+def test_a_tapered_map_arm_tracks_its_own_radius() -> None:
+    """``arm_radius_tip`` tapers the inner problem's arm linearly (Sec. III-A's arm) and
+    ``rho_d = None`` makes the target its radius r(s); a bad tip radius is refused."""
+    from contgrasp_core.quality_map import optimal_grasp
+
+    spec = MapSpec("circle", psi_steps=1, d_steps=1, arm_radius=2.0, arm_radius_tip=0.2, rho_d=None,
+                   length_fraction=1.2, nodes=41)
+    problem, res = optimal_grasp(spec, spec.boundary(), disc_pose(spec.boundary(), 0.0, 5.0))
+    s = problem.s
+    length = 1.2 * 2 * np.pi * 5.0
+    assert problem.arm.radius(s) == pytest.approx(2.0 + (0.2 - 2.0) * s / length)
+    assert problem.disc.rho_d == pytest.approx(2.0 + (0.2 - 2.0) * s / length)
+    assert res.converged
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(InvalidParameterError, match="arm_radius_tip"):
+            MapSpec("circle", arm_radius_tip=bad)

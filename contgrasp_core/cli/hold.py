@@ -44,14 +44,24 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
                    help=f"the object's areal density, kg/m^2 (default {d.areal_density:g})")
     p.add_argument("--directions", type=int, default=d.directions,
                    help=f"force directions of the capacity ramps, plus two pure torques (default {d.directions})")
-    p.add_argument("--rate", type=float, default=d.rate, help=f"capacity ramp rate, N/s (default {d.rate:g})")
-    p.add_argument("--ramp-time", type=float, default=d.ramp_time, help=f"longest ramp, s (default {d.ramp_time:g})")
+    add_ramp_arguments(p, d)
     p.add_argument("--escape-distance", type=float, default=d.escape_distance,
                    help=f"escaped beyond this displacement, in object radii (default {d.escape_distance:g})")
     p.add_argument("--escape-angle", type=float, default=d.escape_angle,
                    help=f"escaped beyond this rotation, rad (default {d.escape_angle:g})")
     add_law_arguments(p)
     p.set_defaults(func=run, format_text=format_text)
+
+
+def add_ramp_arguments(p: argparse.ArgumentParser, d: HoldSettings) -> None:
+    """The capacity ramp's ``--rate`` and ``--ramp-time`` and the first touch's ``--contact-wait``
+    (:class:`contgrasp_core.holding.HoldSettings`; ``hold`` and ``holding-study``)."""
+    p.add_argument("--rate", type=float, default=d.rate, help=f"capacity ramp rate, N/s (default {d.rate:g})")
+    p.add_argument("--ramp-time", type=float, default=d.ramp_time,
+                   help=f"longest ramp, s (default {d.ramp_time:g}; the largest wrench tried is rate x ramp time)")
+    p.add_argument("--contact-wait", type=float, default=d.contact_wait,
+                   help=f"longest time without touching the object before the grasp counts as failed, s "
+                   f"(default {d.contact_wait:g}; a cage closing from a far base needs a few seconds)")
 
 
 def format_text(out: dict[str, Any]) -> str:
@@ -91,7 +101,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             raise InvalidParameterError(f"--base must be three finite numbers, got {args.base}")
         rod = replace(rod, base_position=(args.base[0], args.base[1]), base_angle=args.base[2])
     settings = HoldSettings(areal_density=args.density, support=args.support, mu=args.mu, rate=args.rate,
-                            ramp_time=args.ramp_time, directions=args.directions,
+                            ramp_time=args.ramp_time, contact_wait=args.contact_wait, directions=args.directions,
                             escape_distance=args.escape_distance, escape_angle=args.escape_angle)
     scenario = PAPER.with_object(obj, rod=rod, law=args.law, hold_law=hold_law_from_args(args))
     t0 = time.perf_counter()

@@ -10,6 +10,7 @@ command again resumes.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from collections import Counter
 from typing import Any
 
@@ -18,9 +19,10 @@ import numpy as np
 from ..errors import InvalidParameterError
 from ..executors import EXECUTORS
 from ..control.hold_law import LAWS
-from ..holding import HoldSettings
-from ..holding_study import PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
-from ..objects import SYNTAX
+from .hold import add_ramp_arguments
+from ..holding_study import ARMS, PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
+from ..objects import FIG2_SCALE
+from .common import add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run", "format_text"]
 
@@ -30,9 +32,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     d = StudySpec()
     p = sub.add_parser("holding-study", parents=parents, description=__doc__.splitlines()[0],
                        help="Q1-Q3 against measured grasp stiffness and holding capacity over a quality map's poses")
-    p.add_argument("--object", metavar="NAME[:PARAMS]", default=d.object,
-                   help=f"built-in shape in the paper's units: {SYNTAX} (default {d.object}); no outlines: the "
-                   "static map is scaled to the rod's metres about the shape's centre")
+    add_object_arguments(p, FIG2_SCALE)  # (an outline about an origin inside it: the rod's is scaled about it)
     p.add_argument("--psi-steps", type=int, default=d.psi_steps, help=f"polar angles (default {d.psi_steps})")
     p.add_argument("--d-steps", type=int, default=d.d_steps, help=f"distances (default {d.d_steps})")
     p.add_argument("--d-min", type=float, default=d.d_min,
@@ -50,8 +50,12 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--length-fraction", type=float, default=d.length_fraction,
                    help=f"arm length over the object's perimeter, the map's and the rod's (default {d.length_fraction:g}, "
                    "the paper's map; the holding law closes only past a half-turn wrap)")
+    p.add_argument("--arm", choices=ARMS, default=d.arm,
+                   help="map: uniform, --length-fraction of the perimeter (the paper's map; default); rod: the rod "
+                   "scenario's tapered arm, for the map and the rod alike")
     p.add_argument("--directions", type=int, default=d.hold.directions,
                    help=f"force directions of the capacity ramps, plus two torques (default {d.hold.directions})")
+    add_ramp_arguments(p, d.hold)
     p.add_argument("--out", required=True, metavar="FILE.jsonl", help="results, one pose per line (resumed if present)")
     p.add_argument("--executor", choices=EXECUTORS, default="processes")
     p.add_argument("--workers", type=int, default=None, help="process-pool size (default: all cores)")
@@ -81,9 +85,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run (or resume) the study; return the JSON-able summary."""
     if args.workers is not None and args.workers < 1:
         raise InvalidParameterError(f"--workers must be >= 1, got {args.workers}")
-    spec = StudySpec(object=args.object, psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
+    spec = StudySpec(object=object_from_args(args, FIG2_SCALE).text(), psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
                      d_max=args.d_max, nodes=args.nodes, duration=args.duration, law=args.law,
-                     length_fraction=args.length_fraction, hold=HoldSettings(directions=args.directions, support=args.support))
+                     length_fraction=args.length_fraction, arm=args.arm,
+                     hold=replace(StudySpec().hold, directions=args.directions, support=args.support, rate=args.rate,
+                                  ramp_time=args.ramp_time, contact_wait=args.contact_wait))
     qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,
                          progress=not args.json)
     ok = [r for r in rows if r.get("status") == "ok"]
