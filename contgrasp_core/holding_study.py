@@ -91,7 +91,8 @@ class StudySpec:
         if self.arm == "rod" and self.length_fraction != StudySpec.length_fraction:
             raise InvalidParameterError("the length fraction sets the map's arm only; the rod's arm has its own length "
                                         f"({PAPER.rod.length:g} m)")
-        self.map_spec()  # validates object and grid
+        object.__setattr__(self, "object", self.object_spec().text())  # (one name: "circle" is "circle:5")
+        self.map_spec()  # validates the grid
         if not (np.isfinite(self.scale) and self.scale > 0):
             raise InvalidParameterError(f"scale must be a finite number > 0 (m per paper unit), got {self.scale!r}")
         if int(self.nodes) != self.nodes or not 3 <= self.nodes <= 1001:
@@ -242,8 +243,10 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
     p = Path(path)
     earlier = load_results(p)
     wanted = json.loads(json.dumps(_spec_dict(spec)))
-    if earlier and {k: v for k, v in earlier[0].items() if k != "key"} != wanted:
-        other = {k: v for k, v in earlier[0].items() if k != "key"}
+    other = {k: v for k, v in earlier[0].items() if k != "key"} if earlier else dict(wanted)
+    if isinstance(other.get("object"), str):  # (recorded by the name it was given: "circle" for "circle:5")
+        other["object"] = _canonical_object(other["object"])
+    if other != wanted:
         differ = sorted(k for k in set(other) | set(wanted) if other.get(k) != wanted.get(k))
         raise InvalidParameterError(f"{p} holds a study of another specification (it differs in {', '.join(differ)}); "
                                     "give the same options to resume it, or another file")
@@ -265,6 +268,14 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
         raise WriteError(f"cannot write the study results to {p}: {exc.strerror or exc}") from exc
     # (results written before Q_H existed get it now; the file keeps them as they were)
     return qm, [{"static_QH": static_h.get(r["key"], float("nan")), **r} for r in load_results(p) if r["key"] != "spec"]
+
+
+def _canonical_object(text: str) -> str:
+    """The one name of the object a results file's specification names (as given, if it names none)."""
+    try:
+        return ObjectSpec.parse(text, FIG2_SCALE).text()
+    except ContgraspError:
+        return text
 
 
 def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...], tuple[float, ...]]]) -> dict[str, float]:

@@ -126,6 +126,12 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
     qm2, rows2 = run_study(spec, out, executor="serial")
     assert out.read_text().splitlines() == lines and rows2 == rows
     assert load_results(out)[0]["key"] == "spec"
+    # a file that names the object as it was given (before the study named it by its one name,
+    # "ellipse:8,4") resumes: the same object
+    assert load_results(out)[0]["object"] == "ellipse:8,4" == spec.object
+    older = tmp_path / "older.jsonl"
+    older.write_text(out.read_text().replace('"object": "ellipse:8,4"', '"object": "ellipse"', 1))
+    assert run_study(spec, older, executor="serial")[1] == rows and older.read_text().count("\n") == len(lines)
     with pytest.raises(InvalidParameterError, match=r"another specification \(it differs in duration, nodes\)"):
         run_study(replace(spec, nodes=41, duration=2.0), out, executor="serial")
     from contgrasp_core.figures.holding import study_figure
