@@ -94,7 +94,9 @@ class Graph:
         for proc in self.procs.values():
             if proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
-        codes = {name: proc.wait(timeout=30) for name, proc in self.procs.items()}
+        for proc in self.procs.values():  # (read what it still writes: a full pipe would block its exit)
+            proc.communicate(timeout=30)
+        codes = {name: int(proc.returncode) for name, proc in self.procs.items()}
         self.ex.shutdown()
         self.node.destroy_node()
         rclpy.shutdown(context=self.ctx)
