@@ -45,11 +45,15 @@ from .scenario import PAPER, Scenario
 __all__ = ["ARMS", "StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose",
            "expand_symmetric", "pose_scenario"]
 
-PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "static_QH", "Q1", "Q2", "Q3", "Q1_force", "Q2_force", "Q3_force")
+PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "static_QH", "Q1", "Q2", "Q3", "Q1_force", "Q2_force", "Q3_force",
+              "bound_min")
 """The quality measures: the static map's (the paper's optimal grasp) Q1-Q3 and wrench capacity
 Q_H (:func:`contgrasp_core.holding_measure.static_capacity`, with the study's friction), the
-settled grasp's, and the settled grasp's weighted by its contact forces
-(:func:`contgrasp_core.holding.force_weighted_quality`)."""
+settled grasp's, the settled grasp's weighted by its contact forces
+(:func:`contgrasp_core.holding.force_weighted_quality`), and the settled grasp's friction bound
+``p_max h(d)`` (:func:`contgrasp_core.holding.friction_bound`, its pressure at rest) in the
+weakest of the measured directions (a diagnostic after simulating: does friction at the rest
+pressure set the capacity?)."""
 RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min", "grasped")
 """The holding measures: lambda_min and det of K's scaled symmetric part, the worst capacity
 (over the poses that grasped), and whether the closed loop made a settled grasp that held at all
@@ -337,6 +341,9 @@ def expand_symmetric(spec: StudySpec, rows: list[dict[str, Any]]) -> list[dict[s
 def _value(row: dict[str, Any], name: str) -> float:
     if name == "grasped":
         return float(row.get("status") == "ok")
+    if name == "bound_min" and name not in row:
+        bounds = [c.get("friction_bound") for c in row.get("capacity", [])]
+        return float(np.min(np.asarray(bounds, dtype=float))) if bounds and None not in bounds else float("nan")
     v = row.get(name)
     return float(v) if v is not None else float("nan")
 

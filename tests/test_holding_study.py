@@ -55,6 +55,22 @@ def test_grasped_is_ranked_over_every_pose_and_symmetric_copies_do_not_count() -
     assert math.isnan(c["Q1"]["grasped"]["rho"])  # (every pose with a settled Q1 grasped)
 
 
+def test_bound_min_is_the_weakest_measured_friction_bound() -> None:
+    """The settled grasp's friction bound enters the correlations as its smallest value over
+    the measured directions (the study's records keep it per direction); a record without it
+    gives no value, and one missing direction none (not the minimum of the others)."""
+    def row(i: int, bounds: list) -> dict:  # type: ignore[type-arg]
+        return {"key": f"grid:{i},0", "status": "ok", "outcome": "held", "capacity_min": float(i),
+                "capacity": [{"friction_bound": b} for b in bounds]}
+
+    rows = [row(i, [3.0 * i, float(i), 2.0 * i + 7.0]) for i in range(1, 9)]
+    assert correlations(rows, boot=50)["bound_min"]["capacity_min"]["rho"] == pytest.approx(1.0)
+    rows = [row(i, [float(9 - i), 50.0]) for i in range(1, 9)]
+    assert correlations(rows, boot=50)["bound_min"]["capacity_min"]["rho"] == pytest.approx(-1.0)
+    rows += [row(20, [float("nan"), 0.001]), row(21, [None, 0.001]), {**row(22, []), "capacity": []}]
+    assert correlations(rows, boot=50)["bound_min"]["capacity_min"]["n"] == 8
+
+
 @pytest.mark.parametrize(("obj", "psi_steps", "rows"), [("circle", 24, 1), ("ellipse", 24, 12), ("ellipse", 5, 5),
                                                        ("ellipse:5,5", 24, 1), ("deformed:5,0.5,3,0", 24, 8),
                                                        ("deformed:5,0.5,5,0", 24, 24)])
