@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from typing import Any
 from dataclasses import replace
 from pathlib import Path
 
@@ -59,7 +60,7 @@ def test_bound_min_is_the_weakest_measured_friction_bound() -> None:
     """The settled grasp's friction bound enters the correlations as its smallest value over
     the measured directions (the study's records keep it per direction); a record without it
     gives no value, and one missing direction none (not the minimum of the others)."""
-    def row(i: int, bounds: list) -> dict:  # type: ignore[type-arg]
+    def row(i: int, bounds: list[float | None]) -> dict[str, Any]:
         return {"key": f"grid:{i},0", "status": "ok", "outcome": "held", "capacity_min": float(i),
                 "capacity": [{"friction_bound": b} for b in bounds]}
 
@@ -238,6 +239,7 @@ def test_the_rod_arm_is_the_rod_scenarios_for_the_map_and_the_rod() -> None:
     ms = spec.map_spec()
     perimeter = ms.boundary().length
     assert ms.length_fraction * perimeter * spec.scale == pytest.approx(PAPER.rod.length)
+    assert ms.arm_radius_tip is not None
     assert (ms.arm_radius * spec.scale, ms.arm_radius_tip * spec.scale) == pytest.approx(
         (PAPER.rod.radius_base, PAPER.rod.radius_tip))
     assert ms.rho_d is None
