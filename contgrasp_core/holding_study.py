@@ -348,6 +348,21 @@ def _value(row: dict[str, Any], name: str) -> float:
     return float(v) if v is not None else float("nan")
 
 
+def _spearman_rows(picks: np.ndarray) -> np.ndarray:
+    """Spearman's rho of each resample ``picks[b]`` (shape ``(boot, n, 2)``): Pearson's
+    correlation of the average ranks, NaN where a side does not vary (what
+    ``scipy.stats.spearmanr`` gives one resample at a time, here all at once)."""
+    from scipy.stats import rankdata
+
+    ranks = rankdata(picks, axis=1)
+    ranks -= ranks.mean(axis=1, keepdims=True)
+    cov = np.einsum("bn,bn->b", ranks[:, :, 0], ranks[:, :, 1])
+    var = np.einsum("bnk,bnk->bk", ranks, ranks)
+    varies = np.all(np.ptp(picks, axis=1) > 0, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(varies, cov / np.sqrt(var[:, 0] * var[:, 1]), np.nan)
+
+
 def correlations(rows: list[dict[str, Any]], *, boot: int = 2000, seed: int = 0,
                  grid_only: bool = True) -> dict[str, dict[str, dict[str, float]]]:
     """Spearman's rank correlation of each :data:`PREDICTORS` with each :data:`RESPONSES` over
@@ -374,11 +389,8 @@ def correlations(rows: list[dict[str, Any]], *, boot: int = 2000, seed: int = 0,
                 out[pred][resp] = {"rho": float("nan"), "low": float("nan"), "high": float("nan"), "n": n}
                 continue
             rho = float(spearmanr(pairs[:, 0], pairs[:, 1]).statistic)
-            samples = []
-            for _ in range(boot):
-                pick = pairs[rng.integers(0, n, n)]
-                if np.ptp(pick[:, 0]) > 0 and np.ptp(pick[:, 1]) > 0:
-                    samples.append(spearmanr(pick[:, 0], pick[:, 1]).statistic)
-            low, high = np.percentile(samples, [2.5, 97.5]) if samples else (np.nan, np.nan)
+            samples = _spearman_rows(pairs[rng.integers(0, n, (boot, n))])
+            samples = samples[np.isfinite(samples)]
+            low, high = np.percentile(samples, [2.5, 97.5]) if samples.size else (np.nan, np.nan)
             out[pred][resp] = {"rho": rho, "low": float(low), "high": float(high), "n": n}
     return out

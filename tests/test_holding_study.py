@@ -15,8 +15,8 @@ import pytest
 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.holding import GraspFailure, HoldExperiment, HoldSettings
-from contgrasp_core.holding_study import (PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, load_results,
-                                          base_si, pose_scenario, run_study, study_pose)
+from contgrasp_core.holding_study import (PREDICTORS, RESPONSES, StudySpec, _spearman_rows, correlations, expand_symmetric,
+                                          load_results, base_si, pose_scenario, run_study, study_pose)
 from contgrasp_core.rod.session import run_sampled
 from contgrasp_core.scenario import PAPER
 
@@ -42,6 +42,23 @@ def test_correlations_find_monotone_relations_and_none_in_noise() -> None:
     noise = correlations(_rows(40, lambda q, rng: float(rng.normal())), boot=500)
     c = noise["static_Q1"]["capacity_min"]
     assert c["low"] < 0 < c["high"] and abs(c["rho"]) < 0.5
+
+
+def test_the_bootstrap_ranks_every_resample_as_scipy_does_one_at_a_time() -> None:
+    """The bootstrap's resamples are ranked all at once; each must be scipy's Spearman rho of
+    that resample (ties given average ranks), NaN where a side does not vary."""
+    from scipy.stats import spearmanr
+
+    rng = np.random.default_rng(3)
+    pairs = np.column_stack([rng.integers(0, 5, 9).astype(float), rng.normal(size=9)])  # (ties in x)
+    picks = pairs[rng.integers(0, 9, (400, 9))]
+    picks[0, :, 0] = 2.0  # a resample whose x does not vary
+    picks[1, :, 1] = picks[1, 0, 1]  # one whose y does not
+    got = _spearman_rows(picks)
+    assert np.isnan(got[0]) and np.isnan(got[1])
+    want = [spearmanr(p[:, 0], p[:, 1]).statistic if np.ptp(p[:, 0]) > 0 and np.ptp(p[:, 1]) > 0 else np.nan for p in picks]
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    assert np.isfinite(got[2:]).sum() > 350
 
 
 def test_grasped_is_ranked_over_every_pose_and_symmetric_copies_do_not_count() -> None:
