@@ -152,7 +152,14 @@ run_tests() {
     run_checks || return 1
     # A distinct DDS domain per test run keeps concurrent runs apart (ROS tests pick their own too).
     export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( ($$ % 90) + 10 ))}"
-    "$py" -m pytest "$@"
+    # Two worker processes (pytest-xdist; CONTGRASP_TEST_WORKERS=1 for one, 0 for none), each
+    # test file on one worker so a file's shared fixtures (a colcon build, a wheel) are made once.
+    local workers="${CONTGRASP_TEST_WORKERS:-2}"
+    if [[ ! "$workers" =~ ^[0-9]+$ ]]; then
+        echo "contgrasp.sh: CONTGRASP_TEST_WORKERS must be a whole number, got '$workers'" >&2
+        return 2
+    fi
+    "$py" -m pytest -n "$workers" --dist loadfile "$@"
 }
 
 cmd="${1:-}"

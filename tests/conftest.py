@@ -32,11 +32,21 @@ _domains = itertools.count()
 # a random starting point per test run: two concurrent runs on one machine (a developer's and
 # a benchmark's, say) rarely share a domain, and graphs on different domains cannot cross-talk
 _BASE = random.SystemRandom().randint(0, 100)
+# pytest-xdist's workers (bash contgrasp.sh test runs two) each take the domains of their own
+# residue class: worker i of W uses only the domains congruent to i + 1 mod W, never another's
+_WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw"))
 
 
 def fresh_domain_id() -> int:
-    """A ROS_DOMAIN_ID in 1..101 for one test: distinct within this run."""
-    return (_BASE + next(_domains)) % 101 + 1
+    """A ROS_DOMAIN_ID in 1..101 for one test: distinct within this run, across its workers too."""
+    return ((_BASE + next(_domains)) % (101 // _WORKERS)) * _WORKERS + _WORKER + 1
+
+
+if _WORKERS > 1:
+    # what a test inherits when it picks no domain (the launcher's default, `ros2` commands):
+    # this worker's own, never another worker's
+    os.environ["ROS_DOMAIN_ID"] = str(fresh_domain_id())
 
 
 def spin_until(executor: Any, cond: Callable[[], bool], timeout: float = 10.0) -> bool:
