@@ -35,7 +35,7 @@ import numpy as np
 
 from .arm import BasePose
 from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
-from .control.hold_law import LAWS
+from .control.hold_law import LAWS, HoldLawSettings
 from .executors import run_tasks
 from .holding import GraspFailure, HoldSettings, measure_holding
 from .objects import FIG2_SCALE, OUTLINE, SHAPES, SYNTAX, ObjectSpec
@@ -74,7 +74,8 @@ class StudySpec:
     (``hold``: its ``support`` 0 releases the object entirely free), the closed loop's ``law``
     (``paper`` or ``hold``, docs/holding.md) and the arm's length as a fraction of the object's
     perimeter (``length_fraction``: the map's and the rod's; 0.5 the paper's map) or the rod
-    scenario's arm (``arm``: module docstring)."""
+    scenario's arm (``arm``: module docstring), and the holding law's depth regulation
+    (``depth_gain``, 1/s, docs/holding.md (H7); 0: none)."""
 
     object: str = "circle"
     psi_steps: int = 24
@@ -88,6 +89,7 @@ class StudySpec:
     law: str = "paper"
     length_fraction: float = 0.5
     arm: str = "map"
+    depth_gain: float = 0.0
 
     def __post_init__(self) -> None:
         if self.arm not in ARMS:
@@ -105,6 +107,13 @@ class StudySpec:
             raise InvalidParameterError(f"duration must be a finite number > 0 (s), got {self.duration!r}")
         if self.law not in LAWS:
             raise InvalidParameterError(f"unknown law {self.law!r}; the laws are {', '.join(LAWS)}")
+        self.hold_law()  # (validates the depth gain)
+        if self.depth_gain and self.law != "hold":
+            raise InvalidParameterError("the depth gain regulates the holding law's squeeze; it needs law hold")
+
+    def hold_law(self) -> HoldLawSettings:
+        """The holding law's settings of every pose: the defaults with the study's depth gain."""
+        return HoldLawSettings(depth_gain=self.depth_gain)
 
     def object_spec(self) -> ObjectSpec:
         """The object in the paper's units (a built-in shape or an outline)."""
@@ -170,7 +179,8 @@ def pose_scenario(spec: StudySpec, base_paper: tuple[float, float, float]) -> Sc
         ms = spec.map_spec()
         rod = replace(rod, length=ms.length_fraction * obj.boundary().length, radius_base=ms.arm_radius * spec.scale,
                       radius_tip=ms.arm_radius * spec.scale)
-    return PAPER.with_object(obj, rod=rod, loop=replace(PAPER.loop, duration=spec.duration), law=spec.law)
+    return PAPER.with_object(obj, rod=rod, loop=replace(PAPER.loop, duration=spec.duration), law=spec.law,
+                             hold_law=spec.hold_law())
 
 
 def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float],
@@ -296,7 +306,7 @@ def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...]
     return out
 
 
-_LATER_FIELDS = {"law": "paper", "length_fraction": 0.5, "arm": "map"}
+_LATER_FIELDS = {"law": "paper", "length_fraction": 0.5, "arm": "map", "depth_gain": 0.0}
 """StudySpec's fields added after studies were recorded, with their defaults: written only when
 they differ, so a file recorded before them resumes (it holds a study at those defaults)."""
 

@@ -179,6 +179,69 @@ def test_at_rest_the_contact_wrench_on_the_free_object_balances(held: tuple[Clos
     assert net < 1e-3 * total, (net, total)
 
 
+def _latched(settings: HoldLawSettings) -> tuple[HoldController, np.ndarray]:
+    """A holding law driven by hand into its hold, the squeeze complete, about a quarter-circle
+    of the arm (N = 50) bent at 1/(3 cm) whose first 40 nodes are in the band; and the arm's radius."""
+    law = HoldController(FREE, R, settings)
+    r = FREE.radius(FREE.s_nodes)
+    n = FREE.n_elements
+    law.phase, law.gap = "close", settings.close_gap
+    rho = r + np.where(np.arange(n + 1) < 40, 0.0, 0.02)
+    law.command(rho, np.full(n + 1, np.pi / 2), np.zeros(n + 1), np.full(n, 1 / 0.03), 0.002)
+    law.progress = 1.0
+    return law, r
+
+
+def test_the_depth_regulation_closes_when_the_contact_is_shallow_and_opens_when_deep() -> None:
+    """(H7) in isolation: sensed depth below ``squeeze`` (or no contact) moves the offset z up,
+    so the held shape's curvature on the band rises (the parallel curve nearer its centre);
+    deeper than ``squeeze`` moves it down; exactly ``squeeze`` leaves it; off (gain 0) it never
+    moves. z is dz/dt = gain (squeeze - depth) integrated over the period."""
+    settings = HoldLawSettings(depth_gain=2.0)
+    n = FREE.n_elements
+    alpha, theta, kappa = np.full(n + 1, np.pi / 2), np.zeros(n + 1), np.full(n, 1 / 0.03)
+    for depth, sign in ((0.0002, +1), (0.0015, -1), (settings.squeeze, 0)):
+        law, r = _latched(settings)
+        rho = r - np.where(np.arange(n + 1) < 30, depth, -0.0005)  # (30 nodes touch; 10 more in the band, clear)
+        k0 = law.command(rho, alpha, theta, kappa, 0.002).kappa_ref.copy()
+        hold = law.command(rho, alpha, theta, kappa, 0.002)
+        assert law.depth_offset == pytest.approx(2 * 2.0 * (settings.squeeze - depth) * 0.002, rel=1e-12, abs=1e-18)
+        assert np.sign(hold.kappa_ref[5] - k0[5]) == sign and np.all(hold.kappa_ref[45:] == 1 / 0.03)
+    law, r = _latched(settings)
+    law.command(r + 0.001, alpha, theta, kappa, 0.002)  # (the band clear of the object: the closest node counts)
+    assert law.depth_offset == pytest.approx(2.0 * (settings.squeeze + 0.001) * 0.002)
+    off, r = _latched(HoldLawSettings())
+    off.command(r + 0.001, alpha, theta, kappa, 0.002)
+    assert off.depth_offset == 0.0
+
+
+def test_with_depth_regulation_the_free_object_rests_pressed_squeeze_deep() -> None:
+    """(H7) closed: the free circle caged, closed on and held with the depth regulation (gain
+    10/s, stick-slip friction mu = 0.5: without friction a deeper squeeze pushes the circle out
+    through the opening, docs/holding.md); 5 s after settling the mean sensed depth over the
+    arm's touching band nodes is the squeeze (0.5 mm) within 1 % (the integral's rest), the
+    offset strictly inside its limits, and the object has drifted less than 1 mm."""
+    settings = HoldLawSettings(depth_gain=10.0)
+    rod = replace(FREE, friction=0.5, friction_model="stick")
+    system = RodSystem(rod, Obstacle(CIRCLE), body=ObjectDynamics(mode="free").body(CIRCLE))
+    law = HoldController(rod, R, settings)
+    gains = paper_gains(rod, R)
+    grasp = run_closed_loop(system, gains, replace(PAPER.loop, duration=8.0, control_period=None, dt=0.01), law=law)
+    assert grasp.settled and law.holding
+    more = ClosedLoopConfig(duration=5.0, control_period=None, dt=0.01, settle_speed=1e-9, min_time=100.0)
+    after = run_closed_loop(system, gains, more, state=grasp.final_state, law=law)
+    r = rod.radius(rod.s_nodes)
+    depth = r - after.rho[-1]
+    band = after.rho[-1] - r <= settings.close_gap + settings.band
+    touching = band & (depth > 0)
+    assert np.count_nonzero(touching) >= 5
+    assert float(depth[touching].mean()) == pytest.approx(settings.squeeze, rel=0.01)
+    assert 0 < law.depth_offset < settings.clearance
+    b0, b1 = grasp.final_state.body, after.final_state.body
+    assert b0 is not None and b1 is not None
+    assert np.hypot(*(b1.q[:2] - b0.q[:2])) < 1e-3
+
+
 def test_the_paper_law_pushes_the_same_free_object_away() -> None:
     """The baseline, measured the same way: the paper's law (rho_d = r) from the same start
     has pushed the free object more than a centimetre within 2 s and it is still moving."""
@@ -213,7 +276,8 @@ def test_released_free_the_holding_law_holds_with_a_symmetric_stiffness_and_the_
 
 def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
     for bad in (dict(stiffness_gain=-1.0), dict(squeeze=-1e-4), dict(clearance=0.0), dict(close_gap=0.007),
-                dict(wrap_angle=2.0), dict(mu1=float("nan")), dict(close_rate=True)):
+                dict(wrap_angle=2.0), dict(mu1=float("nan")), dict(close_rate=True), dict(depth_gain=-2.0),
+                dict(depth_gain=float("inf"))):
         with pytest.raises(InvalidParameterError, match="hold law"):
             HoldLawSettings(**bad)
     with pytest.raises(InvalidParameterError, match="unknown law"):
@@ -226,6 +290,7 @@ def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
         Scenario.from_ros_parameters(params)
     cli = [sys.executable, "-m", "contgrasp_core.cli"]
     for args in (["simulate", "--law", "hold", "--hold-gain", "-1"], ["hold", "--law", "hold", "--squeeze", "-0.001"],
+                 ["simulate", "--law", "hold", "--depth-gain", "-2"],
                  ["simulate", "--law", "grip"], ["simulate", "--friction", "-0.5"]):
         proc = subprocess.run(cli + args, capture_output=True, text=True)
         assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, (args, proc.stderr)

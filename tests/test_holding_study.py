@@ -245,6 +245,28 @@ def test_the_study_takes_the_holding_law_a_free_release_and_a_longer_arm(capsys:
     assert "invalid choice: 'grip'" in capsys.readouterr().err
 
 
+def test_the_study_takes_the_depth_regulation_of_the_holding_law(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--depth-gain K`` (docs/holding.md (H7)): every pose's scenario runs the holding law with
+    that gain (and the law's other defaults), the spec records it only when set (older files
+    resume), and a gain without the holding law, negative or not finite is refused."""
+    from contgrasp_core.cli import main
+    from contgrasp_core.control.hold_law import HoldLawSettings
+    from contgrasp_core.holding_study import _spec_dict
+
+    spec = StudySpec(object="circle", law="hold", arm="rod", depth_gain=10.0)
+    assert pose_scenario(spec, (0.0, -8.0, 0.0)).hold_law == HoldLawSettings(depth_gain=10.0)
+    assert _spec_dict(spec)["depth_gain"] == 10.0 and "depth_gain" not in _spec_dict(StudySpec(law="hold"))
+    assert pose_scenario(StudySpec(law="hold"), (0.0, -8.0, 0.0)).hold_law == HoldLawSettings()
+    with pytest.raises(InvalidParameterError, match="needs law hold"):
+        StudySpec(depth_gain=10.0)
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(InvalidParameterError, match="hold law depth_gain"):
+            StudySpec(law="hold", depth_gain=bad)
+    capsys.readouterr()
+    assert main(["holding-study", "--depth-gain", "5", "--out", "x.jsonl"]) == 2
+    assert "needs law hold" in capsys.readouterr().err
+
+
 def test_the_rod_arm_is_the_rod_scenarios_for_the_map_and_the_rod() -> None:
     """``arm="rod"``: the map's inner problem and every pose's rod are the rod scenario's tapered
     arm (length and radii in the paper's units through ``scale``, rho_d = r(s)); a length

@@ -90,12 +90,15 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"hold: how deep the held shape presses into the object, m (default {d.squeeze:g})")
     g.add_argument("--hold-gain", type=float, default=d.stiffness_gain,
                    help=f"hold: the held shape's stiffness gain G >= 0 (default {d.stiffness_gain:g})")
+    g.add_argument("--depth-gain", type=float, default=d.depth_gain,
+                   help="hold: after the squeeze, regulate the mean sensed contact depth to --squeeze with this "
+                   f"integral gain, 1/s >= 0 (docs/holding.md (H7); default {d.depth_gain:g}: off)")
 
 
 def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
     """The holding law's parameters of the command line (refused with an input error when out of range)."""
     return HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
-                           stiffness_gain=args.hold_gain)
+                           stiffness_gain=args.hold_gain, depth_gain=args.depth_gain)
 
 
 def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_tolerance, hold: str = "zoh") -> dict[str, Any]:

@@ -23,6 +23,12 @@ anchored at the arm's base:
    The hold is a potential: with the rod's damping, drag and the contact's damping and
    friction the rod + object energy (H6) cannot increase, and a rest state has a zero net
    contact wrench on the object.
+4. **Depth regulation** (H7, off unless ``depth_gain`` > 0): after the squeeze, the offset of
+   the parallel curve becomes ``close_gap + squeeze + z`` with
+   ``dz/dt = depth_gain (squeeze - depth)``, ``depth`` the mean sensed contact depth
+   ``r - rho`` over the band's nodes that touch (the closest band node's, negative, when none
+   touches), ``z`` kept in ``[-(close_gap + squeeze), clearance]``: at rest the mean contact
+   depth is ``squeeze`` whatever the latch caught (a tactile skin's reading; docs/holding.md).
 
 What it senses: ``(rho, alpha)`` at the arm's nodes (eq. (4), as the paper's law) for the cage
 and the wrap angle, and the arm's own curvature for the hold; never the object's pose.
@@ -56,7 +62,8 @@ class HoldLawSettings:
     enclosing band of (H3)), the ``wrap_angle`` (rad) that starts the close, the ``close_rate``
     (m/s) and the ``close_gap`` (m) at which the shape is latched, the ``squeeze`` depth (m)
     and the ``squeeze_time`` (s) of (H5), the hold's stiffness gain ``stiffness_gain`` (G of
-    (H4), dimensionless) and the paper's ``mu1``."""
+    (H4), dimensionless), the paper's ``mu1`` and the ``depth_gain`` (1/s) of the depth
+    regulation (H7; 0, the default: none, the squeeze of (H5) as latched)."""
 
     clearance: float = 0.006
     band: float = 0.001
@@ -67,6 +74,7 @@ class HoldLawSettings:
     squeeze_time: float = 1.0
     stiffness_gain: float = 3000.0
     mu1: float = 1.0
+    depth_gain: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -76,7 +84,7 @@ class HoldLawSettings:
         for name in ("clearance", "band", "close_rate", "squeeze_time", "mu1"):
             if getattr(self, name) <= 0:
                 raise InvalidParameterError(f"hold law {name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("squeeze", "stiffness_gain"):
+        for name in ("squeeze", "stiffness_gain", "depth_gain"):
             if getattr(self, name) < 0:
                 raise InvalidParameterError(f"hold law {name} must be >= 0, got {getattr(self, name)!r}")
         if not 0 < self.close_gap < self.clearance:
@@ -172,6 +180,8 @@ class HoldController:
         self._radius = model.radius(model.s_nodes)
         self._kappa_star: Array | None = None
         self._kappa_step: Array | None = None
+        self._on: NDArray[np.bool_] | None = None  # (the joints whose parallel curve the hold takes)
+        self.depth_offset = 0.0  # (z of (H7), m)
 
     @property
     def holding(self) -> bool:
@@ -199,15 +209,37 @@ class HoldController:
                 k = np.asarray(kappa, dtype=float)
                 target = k.copy()
                 offset = s.close_gap + s.squeeze
-                on = band[:-1] & (offset * np.abs(k) < 1.0)  # (where the parallel curve exists)
+                reach = offset + (s.clearance if s.depth_gain > 0 else 0.0)  # (the largest offset (H7) may take)
+                on = band[:-1] & (reach * np.abs(k) < 1.0)  # (where the parallel curve exists)
                 target[on] = parallel_curvature(k[on], offset)
-                self._kappa_star, self._kappa_step = k, target - k
+                self._kappa_star, self._kappa_step, self._on = k, target - k, on
                 self.phase = "hold"
         if self.phase == "hold":
             assert self._kappa_star is not None and self._kappa_step is not None
+            if s.depth_gain > 0 and self.progress >= 1.0:
+                return self._regulated(np.asarray(rho, dtype=float), band, period)
             self.progress = min(1.0, self.progress + period / s.squeeze_time)
             return ShapeHold(self.model, self._kappa_star + self.progress * self._kappa_step, s.stiffness_gain)
         return self.gains()
+
+    def _regulated(self, rho: Array, band: NDArray[np.bool_], period: float) -> ShapeHold:
+        """(H7): the offset's integral step from the sensed contact depth on the band, and the
+        held shape at the new offset."""
+        s = self.settings
+        assert self._kappa_star is not None and self._on is not None
+        depth = self._radius - rho  # (> 0: pressed into the object)
+        touching = band & (depth > 0)
+        if touching.any():
+            error = s.squeeze - float(depth[touching].mean())
+        elif band.any():
+            error = s.squeeze - float(depth[band].max())
+        else:  # (nothing sensed: hold the offset)
+            error = 0.0
+        self.depth_offset = float(np.clip(self.depth_offset + s.depth_gain * error * period,
+                                          -(s.close_gap + s.squeeze), s.clearance))
+        kappa_ref = self._kappa_star.copy()
+        kappa_ref[self._on] = parallel_curvature(self._kappa_star[self._on], s.close_gap + s.squeeze + self.depth_offset)
+        return ShapeHold(self.model, kappa_ref, s.stiffness_gain)
 
 
 Law = PaperLaw | HoldController
