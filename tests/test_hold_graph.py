@@ -55,17 +55,20 @@ class _Logged:
 
 def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_path: Path) -> None:
     """``contgrasp-launch --law hold --object-mode free``: the paper's arm (N = 100, 2 ms), the
-    circle free, Coulomb friction 0.5, and a 20 mN push along x from 2.801 s, once the hold is
-    complete (2.54 s). Separate node processes in lock-step equal run_sampled of the same
-    scenario bit for bit (arm, object pose and velocity); the recording has the hold and the
-    transition flag of every couple as the core law gave them, the arm's shape in every contact
-    state, the push in the rod states; the held object moved under the push by less than a
-    millimetre and is at rest."""
+    circle free, Coulomb friction 0.5, the depth regulation (H7) on (gain 10/s), and a 20 mN
+    push along x from 2.801 s, once the hold is complete (2.54 s). Separate node processes in
+    lock-step equal run_sampled of the same scenario bit for bit (arm, object pose and velocity);
+    the regulation has moved the hold's offset; the recording has the hold and the transition
+    flag of every couple as the core law gave them, the arm's shape in every contact state, the
+    push in the rod states; the held object moved under the push by less than a millimetre. (It
+    is not yet at rest at 3.2 s: the regulation is still opening the offset, as it does for a few
+    seconds after the squeeze; the rest it reaches is the core's test, in test_hold_law.py.)"""
     data = yaml.safe_load(default_params_file().read_text())
     data["/**"]["ros__parameters"]["friction"] = 0.5
     data["rod_simulator"]["ros__parameters"].update(duration=3.2, disturbance_kind="step", disturbance_wrench=list(PUSH),
                                                     disturbance_start=PUSH_START)
     data["grasp_quality"]["ros__parameters"]["rate_hz"] = 0.0
+    data["grasp_controller"]["ros__parameters"]["hold_depth_gain"] = 10.0
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(data))
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
@@ -81,11 +84,12 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     scenario = Scenario.from_ros_parameters(p)
     assert scenario.law == "hold" and scenario.dynamics.mode == "free" and scenario.rod.friction == 0.5
     law = scenario.controller()
-    assert isinstance(law, HoldController)
+    assert isinstance(law, HoldController) and law.settings.depth_gain == 10.0
     logged = _Logged(law)
     session = run_sampled(scenario, law=logged)  # type: ignore[arg-type]
     obs = session.observe()
     assert obs.body is not None and summary["steps"] == obs.k == 1600
+    assert law.depth_offset != 0.0  # (the regulation acted)
     np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
     np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
     assert summary["final"]["object_q"] == obs.body.q.tolist() and summary["final"]["object_v"] == obs.body.v.tolist()
@@ -111,7 +115,7 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     assert np.all(run.rod.object.wrench[pushed] == PUSH) and abs(run.rod.t[np.argmax(pushed)] - PUSH_START) < 0.003
     at_push = run.rod.object.q[np.argmax(pushed)]
     moved = np.hypot(*(obs.body.q[:2] - at_push[:2]))
-    assert 0.0 < moved < 1e-3 and np.hypot(*obs.body.v[:2]) < 1e-3, (moved, obs.body.v)
+    assert 0.0 < moved < 1e-3, moved
 
 
 def _wrapped_contact(model: Any, step: int, with_shape: bool = True) -> ContactState:
@@ -157,6 +161,7 @@ def test_the_controller_steps_the_holding_law_once_per_state_and_afresh_for_a_ne
     ("law:=grip", "law: must be one of 'paper', 'hold', got 'grip'"),
     ("hold_close_gap:=0.01", "hold law close_gap must be in (0, clearance = 0.006) m, got 0.01"),
     ("hold_stiffness_gain:=-1.0", "hold law stiffness_gain must be >= 0, got -1.0"),
+    ("hold_depth_gain:=-3.0", "hold law depth_gain must be >= 0, got -3.0"),
 ])
 def test_bad_law_parameters_stop_the_controller_with_one_line(parameter: str, message: str) -> None:
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(fresh_domain_id()))
