@@ -240,7 +240,18 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
     """The static map, then every pose not yet in ``path`` (JSON lines, appended as results
     arrive): the grid poses ``grid:i,j`` of the distinct rows (:meth:`StudySpec.distinct_rows`)
     and the optima ``optimum:Q1|Q2|Q3``. Returns the map and all results (earlier ones
-    included; :func:`expand_symmetric` fills in the rest of the grid)."""
+    included; :func:`expand_symmetric` fills in the rest of the grid). A file of another
+    specification is refused first, before the map's minutes."""
+    p = Path(path)
+    earlier = load_results(p)
+    wanted = json.loads(json.dumps(_spec_dict(spec)))
+    other = {k: v for k, v in earlier[0].items() if k != "key"} if earlier else dict(wanted)
+    if isinstance(other.get("object"), str):  # (recorded by the name it was given: "circle" for "circle:5")
+        other["object"] = _canonical_object(other["object"])
+    if other != wanted:
+        differ = sorted(k for k in set(other) | set(wanted) if other.get(k) != wanted.get(k))
+        raise InvalidParameterError(f"{p} holds a study of another specification (it differs in {', '.join(differ)}); "
+                                    "give the same options to resume it, or another file")
     qm = quality_map(spec.map_spec(), executor="serial" if executor == "dask" else executor, workers=workers,
                      progress=progress)
     tasks = []
@@ -254,16 +265,6 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
         static = [np.nan, np.nan, np.nan]
         static[k] = opt["value"]
         tasks.append((f"optimum:{metric}", (b["x"], b["y"], b["theta"]), tuple(static)))
-    p = Path(path)
-    earlier = load_results(p)
-    wanted = json.loads(json.dumps(_spec_dict(spec)))
-    other = {k: v for k, v in earlier[0].items() if k != "key"} if earlier else dict(wanted)
-    if isinstance(other.get("object"), str):  # (recorded by the name it was given: "circle" for "circle:5")
-        other["object"] = _canonical_object(other["object"])
-    if other != wanted:
-        differ = sorted(k for k in set(other) | set(wanted) if other.get(k) != wanted.get(k))
-        raise InvalidParameterError(f"{p} holds a study of another specification (it differs in {', '.join(differ)}); "
-                                    "give the same options to resume it, or another file")
     done = {r["key"] for r in earlier}
     todo = [(spec, key, tuple(float(v) for v in base), tuple(float(v) for v in q))
             for key, base, q in tasks if key not in done]

@@ -135,9 +135,10 @@ def test_an_arm_that_does_not_touch_the_object_is_a_no_contact_outcome() -> None
     assert row["base"] == pytest.approx(list(base_si(spec, (0.0, -40.0, 0.0))))
 
 
-def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
+def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Two base poses of the circle's map and the three optima, a coarse rod and short ramps:
-    every pose gets a result line; running again computes nothing and returns the same rows."""
+    every pose gets a result line; running again computes nothing and returns the same rows; a
+    file of another specification is refused before the map is computed."""
     spec = StudySpec(object="ellipse", psi_steps=4, d_steps=1, nodes=31,
                      hold=HoldSettings(directions=1, ramp_time=0.4, hold_time=0.3, release_time=0.3))
     out = tmp_path / "study.jsonl"
@@ -166,6 +167,12 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path) -> None:
     older = tmp_path / "older.jsonl"
     older.write_text(out.read_text().replace('"object": "ellipse:8,4"', '"object": "ellipse"', 1))
     assert run_study(spec, older, executor="serial")[1] == rows and older.read_text().count("\n") == len(lines)
+    import contgrasp_core.holding_study as study
+
+    def no_map(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the map was computed for a file that is refused")
+
+    monkeypatch.setattr(study, "quality_map", no_map)
     with pytest.raises(InvalidParameterError, match=r"another specification \(it differs in duration, nodes\)"):
         run_study(replace(spec, nodes=41, duration=2.0), out, executor="serial")
     from contgrasp_core.figures.holding import study_figure
