@@ -9,7 +9,8 @@ each metric, :func:`run_study`
 2. places the rod at the same pose scaled to metres (``scale`` m per paper unit about the
    object frame's origin: the paper's R = 5 circle becomes the rod scenario's 2.5 cm one), runs
    its closed loop to settlement and measures Q1-Q3 of the settled contact, the grasp stiffness K
-   and the holding capacity (:func:`contgrasp_core.holding.measure_holding`).
+   and the holding capacity (:func:`contgrasp_core.holding.measure_holding`), and records the
+   settled grasp's largest line pressure (``pressure_max``, N/m) and its settle time.
 
 The arm (``arm``) is the map's, uniform with a length a fraction of the object's perimeter
 (``map``, the paper's Sec. IV-C), or the rod scenario's own tapered arm for both the map and the
@@ -212,7 +213,8 @@ def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float]
                Q1_force=d["Q1_force"], Q2_force=d["Q2_force"], Q3_force=d["Q3_force"],
                stiffness=d["stiffness"], stiffness_eigenvalues=d["stiffness_eigenvalues"],
                stiffness_min=float(eig[0]), stiffness_det=float(np.prod(eig)), capacity=d["capacity"],
-               capacity_min=result.capacity_min, released_displacement=d["released_displacement"])
+               capacity_min=result.capacity_min, released_displacement=d["released_displacement"],
+               pressure_max=result.pressure_max, settle_time_s=result.settle_time)
     return out
 
 

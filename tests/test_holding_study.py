@@ -150,6 +150,7 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest
     assert ok, [r["status"] for r in rows]
     for r in ok:
         assert np.asarray(r["stiffness"]).shape == (3, 3) and len(r["capacity"]) == 3 and r["Q1"] > 0
+        assert r["pressure_max"] > 0 and 0 < r["settle_time_s"] <= spec.duration  # (the settled grasp presses)
     lines = out.read_text().splitlines()
     # the static wrench capacity Q_H of each pose's optimal grasp (docs/holding.md (M3)) is in every row, written too
     from contgrasp_core.arm import BasePose
