@@ -31,21 +31,23 @@ torque. The integral is the arm-grid quadrature of Q1-Q3 (:func:`contgrasp_core.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize
 
 from ._validate import float_array, real
-from .errors import InvalidParameterError
+from .errors import ContgraspError, InvalidParameterError
 from .quality import contact_weights
 
 if TYPE_CHECKING:
     from .arm import BasePose
+    from .boundary import Boundary
     from .quality_map import MapSpec
 
-__all__ = ["WrenchCapacity", "wrench_generators", "support", "wrench_capacity", "static_capacity", "SEARCH_DIRECTIONS"]
+__all__ = ["WrenchCapacity", "wrench_generators", "support", "wrench_capacity", "static_capacity", "static_capacity_column",
+           "SEARCH_DIRECTIONS"]
 
 Array = NDArray[np.float64]
 
@@ -137,16 +139,39 @@ def wrench_capacity(s: ArrayLike, gamma: ArrayLike, phi: ArrayLike, delta: Array
     return WrenchCapacity(max(best_value, 0.0), np.asarray(best_dir, dtype=float), length)
 
 
-def static_capacity(spec: MapSpec, base: BasePose, mu: float) -> WrenchCapacity:
+def static_capacity(spec: MapSpec, base: BasePose, mu: float, warm: Any = None) -> WrenchCapacity:
     """Q_H (M3) of the optimal grasp of Sec. III from ``base`` (the quality map's problem and
-    contact set, paper units: :func:`contgrasp_core.quality_map.optimal_grasp` from its cold
-    starts), with Coulomb ``mu``, torques about the object frame origin scaled by the object's
-    nominal radius: the measure before any simulation. :class:`ContgraspError` when the grasp
-    cannot be solved from ``base``."""
+    contact set, paper units: :func:`contgrasp_core.quality_map.optimal_grasp`, from the warm
+    start ``warm`` if given, else its cold starts), with Coulomb ``mu``, torques about the object
+    frame origin scaled by the object's nominal radius: the measure before any simulation.
+    :class:`ContgraspError` when the grasp cannot be solved from ``base``."""
+    return _static(spec, spec.boundary(), base, mu, warm)[0]
+
+
+def static_capacity_column(spec: MapSpec, bases: list[BasePose], mu: float) -> list[WrenchCapacity | None]:
+    """Q_H (M3) along one polar angle's valid map bases in increasing distance, each grasp
+    warm-started from the previous one as the quality map's column walk does
+    (:func:`contgrasp_core.quality_map.quality_map`): the very grasps whose Q1-Q3 the map reports
+    (a cold start can miss some: it fails at 4 of the kidney outline's 89 valid poses). ``None``
+    where a grasp cannot be solved."""
+    boundary = spec.boundary()
+    warm: Any = None
+    out: list[WrenchCapacity | None] = []
+    for base in bases:
+        try:
+            cap, warm = _static(spec, boundary, base, mu, warm)
+        except ContgraspError:
+            cap = None
+        out.append(cap)
+    return out
+
+
+def _static(spec: MapSpec, boundary: Boundary, base: BasePose, mu: float, warm: Any) -> tuple[WrenchCapacity, Any]:
+    """Q_H of the optimal grasp from ``base`` and the grasp (a warm start for the next base)."""
     from .quality_map import optimal_grasp
 
-    boundary = spec.boundary()
-    problem, res = optimal_grasp(spec, boundary, base)
+    problem, res = optimal_grasp(spec, boundary, base, warm)
     s = problem.s
-    return wrench_capacity(s, boundary.point(res.s_o), boundary.tangent_angle(res.s_o), problem.arm.radius(s) - res.rho,
-                           mu=mu, tol=spec.contact_tol, scale=spec.object.radius)
+    cap = wrench_capacity(s, boundary.point(res.s_o), boundary.tangent_angle(res.s_o), problem.arm.radius(s) - res.rho,
+                          mu=mu, tol=spec.contact_tol, scale=spec.object.radius)
+    return cap, res

@@ -283,8 +283,9 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
                 fh.flush()
     except OSError as exc:
         raise WriteError(f"cannot write the study results to {p}: {exc.strerror or exc}") from exc
-    # (results written before Q_H existed get it now; the file keeps them as they were)
-    return qm, [{"static_QH": static_h.get(r["key"], float("nan")), **r} for r in load_results(p) if r["key"] != "spec"]
+    # (Q_H is recomputed for every pose, so results written before it existed, or before it was
+    # taken from the map's own grasps, get today's; the file keeps them as they were)
+    return qm, [{**r, "static_QH": static_h.get(r["key"], float("nan"))} for r in load_results(p) if r["key"] != "spec"]
 
 
 def _canonical_object(text: str) -> str:
@@ -296,16 +297,26 @@ def _canonical_object(text: str) -> str:
 
 
 def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...], tuple[float, ...]]]) -> dict[str, float]:
-    """Q_H of the optimal grasp from each task's base (paper units), with the study's friction
-    (NaN where the grasp cannot be solved from a cold start)."""
-    from contgrasp_core.holding_measure import static_capacity
+    """Q_H of each task's optimal grasp (paper units), with the study's friction: for the grid
+    poses the map's own grasps (each row warm-started along increasing distance, as the map
+    solves them), for the optima from a cold start; NaN where the grasp cannot be solved."""
+    from contgrasp_core.holding_measure import static_capacity, static_capacity_column
 
     ms, out = spec.map_spec(), {}
+    rows: dict[int, list[tuple[int, str, tuple[float, ...]]]] = {}
     for key, base, _ in tasks:
-        try:
-            out[key] = static_capacity(ms, BasePose(*base), spec.hold.mu).measure
-        except ContgraspError:
-            out[key] = float("nan")
+        if key.startswith("grid:"):
+            i, j = (int(v) for v in key[len("grid:"):].split(","))
+            rows.setdefault(i, []).append((j, key, base))
+        else:
+            try:
+                out[key] = static_capacity(ms, BasePose(*base), spec.hold.mu).measure
+            except ContgraspError:
+                out[key] = float("nan")
+    for column in rows.values():
+        column.sort()
+        caps = static_capacity_column(ms, [BasePose(*base) for _, _, base in column], spec.hold.mu)
+        out.update({key: float("nan") if cap is None else cap.measure for (_, key, _), cap in zip(column, caps, strict=True)})
     return out
 
 

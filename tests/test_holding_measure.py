@@ -113,3 +113,24 @@ def test_the_friction_bound_of_a_flat_contact_is_mu_times_its_normal_bound() -> 
     p_max, bound = friction_bound(rod, circle(big, centre), np.zeros(rod.n_elements), 0.5, directions, centre, big)
     assert rod.contact_stiffness * depth * 0.99 < p_max <= rod.contact_stiffness * depth * (1 + 1e-9)
     assert bound[1] > 0 and bound[2] == 0.0 and bound[0] / bound[1] == pytest.approx(0.5, abs=1e-3)
+
+
+def test_the_columns_q_h_is_of_the_maps_own_grasps() -> None:
+    """Along one polar angle of the map, Q_H is taken of the grasps the map solved (each
+    warm-started from the previous distance, as the map's column walk): its contact length is
+    the map's (grasp_quality's, from the same solution) at every valid pose; the first pose,
+    without a warm start, is the cold start's."""
+    from contgrasp_core.arm import BasePose
+    from contgrasp_core.holding_measure import static_capacity, static_capacity_column
+    from contgrasp_core.holding_study import StudySpec
+    from contgrasp_core.quality_map import _column
+
+    ms = StudySpec(object="ellipse", arm="rod", d_steps=4).map_spec()
+    column = [r for r in _column(ms, float(ms.psi[3])) if r.valid]
+    assert len(column) >= 3
+    caps = static_capacity_column(ms, [BasePose(*r.base) for r in column], 0.5)
+    assert all(c is not None and c.measure > 0 for c in caps)
+    np.testing.assert_allclose([c.contact_length for c in caps if c is not None], [r.contact_length for r in column],
+                               rtol=1e-12)
+    cold = static_capacity(ms, BasePose(*column[0].base), 0.5)
+    assert caps[0] is not None and caps[0].measure == cold.measure and caps[0].contact_length == cold.contact_length
