@@ -283,9 +283,36 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
                 fh.flush()
     except OSError as exc:
         raise WriteError(f"cannot write the study results to {p}: {exc.strerror or exc}") from exc
-    # (Q_H is recomputed for every pose, so results written before it existed, or before it was
-    # taken from the map's own grasps, get today's; the file keeps them as they were)
-    return qm, [{**r, "static_QH": static_h.get(r["key"], float("nan"))} for r in load_results(p) if r["key"] != "spec"]
+    return qm, _with_todays_map(spec, load_results(p), tasks, static_h)
+
+
+def _with_todays_map(spec: StudySpec, results: list[dict[str, Any]],
+                     tasks: list[tuple[str, tuple[float, ...], tuple[float, ...]]],
+                     static_h: dict[str, float]) -> list[dict[str, Any]]:
+    """The measured rows with the static predictors (Q1-Q3, Q_H) of today's map, which the
+    figure shows too; the file keeps what it recorded. A row whose base or static Q1-Q3 differ
+    from today's (or whose pose is no longer valid in today's map, its predictors then NaN) is
+    marked ``map_changed``: the map was computed differently when it ran (the inner solve's
+    marginal poses can change with the numerical libraries' versions)."""
+    today = {key: (base, q) for key, base, q in tasks}
+    out = []
+    for r in results:
+        if r["key"] == "spec":
+            continue
+        row = {**r, "static_QH": static_h.get(r["key"], float("nan"))}
+        if r["key"] in today:
+            base, q = today[r["key"]]
+            stored = [float(r.get(f"static_Q{k}", float("nan"))) for k in (1, 2, 3)]
+            same = (np.allclose(r["base"], base_si(spec, (base[0], base[1], base[2])), rtol=0.0, atol=1e-9)
+                    and np.allclose(stored, q, rtol=1e-6, atol=0.0, equal_nan=True))
+            row.update(static_Q1=q[0], static_Q2=q[1], static_Q3=q[2])
+        else:
+            same = False
+            row.update(static_Q1=float("nan"), static_Q2=float("nan"), static_Q3=float("nan"))
+        if not same:
+            row["map_changed"] = True
+        out.append(row)
+    return out
 
 
 def _canonical_object(text: str) -> str:

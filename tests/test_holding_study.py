@@ -168,6 +168,18 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest
     older = tmp_path / "older.jsonl"
     older.write_text(out.read_text().replace('"object": "ellipse:8,4"', '"object": "ellipse"', 1))
     assert run_study(spec, older, executor="serial")[1] == rows and older.read_text().count("\n") == len(lines)
+    # a row measured with another static map (here: its static Q1 altered) is reported with
+    # today's map and marked, the others are not
+    tampered = tmp_path / "tampered.jsonl"
+    edited = [json.loads(line) for line in lines]
+    for row in edited:
+        if row["key"] == "grid:0,0":
+            row["static_Q1"] *= 2.0
+    tampered.write_text("".join(json.dumps(row) + "\n" for row in edited))
+    marked = {r["key"]: r for r in run_study(spec, tampered, executor="serial")[1]}
+    assert marked["grid:0,0"]["map_changed"] and marked["grid:0,0"]["static_Q1"] == grid["static_Q1"]
+    assert not any(r.get("map_changed") for k, r in marked.items() if k != "grid:0,0")
+    assert "map_changed" not in grid
     import contgrasp_core.holding_study as study
 
     def no_map(*args: object, **kwargs: object) -> None:

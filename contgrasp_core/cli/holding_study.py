@@ -10,6 +10,7 @@ command again resumes.
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
 from collections import Counter
 from typing import Any
@@ -96,10 +97,15 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,
                          progress=not args.json)
     ok = [r for r in rows if r.get("status") == "ok"]
+    changed = sum(bool(r.get("map_changed")) for r in rows)
+    if changed:
+        print(f"contgrasp holding-study: warning: {changed} of the {len(rows)} poses in {args.out} were measured with "
+              "another static map (their base or static Q1-Q3 differ from today's, or the pose is no longer valid in "
+              "it); the correlations use today's map", file=sys.stderr)
     full = expand_symmetric(spec, rows)
     out = {"object": qm.spec.object.text(), "out": args.out, "poses": len(rows), "grasped": len(ok),
            "not_grasped": len(rows) - len(ok), "outcomes": dict(Counter(r.get("outcome", "?") for r in rows)),
-           "distinct_rows": spec.distinct_rows(), "grid_poses": sum(r["key"].startswith("grid:") for r in full),
+           "map_changed": changed, "distinct_rows": spec.distinct_rows(), "grid_poses": sum(r["key"].startswith("grid:") for r in full),
            "correlations": correlations(rows), "correlations_with_optima": correlations(rows, grid_only=False)}
     if args.plot:
         from ..figures.holding import plot_study
