@@ -293,7 +293,7 @@ def _with_todays_map(spec: StudySpec, results: list[dict[str, Any]],
     figure shows too; the file keeps what it recorded. A row whose base or static Q1-Q3 differ
     from today's (or whose pose is no longer valid in today's map, its predictors then NaN) is
     marked ``map_changed``: the map was computed differently when it ran (the inner solve's
-    marginal poses can change with the numerical libraries' versions)."""
+    marginal poses can change with the numerical libraries or the machine)."""
     today = {key: (base, q) for key, base, q in tasks}
     out = []
     for r in results:
