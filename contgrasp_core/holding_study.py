@@ -29,6 +29,7 @@ import json
 import math
 import time
 from dataclasses import asdict, dataclass, field, replace
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +61,10 @@ RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min", "grasped")
 (over the poses that grasped), and whether the closed loop made a settled grasp that held at all
 (1 or 0, over every pose: only the static map's measures exist for the poses that did not)."""
 
+
+NUMERICS = {name: version(name) for name in ("numpy", "scipy", "numba")}
+"""The numerical libraries' versions, recorded in every result row: a static map's marginal
+poses can change with them (docs/holding.md, the kidney's map between sessions)."""
 
 ARMS = ("map", "rod")
 """The study's arms (module docstring)."""
@@ -191,7 +196,8 @@ def study_pose(spec: StudySpec, key: str, base_paper: tuple[float, float, float]
     result with its ``status``; so is a base the arm cannot start from, outcome ``refused``:
     :func:`contgrasp_core.scenario.check_start`)."""
     out: dict[str, Any] = {"key": key, "base": list(base_si(spec, base_paper)),
-                           "static_Q1": static_q[0], "static_Q2": static_q[1], "static_Q3": static_q[2]}
+                           "static_Q1": static_q[0], "static_Q2": static_q[1], "static_Q3": static_q[2],
+                           "versions": NUMERICS}
     t0 = time.perf_counter()
     try:
         scenario = pose_scenario(spec, base_paper)

@@ -146,6 +146,7 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest
     # (rows 2 and 3 are the half-turns of rows 0 and 1)
     assert sorted(r["key"] for r in rows) == ["grid:0,0", "grid:1,0", "optimum:Q1", "optimum:Q2", "optimum:Q3"]
     assert all(r["outcome"] in ("held", "no contact", "not settled", "not held") for r in rows)
+    assert all(r["versions"]["numpy"] == np.__version__ and set(r["versions"]) == {"numpy", "scipy", "numba"} for r in rows)
     ok = [r for r in rows if r["status"] == "ok"]
     assert ok, [r["status"] for r in rows]
     for r in ok:
