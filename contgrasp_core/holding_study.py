@@ -237,10 +237,20 @@ def load_results(path: str | Path) -> list[dict[str, Any]]:
     for n, line in enumerate(p.read_text().splitlines(), 1):
         if line.strip():
             try:
-                rows.append(json.loads(line))
+                row = json.loads(line)
             except json.JSONDecodeError as exc:
                 raise InvalidParameterError(f"{p}:{n}: not a study result line ({exc.msg})") from exc
+            if not (isinstance(row, dict) and isinstance(row.get("key"), str)):
+                raise InvalidParameterError(f"{p}:{n}: not a study result line (an object with a text 'key')")
+            if row["key"] != "spec" and not _is_base(row.get("base")):
+                raise InvalidParameterError(f"{p}:{n}: not a study result line (its 'base' is not three finite numbers)")
+            rows.append(row)
     return rows
+
+
+def _is_base(value: Any) -> bool:
+    return (isinstance(value, list) and len(value) == 3
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))
 
 
 def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes", workers: int | None = None,
@@ -308,7 +318,7 @@ def _with_todays_map(spec: StudySpec, results: list[dict[str, Any]],
         row = {**r, "static_QH": static_h.get(r["key"], float("nan"))}
         if r["key"] in today:
             base, q = today[r["key"]]
-            stored = [float(r.get(f"static_Q{k}", float("nan"))) for k in (1, 2, 3)]
+            stored = [_value(r, f"static_Q{k}") for k in (1, 2, 3)]
             same = (np.allclose(r["base"], base_si(spec, (base[0], base[1], base[2])), rtol=0.0, atol=1e-9)
                     and np.allclose(stored, q, rtol=1e-6, atol=0.0, equal_nan=True))
             row.update(static_Q1=q[0], static_Q2=q[1], static_Q3=q[2])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from typing import Any
 from dataclasses import replace
 from pathlib import Path
@@ -326,3 +327,18 @@ def test_the_study_takes_an_outline_scaled_about_its_origin() -> None:
     assert spec.distinct_rows() == 8
     with pytest.raises(InvalidParameterError, match="must be text"):
         StudySpec(object=3)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("line", "why"), [
+    ('{"key": "grid:0,0", "base": [0.1, 0.2]}', "its 'base' is not three finite numbers"),
+    ('{"key": "grid:0,0"}', "its 'base' is not three finite numbers"),
+    ('{"key": "grid:0,0", "base": [0.1, "x", 0.0]}', "its 'base' is not three finite numbers"),
+    ('{"base": [0.1, 0.2, 0.0]}', "an object with a text 'key'"),
+    ('[1, 2, 3]', "an object with a text 'key'"),
+    ('{"key": "grid:0,0", "base": [0.1, 0.2', "not a study result line"),
+])
+def test_a_malformed_results_line_is_refused_with_its_line_number(tmp_path: Path, line: str, why: str) -> None:
+    out = tmp_path / "study.jsonl"
+    out.write_text('{"key": "spec"}\n' + line + "\n")
+    with pytest.raises(InvalidParameterError, match=rf"study.jsonl:2: .*{re.escape(why)}"):
+        load_results(out)
