@@ -139,21 +139,21 @@ def wrench_capacity(s: ArrayLike, gamma: ArrayLike, phi: ArrayLike, delta: Array
     return WrenchCapacity(max(best_value, 0.0), np.asarray(best_dir, dtype=float), length)
 
 
-def static_capacity(spec: MapSpec, base: BasePose, mu: float, warm: Any = None) -> WrenchCapacity:
+def static_capacity(spec: MapSpec, base: BasePose, mu: float) -> WrenchCapacity:
     """Q_H (M3) of the optimal grasp of Sec. III from ``base`` (the quality map's problem and
-    contact set, paper units: :func:`contgrasp_core.quality_map.optimal_grasp`, from the warm
-    start ``warm`` if given, else its cold starts), with Coulomb ``mu``, torques about the object
-    frame origin scaled by the object's nominal radius: the measure before any simulation.
-    :class:`ContgraspError` when the grasp cannot be solved from ``base``."""
-    return _static(spec, spec.boundary(), base, mu, warm)[0]
+    contact set, paper units: :func:`contgrasp_core.quality_map.optimal_grasp` from its cold
+    starts), with Coulomb ``mu``, torques about the object frame origin scaled by the object's
+    nominal radius: the measure before any simulation. :class:`ContgraspError` when the grasp
+    cannot be solved from ``base``."""
+    return _static(spec, spec.boundary(), base, mu, None)[0]
 
 
 def static_capacity_column(spec: MapSpec, bases: list[BasePose], mu: float) -> list[WrenchCapacity | None]:
     """Q_H (M3) along one polar angle's valid map bases in increasing distance, each grasp
     warm-started from the previous one as the quality map's column walk does
     (:func:`contgrasp_core.quality_map.quality_map`): the very grasps whose Q1-Q3 the map reports
-    (a cold start can miss some: it fails at 4 of the kidney outline's 89 valid poses). ``None``
-    where a grasp cannot be solved."""
+    (a cold start may solve another local optimum, or none). ``None`` where a grasp cannot be
+    solved."""
     boundary = spec.boundary()
     warm: Any = None
     out: list[WrenchCapacity | None] = []
