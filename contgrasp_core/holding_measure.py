@@ -26,6 +26,12 @@ resisted at all (no force closure: a frictionless wrap under half a turn, a torq
 friction). Closed forms (tested): a full wrap of a circle of radius ``R`` about its centre with
 ``a = R`` has ``h = 2 R (sqrt(1 + mu^2) + mu)`` for any pure force and ``2 pi R mu`` for the pure
 torque. The integral is the arm-grid quadrature of Q1-Q3 (:func:`contgrasp_core.quality.contact_weights`).
+
+Of which contact set? :func:`static_capacity` takes the paper's optimal grasp of Sec. III (the
+static map's); :func:`cage_capacity` takes the contact set the holding law will press
+(docs/holding.md (M4)): its cage (H1) at rest at the close gap, the static closed loop of eq.
+(8) with the feedback curvature eq. (20) integrated from the arm's base (the rod at rest with
+no load: ``EI kappa + u = 0``), and the enclosing band (H3) on it.
 """
 
 from __future__ import annotations
@@ -45,9 +51,10 @@ if TYPE_CHECKING:
     from .arm import BasePose
     from .boundary import Boundary
     from .quality_map import MapSpec
+    from .scenario import Scenario
 
 __all__ = ["WrenchCapacity", "wrench_generators", "support", "wrench_capacity", "static_capacity", "static_capacity_column",
-           "SEARCH_DIRECTIONS"]
+           "cage_capacity", "SEARCH_DIRECTIONS"]
 
 Array = NDArray[np.float64]
 
@@ -175,3 +182,35 @@ def _static(spec: MapSpec, boundary: Boundary, base: BasePose, mu: float, warm: 
     cap = wrench_capacity(s, boundary.point(res.s_o), boundary.tangent_angle(res.s_o), problem.arm.radius(s) - res.rho,
                           mu=mu, tol=spec.contact_tol, scale=spec.object.radius)
     return cap, res
+
+
+def cage_capacity(scenario: Scenario, mu: float) -> WrenchCapacity:
+    """(M4): Q_H (M3) of the contact set the holding law will press, before simulating: the
+    cage (H1) of ``scenario`` (law ``hold``) at rest at its close gap ``g_f``: the static closed
+    loop (eq. (8) with the feedback curvature eq. (20), gains
+    :func:`~contgrasp_core.control.hold_law.cage_gains` at ``g_f``) integrated along the arm
+    from its base's sensed ``(rho, alpha, s_o)``, and the enclosing band (H3) on it
+    (``rho - r <= g_f + band``, cut at its linear crossing as Q1-Q3 cut the contact set).
+    Coulomb ``mu``, torques about the object's centre scaled by its nominal radius; SI (Q_H in
+    m). :class:`ContgraspError` when the closed loop cannot be integrated from the base (it
+    leaves the region where ``(rho, alpha)`` is defined)."""
+    from .arm import ArmShape
+    from .contact import sense
+    from .control.hold_law import HoldController, cage_gains
+    from .control.law import closed_loop_kinematics
+
+    law, m, boundary = scenario.controller(), scenario.rod, scenario.object.boundary()
+    if not isinstance(law, HoldController):
+        raise InvalidParameterError(f"the cage is the holding law's; the scenario's law is {scenario.law!r}")
+    s = law.settings
+    gains = cage_gains(m, law.object_radius, s, s.close_gap, law.length_unit)
+    base = sense(ArmShape(s=np.zeros(1), r=np.array([m.base_position], dtype=float), theta=np.array([m.base_angle])),
+                 boundary, float(m.radius(np.zeros(1))[0]))
+    mu2 = np.asarray(gains.mu2, dtype=float)
+    cage = closed_loop_kinematics(float(base.rho[0]), float(base.alpha[0]), m.s_nodes, gains.mu1,
+                                  lambda si: np.interp(si, m.joint_s, mu2),
+                                  lambda so: float(boundary.curvature(so)), length_unit=gains.length_unit,
+                                  s_o0=float(base.s_o[0]))
+    in_band = s.close_gap + s.band - (cage.rho - m.radius(m.s_nodes))
+    return wrench_capacity(m.s_nodes, boundary.point(cage.s_o), boundary.tangent_angle(cage.s_o), in_band, mu=mu,
+                           ref=scenario.object.center, scale=scenario.object.radius)

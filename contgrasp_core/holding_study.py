@@ -47,11 +47,13 @@ from .scenario import PAPER, Scenario
 __all__ = ["ARMS", "StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose",
            "expand_symmetric", "pose_scenario"]
 
-PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "static_QH", "Q1", "Q2", "Q3", "Q1_force", "Q2_force", "Q3_force",
-              "bound_min")
+PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "static_QH", "cage_QH", "Q1", "Q2", "Q3", "Q1_force", "Q2_force",
+              "Q3_force", "bound_min")
 """The quality measures: the static map's (the paper's optimal grasp) Q1-Q3 and wrench capacity
 Q_H (:func:`contgrasp_core.holding_measure.static_capacity`, with the study's friction), the
-settled grasp's, the settled grasp's weighted by its contact forces
+wrench capacity of the holding law's cage at rest (``cage_QH``,
+:func:`contgrasp_core.holding_measure.cage_capacity`: before simulating too; NaN for the
+paper's law), the settled grasp's, the settled grasp's weighted by its contact forces
 (:func:`contgrasp_core.holding.force_weighted_quality`), and the settled grasp's friction bound
 ``p_max h(d)`` (:func:`contgrasp_core.holding.friction_bound`, its pressure at rest) in the
 weakest of the measured directions (a diagnostic after simulating: does friction at the rest
@@ -81,7 +83,8 @@ class StudySpec:
     (``paper`` or ``hold``, docs/holding.md) and the arm's length as a fraction of the object's
     perimeter (``length_fraction``: the map's and the rod's; 0.5 the paper's map) or the rod
     scenario's arm (``arm``: module docstring), and the holding law's depth regulation
-    (``depth_gain``, 1/s, docs/holding.md (H7); 0: none)."""
+    (``depth_gain``, 1/s, docs/holding.md (H7); 0: none) and dwell (``dwell``, s, (H8); 0:
+    none)."""
 
     object: str = "circle"
     psi_steps: int = 24
@@ -96,6 +99,7 @@ class StudySpec:
     length_fraction: float = 0.5
     arm: str = "map"
     depth_gain: float = 0.0
+    dwell: float = 0.0
 
     def __post_init__(self) -> None:
         if self.arm not in ARMS:
@@ -113,13 +117,15 @@ class StudySpec:
             raise InvalidParameterError(f"duration must be a finite number > 0 (s), got {self.duration!r}")
         if self.law not in LAWS:
             raise InvalidParameterError(f"unknown law {self.law!r}; the laws are {', '.join(LAWS)}")
-        self.hold_law()  # (validates the depth gain)
+        self.hold_law()  # (validates the depth gain and the dwell)
         if self.depth_gain and self.law != "hold":
             raise InvalidParameterError("the depth gain regulates the holding law's squeeze; it needs law hold")
+        if self.dwell and self.law != "hold":
+            raise InvalidParameterError("the dwell is the holding law's latch; it needs law hold")
 
     def hold_law(self) -> HoldLawSettings:
-        """The holding law's settings of every pose: the defaults with the study's depth gain."""
-        return HoldLawSettings(depth_gain=self.depth_gain)
+        """The holding law's settings of every pose: the defaults with the study's depth gain and dwell."""
+        return HoldLawSettings(depth_gain=self.depth_gain, dwell=self.dwell)
 
     def object_spec(self) -> ObjectSpec:
         """The object in the paper's units (a built-in shape or an outline)."""
@@ -286,7 +292,7 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
     done = {r["key"] for r in earlier}
     todo = [(spec, key, tuple(float(v) for v in base), tuple(float(v) for v in q))
             for key, base, q in tasks if key not in done]
-    static_h = _static_capacities(spec, tasks)
+    before = _before_simulating(spec, tasks)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
         with p.open("a") as fh:
@@ -294,18 +300,19 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
                 fh.write(json.dumps({"key": "spec", **_spec_dict(spec)}) + "\n")
             for row in run_tasks(_task, todo, executor, workers=workers, scheduler=scheduler,
                                  progress=f"holding study {spec.object}" if progress else None, unit="pose"):
-                row.setdefault("static_QH", static_h.get(row["key"], float("nan")))
+                for name, value in before.get(row["key"], _NOT_COMPUTED).items():
+                    row.setdefault(name, value)
                 fh.write(json.dumps(row, allow_nan=True) + "\n")
                 fh.flush()
     except OSError as exc:
         raise WriteError(f"cannot write the study results to {p}: {exc.strerror or exc}") from exc
-    return qm, _with_todays_map(spec, load_results(p), tasks, static_h)
+    return qm, _with_todays_map(spec, load_results(p), tasks, before)
 
 
 def _with_todays_map(spec: StudySpec, results: list[dict[str, Any]],
                      tasks: list[tuple[str, tuple[float, ...], tuple[float, ...]]],
-                     static_h: dict[str, float]) -> list[dict[str, Any]]:
-    """The measured rows with the static predictors (Q1-Q3, Q_H) of today's map, which the
+                     before: dict[str, dict[str, float]]) -> list[dict[str, Any]]:
+    """The measured rows with the static predictors (Q1-Q3, Q_H, the cage's Q_H) of today's map, which the
     figure shows too; the file keeps what it recorded. A row whose base or static Q1-Q3 differ
     from today's (or whose pose is no longer valid in today's map, its predictors then NaN) is
     marked ``map_changed``: the map was computed differently when it ran (the inner solve's
@@ -315,7 +322,7 @@ def _with_todays_map(spec: StudySpec, results: list[dict[str, Any]],
     for r in results:
         if r["key"] == "spec":
             continue
-        row = {**r, "static_QH": static_h.get(r["key"], float("nan"))}
+        row = {**r, **before.get(r["key"], _NOT_COMPUTED)}
         if r["key"] in today:
             base, q = today[r["key"]]
             stored = [_value(r, f"static_Q{k}") for k in (1, 2, 3)]
@@ -337,6 +344,31 @@ def _canonical_object(text: str) -> str:
         return ObjectSpec.parse(text, FIG2_SCALE).text()
     except ContgraspError:
         return text
+
+
+_NOT_COMPUTED = {"static_QH": math.nan, "cage_QH": math.nan}
+"""The measures before simulating of a pose that has none (not among today's tasks). (NaN here
+is ``math.nan``, one object, so rows compare equal run after run.)"""
+
+
+def _before_simulating(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...], tuple[float, ...]]]) -> dict[str, dict[str, float]]:
+    """The wrench capacities before simulating of each task: ``static_QH`` of its optimal grasp
+    (:func:`_static_capacities`) and, with the holding law, ``cage_QH`` of the law's cage at
+    rest (:func:`contgrasp_core.holding_measure.cage_capacity`, SI; NaN where the cage's
+    closed loop cannot be integrated from the base, and for the paper's law)."""
+    from contgrasp_core.holding_measure import cage_capacity
+
+    static = _static_capacities(spec, tasks)
+    out = {}
+    for key, base, _ in tasks:
+        cage = math.nan
+        if spec.law == "hold":
+            try:
+                cage = cage_capacity(pose_scenario(spec, (base[0], base[1], base[2])), spec.hold.mu).measure
+            except ContgraspError:
+                pass
+        out[key] = {"static_QH": static[key], "cage_QH": cage}
+    return out
 
 
 def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...], tuple[float, ...]]]) -> dict[str, float]:
@@ -363,7 +395,7 @@ def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...]
     return out
 
 
-_LATER_FIELDS = {"law": "paper", "length_fraction": 0.5, "arm": "map", "depth_gain": 0.0}
+_LATER_FIELDS = {"law": "paper", "length_fraction": 0.5, "arm": "map", "depth_gain": 0.0, "dwell": 0.0}
 """StudySpec's fields added after studies were recorded, with their defaults: written only when
 they differ, so a file recorded before them resumes (it holds a study at those defaults)."""
 

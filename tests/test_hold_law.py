@@ -192,6 +192,38 @@ def _latched(settings: HoldLawSettings) -> tuple[HoldController, np.ndarray]:
     return law, r
 
 
+def test_the_dwell_latches_the_mean_curvature_and_the_band_of_most_of_it() -> None:
+    """(H8) in isolation: at the close gap the law keeps the cage's gains (H1) at that gap for
+    ``dwell`` (1 s: four periods of 0.25 s, exact in binary), then latches the mean of the four
+    sensed curvatures (alternating 1/(3 cm) and 1/(5 cm): their average, by hand) and squeezes
+    the parallel curve (H5) on the joints in the band for more than half of the dwell (the band
+    sensed over the first 40 nodes twice, then the first 10 twice: only joints 0-9 qualify)."""
+    settings = HoldLawSettings(dwell=1.0)
+    law = HoldController(FREE, R, settings)
+    r, n = FREE.radius(FREE.s_nodes), FREE.n_elements
+    law.phase, law.gap = "close", settings.close_gap
+    alpha, theta = np.full(n + 1, np.pi / 2), np.zeros(n + 1)
+    k1, k2 = 1 / 0.03, 1 / 0.05
+    cage = law.gains()
+    for i, (k, banded) in enumerate(((k1, 40), (k2, 40), (k1, 10), (k2, 10))):
+        rho = r + np.where(np.arange(n + 1) < banded, 0.0, 0.02)
+        out = law.command(rho, alpha, theta, np.full(n, k), 0.25)
+        if i < 3:
+            assert law.phase == "close" and law.gap == settings.close_gap
+            assert isinstance(out, type(cage)) and np.array_equal(np.asarray(out.mu2), np.asarray(cage.mu2))
+    assert law.phase == "hold" and isinstance(out, ShapeHold)
+    mean = (k1 + k2) / 2
+    squeezed = mean / (1 - (settings.close_gap + settings.squeeze) * mean)
+    want = np.full(n, mean)
+    want[:10] += 0.25 * (squeezed - mean)  # (the squeeze's first quarter: period / squeeze_time)
+    np.testing.assert_allclose(out.kappa_ref, want, rtol=1e-14)
+    once = HoldController(FREE, R, HoldLawSettings())  # (dwell 0: the one sample at which the gap is reached)
+    once.phase, once.gap = "close", settings.close_gap
+    first = once.command(r + np.where(np.arange(n + 1) < 40, 0.0, 0.02), alpha, theta, np.full(n, k1), 0.25)
+    assert once.phase == "hold" and isinstance(first, ShapeHold)
+    assert np.all(first.kappa_ref[40:] == k1) and first.kappa_ref[0] > k1
+
+
 def test_the_depth_regulation_closes_when_the_contact_is_shallow_and_opens_when_deep() -> None:
     """(H7) in isolation: sensed depth below ``squeeze`` (or no contact) moves the offset z up,
     so the held shape's curvature on the band rises (the parallel curve nearer its centre);
@@ -277,7 +309,7 @@ def test_released_free_the_holding_law_holds_with_a_symmetric_stiffness_and_the_
 def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
     for bad in (dict(stiffness_gain=-1.0), dict(squeeze=-1e-4), dict(clearance=0.0), dict(close_gap=0.007),
                 dict(wrap_angle=2.0), dict(mu1=float("nan")), dict(close_rate=True), dict(depth_gain=-2.0),
-                dict(depth_gain=float("inf"))):
+                dict(depth_gain=float("inf")), dict(dwell=-0.5), dict(dwell=float("nan"))):
         with pytest.raises(InvalidParameterError, match="hold law"):
             HoldLawSettings(**bad)
     with pytest.raises(InvalidParameterError, match="unknown law"):
@@ -290,7 +322,7 @@ def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
         Scenario.from_ros_parameters(params)
     cli = [sys.executable, "-m", "contgrasp_core.cli"]
     for args in (["simulate", "--law", "hold", "--hold-gain", "-1"], ["hold", "--law", "hold", "--squeeze", "-0.001"],
-                 ["simulate", "--law", "hold", "--depth-gain", "-2"],
+                 ["simulate", "--law", "hold", "--depth-gain", "-2"], ["hold", "--law", "hold", "--dwell", "-1"],
                  ["simulate", "--law", "grip"], ["simulate", "--friction", "-0.5"]):
         proc = subprocess.run(cli + args, capture_output=True, text=True)
         assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, (args, proc.stderr)

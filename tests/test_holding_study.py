@@ -159,6 +159,7 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest
     from contgrasp_core.holding_measure import static_capacity
 
     assert all(json.loads(line)["static_QH"] >= 0.0 for line in lines[1:])
+    assert all(math.isnan(json.loads(line)["cage_QH"]) for line in lines[1:])  # (the paper's law has no cage)
     grid = next(r for r in rows if r["key"] == "grid:0,0")
     assert grid["static_QH"] == static_capacity(spec.map_spec(), BasePose(*qm.base[0, 0]), spec.hold.mu).measure
     qm2, rows2 = run_study(spec, out, executor="serial")
@@ -287,6 +288,36 @@ def test_the_study_takes_the_depth_regulation_of_the_holding_law(capsys: pytest.
     capsys.readouterr()
     assert main(["holding-study", "--depth-gain", "5", "--out", "x.jsonl"]) == 2
     assert "needs law hold" in capsys.readouterr().err
+
+
+def test_the_study_takes_the_dwell_and_measures_the_cage_before_simulating(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--dwell T`` (docs/holding.md (H8)) reaches every pose's law and the spec (only when
+    set); without the holding law it is refused. Before simulating, every task of a holding-law
+    study gets ``cage_QH`` (M4) of its pose's scenario: positive where the cage wraps the
+    object (a base 3 units from the circle, heading along it), NaN where the cage cannot be
+    integrated (the same base heading away); the paper's law has none (NaN)."""
+    from contgrasp_core.cli import main
+    from contgrasp_core.control.hold_law import HoldLawSettings
+    from contgrasp_core.holding_measure import cage_capacity
+    from contgrasp_core.holding_study import _before_simulating, _spec_dict
+
+    spec = StudySpec(object="circle", law="hold", arm="rod", depth_gain=10.0, dwell=1.0)
+    assert pose_scenario(spec, (0.0, -8.0, 0.0)).hold_law == HoldLawSettings(depth_gain=10.0, dwell=1.0)
+    assert _spec_dict(spec)["dwell"] == 1.0 and "dwell" not in _spec_dict(StudySpec(law="hold"))
+    with pytest.raises(InvalidParameterError, match="needs law hold"):
+        StudySpec(dwell=1.0)
+    with pytest.raises(InvalidParameterError, match="hold law dwell"):
+        StudySpec(law="hold", dwell=-1.0)
+    capsys.readouterr()
+    assert main(["holding-study", "--dwell", "1", "--out", "x.jsonl"]) == 2
+    assert "needs law hold" in capsys.readouterr().err
+    tasks = [("grid:0,0", (0.0, -8.0, 0.0), (1.0, 1.0, 1.0)), ("grid:0,1", (0.0, -8.0, np.pi), (1.0, 1.0, 1.0))]
+    spec = StudySpec(object="circle", law="hold", arm="rod", d_steps=2)
+    before = _before_simulating(spec, tasks)
+    assert before["grid:0,0"]["cage_QH"] == cage_capacity(pose_scenario(spec, tasks[0][1]), spec.hold.mu).measure > 0
+    assert math.isnan(before["grid:0,1"]["cage_QH"])
+    paper = _before_simulating(replace(spec, law="paper"), tasks[:1])
+    assert math.isnan(paper["grid:0,0"]["cage_QH"]) and paper["grid:0,0"]["static_QH"] == before["grid:0,0"]["static_QH"]
 
 
 def test_the_rod_arm_is_the_rod_scenarios_for_the_map_and_the_rod() -> None:

@@ -49,6 +49,9 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--depth-gain", type=float, default=d.depth_gain,
                    help="with --law hold: regulate the mean sensed contact depth to the squeeze after it, integral "
                    f"gain 1/s >= 0 (docs/holding.md (H7); default {d.depth_gain:g}: off)")
+    p.add_argument("--dwell", type=float, default=d.dwell,
+                   help="with --law hold: stay at the close gap this long, s >= 0, and latch the mean curvature over "
+                   f"it (docs/holding.md (H8); default {d.dwell:g}: one sample)")
     p.add_argument("--support", type=float, default=d.hold.support,
                    help=f"support stiffness under the released object, N/m (default {d.hold.support:g}; 0: entirely free)")
     p.add_argument("--length-fraction", type=float, default=d.length_fraction,
@@ -91,7 +94,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise InvalidParameterError(f"--workers must be >= 1, got {args.workers}")
     spec = StudySpec(object=object_from_args(args, FIG2_SCALE).text(), psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
                      d_max=args.d_max, nodes=args.nodes, duration=args.duration, law=args.law,
-                     length_fraction=args.length_fraction, arm=args.arm, depth_gain=args.depth_gain,
+                     length_fraction=args.length_fraction, arm=args.arm, depth_gain=args.depth_gain, dwell=args.dwell,
                      hold=replace(StudySpec().hold, directions=args.directions, support=args.support, rate=args.rate,
                                   ramp_time=args.ramp_time, contact_wait=args.contact_wait))
     qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,

@@ -93,12 +93,15 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--depth-gain", type=float, default=d.depth_gain,
                    help="hold: after the squeeze, regulate the mean sensed contact depth to --squeeze with this "
                    f"integral gain, 1/s >= 0 (docs/holding.md (H7); default {d.depth_gain:g}: off)")
+    g.add_argument("--dwell", type=float, default=d.dwell,
+                   help="hold: stay at the close gap this long, s >= 0, and latch the mean curvature over it "
+                   f"(docs/holding.md (H8); default {d.dwell:g}: the one sample at which the gap is reached)")
 
 
 def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
     """The holding law's parameters of the command line (refused with an input error when out of range)."""
     return HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
-                           stiffness_gain=args.hold_gain, depth_gain=args.depth_gain)
+                           stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell)
 
 
 def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_tolerance, hold: str = "zoh") -> dict[str, Any]:

@@ -23,7 +23,12 @@ anchored at the arm's base:
    The hold is a potential: with the rod's damping, drag and the contact's damping and
    friction the rod + object energy (H6) cannot increase, and a rest state has a zero net
    contact wrench on the object.
-4. **Depth regulation** (H7, off unless ``depth_gain`` > 0): after the squeeze, the offset of
+4. **Dwell** (H8, off unless ``dwell`` > 0): at ``g = close_gap`` the cage stays at that gap
+   for ``dwell`` seconds and the latched ``kappa*`` is the mean of the sensed curvature over
+   the dwell (the band of (H5): the joints in the enclosing band for more than half of it), so
+   the held shape is the cage's mean shape, not its shape at one instant of its motion; with
+   ``dwell`` 0 the latch takes the one sample at which the gap is reached.
+5. **Depth regulation** (H7, off unless ``depth_gain`` > 0): after the squeeze, the offset of
    the parallel curve becomes ``close_gap + squeeze + z`` with
    ``dz/dt = depth_gain (squeeze - depth)``, ``depth`` the mean sensed contact depth
    ``r - rho`` over the band's nodes that touch (the closest band node's, negative, when none
@@ -47,7 +52,7 @@ from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod.model import RodModel
 
 __all__ = ["LAWS", "HoldLawSettings", "ShapeHold", "PaperLaw", "HoldController", "Law", "wrap_angle",
-           "parallel_curvature"]
+           "parallel_curvature", "cage_gains"]
 
 Array = NDArray[np.float64]
 
@@ -62,8 +67,9 @@ class HoldLawSettings:
     enclosing band of (H3)), the ``wrap_angle`` (rad) that starts the close, the ``close_rate``
     (m/s) and the ``close_gap`` (m) at which the shape is latched, the ``squeeze`` depth (m)
     and the ``squeeze_time`` (s) of (H5), the hold's stiffness gain ``stiffness_gain`` (G of
-    (H4), dimensionless), the paper's ``mu1`` and the ``depth_gain`` (1/s) of the depth
-    regulation (H7; 0, the default: none, the squeeze of (H5) as latched)."""
+    (H4), dimensionless), the paper's ``mu1``, the ``depth_gain`` (1/s) of the depth
+    regulation (H7; 0, the default: none, the squeeze of (H5) as latched) and the ``dwell`` (s)
+    over which the latch averages the cage's curvature (H8; 0, the default: one sample)."""
 
     clearance: float = 0.006
     band: float = 0.001
@@ -75,6 +81,7 @@ class HoldLawSettings:
     stiffness_gain: float = 3000.0
     mu1: float = 1.0
     depth_gain: float = 0.0
+    dwell: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -84,7 +91,7 @@ class HoldLawSettings:
         for name in ("clearance", "band", "close_rate", "squeeze_time", "mu1"):
             if getattr(self, name) <= 0:
                 raise InvalidParameterError(f"hold law {name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("squeeze", "stiffness_gain", "depth_gain"):
+        for name in ("squeeze", "stiffness_gain", "depth_gain", "dwell"):
             if getattr(self, name) < 0:
                 raise InvalidParameterError(f"hold law {name} must be >= 0, got {getattr(self, name)!r}")
         if not 0 < self.close_gap < self.clearance:
@@ -117,6 +124,14 @@ def parallel_curvature(kappa: Array, offset: float) -> Array:
         raise InvalidParameterError(f"no parallel curve at offset {offset!r} m where the radius of curvature is "
                                     f"below it (largest |kappa| {float(np.abs(k).max())!r} 1/m)")
     return np.asarray(k / den, dtype=np.float64)
+
+
+def cage_gains(model: RodModel, object_radius: float, settings: HoldLawSettings, gap: float,
+               length_unit: float = CENTIMETRE) -> FeedbackGains:
+    """The cage's gains (H1) at the gap ``gap`` (m): eq. (19) with ``mu2`` of eq. (A-2) for
+    ``rho_d = r + gap`` at the rod's joints (law units, Appendix IV)."""
+    return FeedbackGains(mu1=settings.mu1, length_unit=length_unit,
+                         mu2=adaptive_mu2(model.radius(model.joint_s) + gap, object_radius, length_unit=length_unit))
 
 
 @dataclass(frozen=True)
@@ -168,7 +183,8 @@ class PaperLaw:
 class HoldController:
     """The holding law's state across control periods (module docstring): ``phase`` ``cage``,
     ``close`` or ``hold``, the current gap ``gap`` (m), and in the hold the latched reference.
-    :meth:`command` is called once per control period with what the arm senses."""
+    :meth:`command` is called once per control period with what the arm senses; in the dwell
+    (H8) the phase is ``close`` at ``gap == close_gap``."""
 
     def __init__(self, model: RodModel, object_radius: float, settings: HoldLawSettings = HoldLawSettings(),
                  length_unit: float = CENTIMETRE) -> None:
@@ -182,6 +198,10 @@ class HoldController:
         self._kappa_step: Array | None = None
         self._on: NDArray[np.bool_] | None = None  # (the joints whose parallel curve the hold takes)
         self.depth_offset = 0.0  # (z of (H7), m)
+        self._dwelt = 0.0  # (the dwell's time so far (H8), s, and its sums of the curvature and the band)
+        self._kappa_sum = np.zeros(model.n_elements)
+        self._band_count = np.zeros(model.n_elements)
+        self._samples = 0
 
     @property
     def holding(self) -> bool:
@@ -189,11 +209,8 @@ class HoldController:
         return self.phase == "hold" and self.progress >= 1.0
 
     def gains(self) -> FeedbackGains:
-        """Eq. (19)'s gains for the current gap (H1): ``mu2`` of eq. (A-2) with ``rho_d = r + g``."""
-        m = self.model
-        return FeedbackGains(mu1=self.settings.mu1, length_unit=self.length_unit,
-                             mu2=adaptive_mu2(m.radius(m.joint_s) + self.gap, self.object_radius,
-                                              length_unit=self.length_unit))
+        """Eq. (19)'s gains for the current gap (H1): :func:`cage_gains`."""
+        return cage_gains(self.model, self.object_radius, self.settings, self.gap, self.length_unit)
 
     def command(self, rho: Array, alpha: Array, theta: Array, kappa: Array, period: float) -> FeedbackGains | ShapeHold:
         """The law for the next ``period`` (s) from ``rho``, ``alpha`` and the node angles ``theta``
@@ -205,15 +222,8 @@ class HoldController:
             self.phase = "close"
         if self.phase == "close":
             self.gap = max(self.gap - s.close_rate * period, s.close_gap)
-            if self.gap <= s.close_gap:
-                k = np.asarray(kappa, dtype=float)
-                target = k.copy()
-                offset = s.close_gap + s.squeeze
-                reach = offset + (s.clearance if s.depth_gain > 0 else 0.0)  # (the largest offset (H7) may take)
-                on = band[:-1] & (reach * np.abs(k) < 1.0)  # (where the parallel curve exists)
-                target[on] = parallel_curvature(k[on], offset)
-                self._kappa_star, self._kappa_step, self._on = k, target - k, on
-                self.phase = "hold"
+            if self.gap <= s.close_gap and self._dwell(np.asarray(kappa, dtype=float), band[:-1], period):
+                self._latch()
         if self.phase == "hold":
             assert self._kappa_star is not None and self._kappa_step is not None
             if s.depth_gain > 0 and self.progress >= 1.0:
@@ -221,6 +231,28 @@ class HoldController:
             self.progress = min(1.0, self.progress + period / s.squeeze_time)
             return ShapeHold(self.model, self._kappa_star + self.progress * self._kappa_step, s.stiffness_gain)
         return self.gains()
+
+    def _dwell(self, kappa: Array, band: NDArray[np.bool_], period: float) -> bool:
+        """(H8): add one period's sensed curvature and band to the dwell's sums; True when the
+        dwell is over (at once with ``dwell`` 0)."""
+        self._kappa_sum += kappa
+        self._band_count += band
+        self._samples += 1
+        self._dwelt += period
+        return self._dwelt >= self.settings.dwell
+
+    def _latch(self) -> None:
+        """(H4), (H5): latch the dwell's mean curvature ``kappa*`` and the squeezed parallel curve
+        on the joints in the band for more than half of the dwell; the phase becomes ``hold``."""
+        s = self.settings
+        k = self._kappa_sum / self._samples
+        target = k.copy()
+        offset = s.close_gap + s.squeeze
+        reach = offset + (s.clearance if s.depth_gain > 0 else 0.0)  # (the largest offset (H7) may take)
+        on = (2 * self._band_count > self._samples) & (reach * np.abs(k) < 1.0)  # (where the parallel curve exists)
+        target[on] = parallel_curvature(k[on], offset)
+        self._kappa_star, self._kappa_step, self._on = k, target - k, on
+        self.phase = "hold"
 
     def _regulated(self, rho: Array, band: NDArray[np.bool_], period: float) -> ShapeHold:
         """(H7): the offset's integral step from the sensed contact depth on the band, and the
