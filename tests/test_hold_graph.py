@@ -55,8 +55,8 @@ class _Logged:
 
 def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_path: Path) -> None:
     """``contgrasp-launch --law hold --object-mode free``: the paper's arm (N = 100, 2 ms), the
-    circle free, Coulomb friction 0.5, the depth regulation (H7) on (gain 10/s), and a 20 mN
-    push along x from 2.801 s, once the hold is complete (2.54 s). Separate node processes in
+    circle free, Coulomb friction 0.5, the dwell (H8) of 0.05 s (25 samples) and the depth regulation (H7) on
+    (gain 10/s), and a 20 mN push along x from 2.801 s, once the hold is complete. Separate node processes in
     lock-step equal run_sampled of the same scenario bit for bit (arm, object pose and velocity);
     the regulation has moved the hold's offset; the recording has the hold and the transition
     flag of every couple as the core law gave them, the arm's shape in every contact state, the
@@ -68,7 +68,7 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     data["rod_simulator"]["ros__parameters"].update(duration=3.2, disturbance_kind="step", disturbance_wrench=list(PUSH),
                                                     disturbance_start=PUSH_START)
     data["grasp_quality"]["ros__parameters"]["rate_hz"] = 0.0
-    data["grasp_controller"]["ros__parameters"]["hold_depth_gain"] = 10.0
+    data["grasp_controller"]["ros__parameters"].update(hold_depth_gain=10.0, hold_dwell=0.05)
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(data))
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
@@ -84,7 +84,7 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     scenario = Scenario.from_ros_parameters(p)
     assert scenario.law == "hold" and scenario.dynamics.mode == "free" and scenario.rod.friction == 0.5
     law = scenario.controller()
-    assert isinstance(law, HoldController) and law.settings.depth_gain == 10.0
+    assert isinstance(law, HoldController) and law.settings.depth_gain == 10.0 and law.settings.dwell == 0.05
     logged = _Logged(law)
     session = run_sampled(scenario, law=logged)  # type: ignore[arg-type]
     obs = session.observe()
@@ -162,6 +162,7 @@ def test_the_controller_steps_the_holding_law_once_per_state_and_afresh_for_a_ne
     ("hold_close_gap:=0.01", "hold law close_gap must be in (0, clearance = 0.006) m, got 0.01"),
     ("hold_stiffness_gain:=-1.0", "hold law stiffness_gain must be >= 0, got -1.0"),
     ("hold_depth_gain:=-3.0", "hold law depth_gain must be >= 0, got -3.0"),
+    ("hold_dwell:=-1.0", "hold law dwell must be >= 0, got -1.0"),
 ])
 def test_bad_law_parameters_stop_the_controller_with_one_line(parameter: str, message: str) -> None:
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(fresh_domain_id()))
