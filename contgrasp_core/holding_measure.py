@@ -29,9 +29,9 @@ torque. The integral is the arm-grid quadrature of Q1-Q3 (:func:`contgrasp_core.
 
 Of which contact set? :func:`static_capacity` takes the paper's optimal grasp of Sec. III (the
 static map's); :func:`cage_capacity` takes the contact set the holding law will press
-(docs/holding.md (M4)): its cage (H1) at rest at the close gap, the static closed loop of eq.
-(8) with the feedback curvature eq. (20) integrated from the arm's base (the rod at rest with
-no load: ``EI kappa + u = 0``), and the enclosing band (H3) on it.
+(docs/holding.md (M4)): its cage (H1) at rest at the close gap, the rod's static closed loop
+(at rest with no load ``EI kappa + u = 0`` at every joint: the feedback curvature of eq. (20),
+swept from the arm's base), and the enclosing band (H3) on it.
 """
 
 from __future__ import annotations
@@ -186,31 +186,27 @@ def _static(spec: MapSpec, boundary: Boundary, base: BasePose, mu: float, warm: 
 
 def cage_capacity(scenario: Scenario, mu: float) -> WrenchCapacity:
     """(M4): Q_H (M3) of the contact set the holding law will press, before simulating: the
-    cage (H1) of ``scenario`` (law ``hold``) at rest at its close gap ``g_f``: the static closed
-    loop (eq. (8) with the feedback curvature eq. (20), gains
-    :func:`~contgrasp_core.control.hold_law.cage_gains` at ``g_f``) integrated along the arm
-    from its base's sensed ``(rho, alpha, s_o)``, and the enclosing band (H3) on it
-    (``rho - r <= g_f + band``, cut at its linear crossing as Q1-Q3 cut the contact set).
-    Coulomb ``mu``, torques about the object's centre scaled by its nominal radius; SI (Q_H in
-    m). :class:`ContgraspError` when the closed loop cannot be integrated from the base (it
-    leaves the region where ``(rho, alpha)`` is defined)."""
-    from .arm import ArmShape
-    from .contact import sense
+    cage (H1) of ``scenario`` (law ``hold``) at rest at its close gap ``g_f``, the rod's static
+    closed loop under eq. (19) with the cage's gains at ``g_f``
+    (:func:`~contgrasp_core.control.hold_law.cage_gains`,
+    :func:`~contgrasp_core.control.rod_feedback.rest_shape`), and the enclosing band (H3) on it
+    (nodes with ``rho - r <= g_f + band``, cut at the linear crossing as Q1-Q3 cut the contact
+    set) pressed at the shadow points. Coulomb ``mu``, torques about the object's centre scaled
+    by its nominal radius; SI (Q_H in m). :class:`ContgraspError` when the rest cannot be solved."""
+    from .contact import shadow_geometry
     from .control.hold_law import HoldController, cage_gains
-    from .control.law import closed_loop_kinematics
+    from .control.rod_feedback import rest_shape
+    from .rod import Obstacle, chain
 
-    law, m, boundary = scenario.controller(), scenario.rod, scenario.object.boundary()
+    law, m = scenario.controller(), scenario.rod
     if not isinstance(law, HoldController):
         raise InvalidParameterError(f"the cage is the holding law's; the scenario's law is {scenario.law!r}")
     s = law.settings
-    gains = cage_gains(m, law.object_radius, s, s.close_gap, law.length_unit)
-    base = sense(ArmShape(s=np.zeros(1), r=np.array([m.base_position], dtype=float), theta=np.array([m.base_angle])),
-                 boundary, float(m.radius(np.zeros(1))[0]))
-    mu2 = np.asarray(gains.mu2, dtype=float)
-    cage = closed_loop_kinematics(float(base.rho[0]), float(base.alpha[0]), m.s_nodes, gains.mu1,
-                                  lambda si: np.interp(si, m.joint_s, mu2),
-                                  lambda so: float(boundary.curvature(so)), length_unit=gains.length_unit,
-                                  s_o0=float(base.s_o[0]))
-    in_band = s.close_gap + s.band - (cage.rho - m.radius(m.s_nodes))
-    return wrench_capacity(m.s_nodes, boundary.point(cage.s_o), boundary.tangent_angle(cage.s_o), in_band, mu=mu,
-                           ref=scenario.object.center, scale=scenario.object.radius)
+    obstacle = Obstacle(scenario.object.boundary())
+    theta = rest_shape(m, obstacle, cage_gains(m, law.object_radius, s, s.close_gap, law.length_unit))
+    x = chain.nodes(m, theta)
+    rho = shadow_geometry(x, chain.node_angles(m, theta), obstacle)[0]
+    foot = obstacle.project(x)
+    in_band = s.close_gap + s.band - (rho - m.radius(m.s_nodes))
+    return wrench_capacity(m.s_nodes, foot.foot, foot.phi, in_band, mu=mu, ref=scenario.object.center,
+                           scale=scenario.object.radius)

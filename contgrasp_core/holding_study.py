@@ -354,8 +354,8 @@ is ``math.nan``, one object, so rows compare equal run after run.)"""
 def _before_simulating(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...], tuple[float, ...]]]) -> dict[str, dict[str, float]]:
     """The wrench capacities before simulating of each task: ``static_QH`` of its optimal grasp
     (:func:`_static_capacities`) and, with the holding law, ``cage_QH`` of the law's cage at
-    rest (:func:`contgrasp_core.holding_measure.cage_capacity`, SI; NaN where the cage's
-    closed loop cannot be integrated from the base, and for the paper's law)."""
+    rest (:func:`contgrasp_core.holding_measure.cage_capacity`, SI; NaN where the rod's
+    rest under the cage's law cannot be solved, and for the paper's law)."""
     from contgrasp_core.holding_measure import cage_capacity
 
     static = _static_capacities(spec, tasks)

@@ -50,6 +50,36 @@ def test_the_cage_equilibrium_is_the_clearance_and_the_paper_kinematics_converge
     assert sol.alpha[-1] == pytest.approx(np.pi / 2, abs=2e-3)
 
 
+def test_the_rods_rest_under_the_cage_is_the_static_closed_loop() -> None:
+    """The rod at rest under the cage's law with no load (rod_feedback.rest_shape, what (M4)
+    measures): the total couple ``EI kappa + u`` of the rod's own state feedback (StateFeedback,
+    sensed on the swept shape) is zero at every joint, and the shape is the paper's closed-loop
+    kinematics (eq. (8) with eq. (20), an ODE integrated independently) to the rod's
+    discretisation: the uniform arm from 1 cm off the circle at alpha = 1.2, rho along the arm
+    within 0.2 mm at 50 elements and second order in the element length (10 times closer at 200)."""
+    from contgrasp_core.control.hold_law import cage_gains
+    from contgrasp_core.control.rod_feedback import StateFeedback, rest_shape
+
+    errors = []
+    for n in (50, 200):
+        rod = replace(PAPER.rod, radius_tip=PAPER.rod.radius_base, n_elements=n)
+        settings = HoldLawSettings()
+        gains = cage_gains(rod, R, settings, settings.close_gap)
+        r0 = R + rod.radius_base + 0.01  # (the base's distance from the centre: rho = r + 1 cm)
+        base = CENTRE + r0 * np.array([np.cos(-2.0), np.sin(-2.0)])
+        phi = -2.0 + np.pi / 2  # (the circle's tangent angle at the base's shadow point)
+        rod = replace(rod, base_position=tuple(base), base_angle=phi + np.pi / 2 - 1.2)
+        obstacle = Obstacle(CIRCLE)
+        theta = rest_shape(rod, obstacle, gains)
+        total = rod.joint_ei * rod.joint_curvature(theta) + StateFeedback(rod, obstacle, gains).couple(theta)
+        assert np.max(np.abs(total)) < 1e-9 * np.max(rod.joint_ei) / rod.h
+        sol = closed_loop_kinematics(r0 - R, 1.2, rod.s_nodes, gains.mu1, float(np.asarray(gains.mu2)[0]), 1.0 / R,
+                                     length_unit=gains.length_unit)
+        rho = np.hypot(*(chain.nodes(rod, theta) - CENTRE).T) - R
+        errors.append(float(np.max(np.abs(rho - sol.rho))))
+    assert errors[0] < 2e-4 and errors[1] < errors[0] / 10, errors
+
+
 def _arc(radius: float, start: float, span: float, n: int = 60) -> ArmShape:
     """An arm along a circle about the object's centre, counter-clockwise through ``span`` rad."""
     ang = start + np.linspace(0.0, span, n)

@@ -293,9 +293,8 @@ def test_the_study_takes_the_depth_regulation_of_the_holding_law(capsys: pytest.
 def test_the_study_takes_the_dwell_and_measures_the_cage_before_simulating(capsys: pytest.CaptureFixture[str]) -> None:
     """``--dwell T`` (docs/holding.md (H8)) reaches every pose's law and the spec (only when
     set); without the holding law it is refused. Before simulating, every task of a holding-law
-    study gets ``cage_QH`` (M4) of its pose's scenario: positive where the cage wraps the
-    object (a base 3 units from the circle, heading along it), NaN where the cage cannot be
-    integrated (the same base heading away); the paper's law has none (NaN)."""
+    study gets ``cage_QH`` (M4) of its pose's scenario (a base 3 units from the circle, heading
+    along it: the cage wraps it, positive); the paper's law has none (NaN)."""
     from contgrasp_core.cli import main
     from contgrasp_core.control.hold_law import HoldLawSettings
     from contgrasp_core.holding_measure import cage_capacity
@@ -311,12 +310,11 @@ def test_the_study_takes_the_dwell_and_measures_the_cage_before_simulating(capsy
     capsys.readouterr()
     assert main(["holding-study", "--dwell", "1", "--out", "x.jsonl"]) == 2
     assert "needs law hold" in capsys.readouterr().err
-    tasks = [("grid:0,0", (0.0, -8.0, 0.0), (1.0, 1.0, 1.0)), ("grid:0,1", (0.0, -8.0, np.pi), (1.0, 1.0, 1.0))]
+    tasks = [("grid:0,0", (0.0, -8.0, 0.0), (1.0, 1.0, 1.0))]
     spec = StudySpec(object="circle", law="hold", arm="rod", d_steps=2)
     before = _before_simulating(spec, tasks)
     assert before["grid:0,0"]["cage_QH"] == cage_capacity(pose_scenario(spec, tasks[0][1]), spec.hold.mu).measure > 0
-    assert math.isnan(before["grid:0,1"]["cage_QH"])
-    paper = _before_simulating(replace(spec, law="paper"), tasks[:1])
+    paper = _before_simulating(replace(spec, law="paper"), tasks)
     assert math.isnan(paper["grid:0,0"]["cage_QH"]) and paper["grid:0,0"]["static_QH"] == before["grid:0,0"]["static_QH"]
 
 

@@ -8,7 +8,8 @@ Two ways the couple of eq. (19) reaches the rod:
   sends once per control period), held to first order in the state between samples.
 
 :func:`static_solution` is the static closed loop (eq. (8) with eq. (20))
-the dynamic loop is compared with in Fig. 4.
+the dynamic loop is compared with in Fig. 4; :func:`rest_shape` is the rod's own static closed
+loop, joint by joint, sensed as the rod senses (any object, convex or not).
 
 With a zero-order hold the couple of eq. (19) is sampled every control period and
 held; the loop then inherits a sampling-rate stability limit (the law acts at the element scale,
@@ -37,7 +38,7 @@ from numpy.typing import NDArray
 from contgrasp_core.contact import shadow_geometry
 from contgrasp_core.control.gains import FeedbackGains
 from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_and_gradient
-from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.errors import IntegrationError, InvalidParameterError
 from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.model import RodModel
 
@@ -48,7 +49,7 @@ if TYPE_CHECKING:  # (the obstacle imports scipy.spatial: the ROS controller pro
 Array = NDArray[np.float64]
 
 __all__ = ["StateFeedback", "joint_couple_jacobian", "FeedbackExpansion", "feedback_at_joints", "HeldExpansion",
-           "static_solution"]
+           "static_solution", "rest_shape"]
 
 _SAFE_ONE_PLUS = 0.05  # below this 1 + rho kappa_o the foot's turning rate is dropped from the Jacobian
 
@@ -185,3 +186,42 @@ def static_solution(res: "ClosedLoopResult", obstacle_radius: float) -> tuple[np
     sol = closed_loop_kinematics(float(res.rho[-1][0]), float(res.alpha[-1][0]), s, g.mu1, mu2_fn,
                                  1.0 / obstacle_radius, length_unit=g.length_unit)
     return s, sol.rho, sol.alpha
+
+
+def rest_shape(model: RodModel, obstacle: Obstacle, gains: FeedbackGains, *, tol: float = 1e-13,
+               max_iterations: int = 50) -> Array:
+    """The element angles (N,) of the rod at rest under eq. (19) with no load: the static
+    closed loop of the rod itself (eq. (17) at rest with no external force: the total couple
+    ``EI_k kappa_k + u_k`` vanishes at every joint, so ``kappa = -u / EI``, eq. (20), joint by
+    joint). Swept from the clamp: node ``k``'s position follows from the elements before it,
+    its ``rho_k`` and the shadow point's tangent angle from the obstacle's closest point (as the
+    rod senses, :func:`contgrasp_core.contact.shadow_geometry`), and ``theta_k`` solves
+    ``EI_k (theta_k - theta_(k-1)) / D_k + u_k(rho_k, alpha_k(theta_k)) = 0`` by Newton's method
+    (``alpha_k`` through the node angle, the mean of the adjacent elements; at the clamp the
+    base angle). The closest point may jump across a concave part of the object, as the rod's
+    does: unlike :func:`static_solution`'s ODE the sweep follows it. :class:`IntegrationError`
+    if a joint's equation does not converge."""
+    n, lu = model.n_elements, gains.length_unit
+    ei, d = model.joint_ei, model.joint_len
+    mu1 = np.broadcast_to(np.asarray(gains.mu1, dtype=float), (n,))
+    mu2 = np.broadcast_to(np.asarray(gains.mu2, dtype=float), (n,))
+    theta = np.empty(n)
+    x, prev = np.array([model.base_position], dtype=float), float(model.base_angle)
+    for k in range(n):
+        t = prev
+        for _ in range(max_iterations):
+            node_angle = prev if k == 0 else 0.5 * (prev + t)
+            rho, alpha = shadow_geometry(x, np.array([node_angle]), obstacle)[:2]
+            u, _, du_dalpha = feedback_couple_and_gradient(rho, alpha, ei[k], mu1[k], mu2[k], length_unit=lu)
+            slope = ei[k] / d[k] - (0.0 if k == 0 else 0.5 * float(du_dalpha[0]))
+            step = (ei[k] * (t - prev) / d[k] + float(u[0])) / slope
+            t -= step
+            if abs(step) <= tol * max(1.0, abs(t)):
+                break
+        else:
+            raise IntegrationError(f"the rod's rest under the feedback law: joint {k} did not converge in "
+                                   f"{max_iterations} Newton steps")
+        theta[k] = t
+        x = x + model.h * np.array([[np.cos(t), np.sin(t)]])
+        prev = t
+    return theta
