@@ -68,7 +68,7 @@ def study_figure(qm: QualityMap, rows: list[dict[str, Any]]) -> Figure:
     distinct = [r for r in held.values() if "same_as" not in r]
     if distinct:
         cap = np.array([r["capacity_min"] for r in distinct])
-        for name, marker in (("static_Q1", "o"), ("static_QH", "D"), ("Q1", "s")):
+        for name, marker in (("static_Q1", "o"), ("static_QH", "D"), ("cage_QH", "^"), ("Q1", "s")):
             q = np.array([r.get(name, np.nan) for r in distinct], dtype=float)
             good = np.isfinite(q)
             if good.sum() >= 2:
