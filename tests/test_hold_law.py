@@ -367,3 +367,4 @@ def test_hold_command_reports_the_paper_law_released_free_as_not_holding() -> No
     # the contact's friction bound (docs/holding.md (M2)) is reported all the same: the grasp pressed the fixed object
     assert out["pressure_max"] > 0 and all(c["friction_bound"] >= 0 and c["bound_ratio"] in (0.0, None) for c in out["capacity"])
     assert out["stiffness"] is None and out["law"] == "paper" and out["support"] == 0.0
+    assert out["cage_QH"] is None  # (the paper's law has no cage to predict from)

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from ..holding import HoldSettings, measure_holding
+from ..holding_measure import cage_capacity
 from ..objects import ROD_SCALE
 from ..scenario import PAPER
 from .common import add_object_arguments, object_from_args
@@ -106,6 +107,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     scenario = PAPER.with_object(obj, rod=rod, law=args.law, hold_law=hold_law_from_args(args))
     t0 = time.perf_counter()
     progress = None if args.json else (lambda phase: print(f"contgrasp hold: {phase}", file=sys.stderr, flush=True))
+    cage = cage_capacity(scenario, settings.mu).measure if args.law == "hold" else None  # (before simulating)
     result = measure_holding(scenario, settings, progress)
     return {"object": obj.text(), "base": [float(rod.base_position[0]), float(rod.base_position[1]), float(rod.base_angle)],
-            "law": args.law, "support": settings.support, **result.to_dict(), "wall_time_s": time.perf_counter() - t0}
+            "law": args.law, "support": settings.support, "cage_QH": cage, **result.to_dict(),
+            "wall_time_s": time.perf_counter() - t0}
