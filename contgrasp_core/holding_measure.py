@@ -193,7 +193,6 @@ def cage_capacity(scenario: Scenario, mu: float) -> WrenchCapacity:
     (nodes with ``rho - r <= g_f + band``, cut at the linear crossing as Q1-Q3 cut the contact
     set) pressed at the shadow points. Coulomb ``mu``, torques about the object's centre scaled
     by its nominal radius; SI (Q_H in m). :class:`ContgraspError` when the rest cannot be solved."""
-    from .contact import shadow_geometry
     from .control.hold_law import HoldController, cage_gains
     from .control.rod_feedback import rest_shape
     from .rod import Obstacle, chain
@@ -204,9 +203,7 @@ def cage_capacity(scenario: Scenario, mu: float) -> WrenchCapacity:
     s = law.settings
     obstacle = Obstacle(scenario.object.boundary())
     theta = rest_shape(m, obstacle, cage_gains(m, law.object_radius, s, s.close_gap, law.length_unit))
-    x = chain.nodes(m, theta)
-    rho = shadow_geometry(x, chain.node_angles(m, theta), obstacle)[0]
-    foot = obstacle.project(x)
-    in_band = s.close_gap + s.band - (rho - m.radius(m.s_nodes))
+    foot = obstacle.project(chain.nodes(m, theta))
+    in_band = s.close_gap + s.band - (foot.signed_distance - m.radius(m.s_nodes))
     return wrench_capacity(m.s_nodes, foot.foot, foot.phi, in_band, mu=mu, ref=scenario.object.center,
                            scale=scenario.object.radius)
