@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from filelock import FileLock, Timeout
 
 from .arm import BasePose
 from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
@@ -265,8 +266,28 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
     arrive): the grid poses ``grid:i,j`` of the distinct rows (:meth:`StudySpec.distinct_rows`)
     and the optima ``optimum:Q1|Q2|Q3``. Returns the map and all results (earlier ones
     included; :func:`expand_symmetric` fills in the rest of the grid). A file of another
-    specification is refused first, before the map's minutes."""
+    specification is refused first, before the map's minutes. One writer at a time: while a
+    study holds the lock on ``path + ".lock"`` (an OS lock, released when it ends, even killed)
+    another on the same file is refused with :class:`WriteError`."""
     p = Path(path)
+    lock = FileLock(p.with_name(p.name + ".lock"), timeout=0)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        lock.acquire()
+    except Timeout:
+        raise WriteError(f"another holding study is writing to {p} (it holds {lock.lock_file}); let it finish, "
+                         "or give another file") from None
+    except OSError as exc:
+        raise WriteError(f"cannot lock the study results {p}: {exc.strerror or exc}") from exc
+    try:
+        return _run_study(spec, p, executor, workers, scheduler, progress)
+    finally:
+        lock.release()
+
+
+def _run_study(spec: StudySpec, p: Path, executor: str, workers: int | None, scheduler: str | None,
+               progress: bool) -> tuple[QualityMap, list[dict[str, Any]]]:
+    """:func:`run_study` with its file locked."""
     earlier = load_results(p)
     wanted = json.loads(json.dumps(_spec_dict(spec)))
     other = {k: v for k, v in earlier[0].items() if k != "key"} if earlier else dict(wanted)
@@ -294,7 +315,6 @@ def run_study(spec: StudySpec, path: str | Path, *, executor: str = "processes",
             for key, base, q in tasks if key not in done]
     before = _before_simulating(spec, tasks)
     try:
-        p.parent.mkdir(parents=True, exist_ok=True)
         with p.open("a") as fh:
             if not done:
                 fh.write(json.dumps({"key": "spec", **_spec_dict(spec)}) + "\n")

@@ -198,6 +198,43 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest
     assert any("static Q1" in t for t in titles) and any("capacity" in t for t in titles)
 
 
+def test_a_second_writer_is_refused_until_the_first_is_gone(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Another process holding the study file's lock (a study writing it): run_study refuses at
+    once with WriteError, before the map and without touching the file; once that process is
+    killed (SIGKILL: no clean-up of its own) the lock is free and the study starts."""
+    import subprocess
+    import sys
+
+    import contgrasp_core.holding_study as study
+    from contgrasp_core.errors import WriteError
+
+    out = tmp_path / "study.jsonl"
+    out.write_text('{"key": "spec"}\n')
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from filelock import FileLock; "
+                               f"lock = FileLock({str(out) + '.lock'!r}); lock.acquire(); print('locked', flush=True); time.sleep(120)"],
+                              stdout=subprocess.PIPE, text=True)
+    started: list[bool] = []
+
+    def map_started(*args: object, **kwargs: object) -> None:
+        started.append(True)
+        raise KeyboardInterrupt  # (stops the study once it is past the lock)
+
+    monkeypatch.setattr(study, "quality_map", map_started)
+    spec = StudySpec(object="ellipse", psi_steps=4, d_steps=1, nodes=31)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "locked"
+        with pytest.raises(WriteError, match=r"another holding study is writing to .*study\.jsonl"):
+            run_study(spec, out, executor="serial")
+        assert not started and out.read_text() == '{"key": "spec"}\n'
+    finally:
+        holder.kill()
+        holder.wait()
+    out.unlink()
+    with pytest.raises(KeyboardInterrupt):
+        run_study(spec, out, executor="serial")
+    assert started == [True]
+
+
 def _children(pid: int) -> list[int]:
     try:
         text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
