@@ -9,7 +9,9 @@ Two ways the couple of eq. (19) reaches the rod:
 
 :func:`static_solution` is the static closed loop (eq. (8) with eq. (20))
 the dynamic loop is compared with in Fig. 4; :func:`rest_shape` is the rod's own static closed
-loop, joint by joint, sensed as the rod senses (any object, convex or not).
+loop, joint by joint, sensed as the rod senses (any object, convex or not);
+:func:`rest_stability` linearises the rod's closed loop about such a rest (docs/holding.md,
+"The cage flutters").
 
 With a zero-order hold the couple of eq. (19) is sampled every control period and
 held; the loop then inherits a sampling-rate stability limit (the law acts at the element scale,
@@ -37,6 +39,7 @@ from numpy.typing import NDArray
 
 from contgrasp_core.contact import shadow_geometry
 from contgrasp_core.control.gains import FeedbackGains
+from contgrasp_core.control.hold_law import ShapeHold
 from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_and_gradient
 from contgrasp_core.errors import IntegrationError, InvalidParameterError
 from contgrasp_core.rod import _kernels, chain
@@ -49,7 +52,7 @@ if TYPE_CHECKING:  # (the obstacle imports scipy.spatial: the ROS controller pro
 Array = NDArray[np.float64]
 
 __all__ = ["StateFeedback", "joint_couple_jacobian", "FeedbackExpansion", "feedback_at_joints", "HeldExpansion",
-           "static_solution", "rest_shape"]
+           "static_solution", "rest_shape", "RestStability", "rest_stability"]
 
 _SAFE_ONE_PLUS = 0.05  # below this 1 + rho kappa_o the foot's turning rate is dropped from the Jacobian
 
@@ -225,3 +228,54 @@ def rest_shape(model: RodModel, obstacle: Obstacle, gains: FeedbackGains, *, tol
         x = x + model.h * np.array([[np.cos(t), np.sin(t)]])
         prev = t
     return theta
+
+
+@dataclass(frozen=True)
+class RestStability:
+    """The rod's closed loop linearised about a rest (:func:`rest_stability`): its characteristic
+    exponents ``exponents`` (2N,) (1/s; a perturbation grows or decays as ``exp(s t)``)."""
+
+    exponents: NDArray[np.complex128]
+
+    @property
+    def growth_rate(self) -> float:
+        """The largest real part (1/s): > 0, the rest is unstable."""
+        return float(self.exponents.real.max())
+
+    @property
+    def frequency(self) -> float:
+        """The angular frequency (rad/s) of the fastest-growing mode (0: a real exponent)."""
+        return float(abs(self.exponents[np.argmax(self.exponents.real)].imag))
+
+
+def rest_stability(model: RodModel, feedback: StateFeedback | ShapeHold, theta: Array) -> RestStability:
+    """The closed loop of eq. (17) with the state-feedback couple ``feedback`` (eq. (19)
+    sensed on the rod, :class:`StateFeedback`, or the hold (H4), :class:`ShapeHold`)
+    linearised about a rest ``theta`` (N,) with no contact:
+
+        M(theta) d'' + zeta M(theta) d' + (K + P du/dtheta) d = 0
+
+    (``M`` the mass matrix, ``zeta`` the rod's mass-proportional damping, ``K`` the bending
+    stiffness, ``P`` maps the joint couples' derivative to the generalised forces as the
+    integrator does: ``(P X)_j = X_j - X_(j+1)``; the quadratic drag and the centripetal terms
+    vanish to first order at rest). Prop. 5.2 asserts asymptotic stability; its proof takes ``u``
+    as the gradient of an energy, but ``rho`` and ``alpha`` at ``s`` depend on the whole arm
+    before ``s`` (eq. (4)), so ``du/dtheta`` is not symmetric and the loop can flutter (a hold
+    (H4) is a potential: ``P du/dtheta`` is symmetric). Undamped by the drag at small amplitude,
+    a growth rate above 0 is an oscillation that grows until the drag bounds it."""
+    from contgrasp_core.rod.chain import mass_matrix
+
+    th = np.asarray(theta, dtype=float)
+    n = model.n_elements
+    if th.shape != (n,) or not np.isfinite(th).all():
+        raise InvalidParameterError(f"theta must be {n} finite element angles, got shape {th.shape}")
+    _, du = feedback.couple_and_jacobian(th)
+    assert du is not None  # (asked for with jacobian=True)
+    stiffness = model.stiffness_matrix + du
+    stiffness[:-1] -= du[1:]
+    mass = mass_matrix(model, th)
+    state = np.zeros((2 * n, 2 * n))
+    state[:n, n:] = np.eye(n)
+    state[n:, :n] = -np.linalg.solve(mass, stiffness)
+    state[n:, n:] = -model.damping * np.eye(n)
+    return RestStability(np.linalg.eigvals(state).astype(np.complex128))
