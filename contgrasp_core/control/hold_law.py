@@ -9,7 +9,9 @@ anchored at the arm's base:
 1. **Cage** (H1): eq. (19) with the desired distance ``rho_d(s) = r(s) + g``, a clearance
    ``g`` over the arm's surface (``mu2`` from eq. (A-2) with ``rho_d``, as Appendix IV does for
    ``rho_d = r``). Equilibrium (Prop. 5.1, unchanged: ``mu2 > -kbar``): ``rho = rho_d``,
-   ``alpha = pi/2``: the arm at the gap ``g`` from the object, no contact force.
+   ``alpha = pi/2``: the arm at the gap ``g`` from the object, no contact force (the shape
+   along the arm; in time the rod flutters about it, docs/holding.md "The cage flutters",
+   :func:`~contgrasp_core.control.rod_feedback.rest_stability`).
 2. **Close** (H2): once the wrap angle (H3) sensed on the enclosing band reaches
    ``wrap_angle`` (pi: the arm then surrounds more than half of the object), ``g`` decreases at
    ``close_rate`` from ``clearance`` to ``close_gap``; the law stays eq. (19) with (H1).
