@@ -39,7 +39,6 @@ from numpy.typing import NDArray
 
 from contgrasp_core.contact import shadow_geometry
 from contgrasp_core.control.gains import FeedbackGains
-from contgrasp_core.control.hold_law import ShapeHold
 from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_and_gradient
 from contgrasp_core.errors import IntegrationError, InvalidParameterError
 from contgrasp_core.rod import _kernels, chain
@@ -47,6 +46,7 @@ from contgrasp_core.rod.model import RodModel
 
 if TYPE_CHECKING:  # (the obstacle imports scipy.spatial: the ROS controller process never needs it)
     from contgrasp_core.rod.closed_loop import ClosedLoopResult
+    from contgrasp_core.rod.integrator import CoupleFeedback
     from contgrasp_core.rod.obstacle import Obstacle
 
 Array = NDArray[np.float64]
@@ -248,9 +248,10 @@ class RestStability:
         return float(abs(self.exponents[np.argmax(self.exponents.real)].imag))
 
 
-def rest_stability(model: RodModel, feedback: StateFeedback | ShapeHold, theta: Array) -> RestStability:
+def rest_stability(model: RodModel, feedback: CoupleFeedback, theta: Array) -> RestStability:
     """The closed loop of eq. (17) with the state-feedback couple ``feedback`` (eq. (19)
-    sensed on the rod, :class:`StateFeedback`, or the hold (H4), :class:`ShapeHold`)
+    sensed on the rod, :class:`StateFeedback`, or the hold (H4),
+    :class:`~contgrasp_core.control.hold_law.ShapeHold`)
     linearised about a rest ``theta`` (N,) with no contact:
 
         M(theta) d'' + zeta M(theta) d' + (K + P du/dtheta) d = 0
@@ -263,8 +264,6 @@ def rest_stability(model: RodModel, feedback: StateFeedback | ShapeHold, theta: 
     before ``s`` (eq. (4)), so ``du/dtheta`` is not symmetric and the loop can flutter (a hold
     (H4) is a potential: ``P du/dtheta`` is symmetric). Undamped by the drag at small amplitude,
     a growth rate above 0 is an oscillation that grows until the drag bounds it."""
-    from contgrasp_core.rod.chain import mass_matrix
-
     th = np.asarray(theta, dtype=float)
     n = model.n_elements
     if th.shape != (n,) or not np.isfinite(th).all():
@@ -273,7 +272,7 @@ def rest_stability(model: RodModel, feedback: StateFeedback | ShapeHold, theta: 
     assert du is not None  # (asked for with jacobian=True)
     stiffness = model.stiffness_matrix + du
     stiffness[:-1] -= du[1:]
-    mass = mass_matrix(model, th)
+    mass = chain.mass_matrix(model, th)
     state = np.zeros((2 * n, 2 * n))
     state[:n, n:] = np.eye(n)
     state[n:, :n] = -np.linalg.solve(mass, stiffness)
