@@ -90,6 +90,13 @@ class Graph:
         out, _ = proc.communicate(timeout=30)
         return out
 
+    def post_mortem(self) -> dict[str, Any]:
+        """For a failed assertion: the simulator's last status, and each node's exit status and
+        the end of what it printed (a node still up is stopped to read it)."""
+        codes = {name: proc.poll() for name, proc in self.procs.items()}
+        return {"status": self.status, "last step": None if self.last is None else self.last.step, "exit codes": codes,
+                **{f"{name} printed": self.output(name)[-1500:] for name in self.procs}}
+
     def close(self) -> dict[str, int]:
         for proc in self.procs.values():
             if proc.poll() is None:
@@ -145,7 +152,7 @@ def test_four_nodes_by_hand_without_parameters_give_the_paper_grasp_bitwise(grap
     time.sleep(1.0)
     for node in ("grasp_quality", "grasp_controller", "boundary_sensor"):
         graph.start(node)
-    assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.status
+    assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.post_mortem()
     assert graph.spin_until(lambda: graph.last is not None and graph.last.step == int(graph.status["step"]), timeout=10)
     _, session = paper_core
     assert graph.status["missed_deadlines"] == "0" and graph.status["settled"] == "true"
@@ -172,7 +179,7 @@ def test_by_hand_with_the_parameter_file_exits_when_finished_and_equals_the_laun
     for node in NODES:  # (the simulator waits for this test's probe too: min_subscribers, as above)
         extra = ("-p", "min_subscribers:=3") if node == "rod_simulator" else ()
         graph.start(node, "--ros-args", "--params-file", params, "-p", "on_finish:=exit", *extra)
-    assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=240), graph.status
+    assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=240), graph.post_mortem()
     assert graph.status.get("state") == "finished" and graph.status["missed_deadlines"] == "0"
     assert graph.last is not None
     same_as_core(graph.last, paper_core)
@@ -217,7 +224,7 @@ def test_four_nodes_by_hand_in_any_order_with_any_gaps_never_lose_step_0(graph: 
         graph.start(node, "--ros-args", "-p", "on_finish:=exit",
                     *(("-p", "min_subscribers:=3") if node == "rod_simulator" else ()))
         time.sleep(gap)  # a person starting the next terminal
-    assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), (plan, graph.status)
+    assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), (plan, graph.post_mortem())
     assert graph.spin_until(lambda: graph.last is not None and graph.last.step == int(graph.status["step"]), timeout=60), plan
     assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=120,
                             stop_on_failure=False), (plan, {n: p.poll() for n, p in graph.procs.items()})
@@ -243,7 +250,7 @@ def test_step_0_sent_before_the_controller_existed_still_closes_the_loop(graph: 
     assert graph.spin_until(lambda: graph.last is not None, timeout=120)
     assert graph.last is not None and graph.last.step == 0
     graph.start("grasp_controller")
-    assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.status
+    assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.post_mortem()
     assert graph.spin_until(lambda: graph.last is not None and graph.last.step == int(graph.status["step"]), timeout=60)
     _, session = paper_core
     assert graph.status["missed_deadlines"] == "0" and float(graph.status["settle_time_s"]) == session.settle_time
@@ -358,7 +365,7 @@ def test_the_container_hosts_the_sensor_and_controller_by_hand(graph: Graph, pap
     graph.start("rod_simulator", "--ros-args", "--params-file", params, "-p", "on_finish:=exit", "-p", "min_subscribers:=3")
     graph.start("container", "boundary_sensor", "grasp_controller", "--ros-args", "--params-file", params,
                 "-p", "on_finish:=exit")
-    assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=240), graph.status
+    assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=240), graph.post_mortem()
     assert graph.status.get("state") == "finished" and graph.status["missed_deadlines"] == "0"
     assert graph.last is not None
     same_as_core(graph.last, paper_core)
@@ -382,3 +389,51 @@ def test_the_container_refuses_bad_usage_with_exit_2(args: list[str], needle: st
 def test_the_container_help() -> None:
     proc = subprocess.run([str(EXE / "container"), "--help"], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and proc.stdout.startswith("usage: container NODE") and "grasp_quality" in proc.stdout
+
+
+@pytest.mark.parametrize("ack_timeout", [10.0, 1.0])
+def test_a_monitor_starved_at_the_end_of_the_run_still_hears_it(graph: Graph, paper_core: Any, ack_timeout: float) -> None:
+    """A monitor in a process of its own is stopped (SIGSTOP) from the run's first steps until
+    3 s after the run finished: longer than the 1 s the nodes wait before exiting, so what it
+    lost while stopped is repaired only if the writers still exist when it resumes. With
+    ``on_finish:=exit`` every node waits for its subscribers' acknowledgements
+    (``finish_ack_timeout``), so the monitor hears the final status and state, equal to the core
+    loop's; with a timeout shorter than the stop the nodes exit without it, say so, and the
+    monitor never hears the end (the CI failure this wait fixed: a test's probe starved near
+    the end of a run waited 240 s for a 'finished' gone with its writer)."""
+    probe = subprocess.Popen([sys.executable, str(Path(__file__).with_name("probe_process.py"))], env=graph.env,
+                             stdout=subprocess.PIPE, text=True)
+    try:
+        for node in NODES:  # (min_subscribers 4: the sensor's two, this test's probe and the monitor)
+            graph.start(node, "--ros-args", "-p", "on_finish:=exit", "-p", f"finish_ack_timeout:={ack_timeout}",
+                        *(("-p", "min_subscribers:=4") if node == "rod_simulator" else ()))
+        assert probe.stdout is not None and probe.stdout.readline() == "ready\n"  # (it hears both topics)
+        assert graph.spin_until(lambda: graph.status.get("state") is not None, timeout=60), graph.post_mortem()
+        probe.send_signal(signal.SIGSTOP)
+        assert graph.status["state"] == "running", graph.status  # (stopped before the run's end)
+        assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.post_mortem()
+        graph.spin_until(lambda: False, timeout=3.0)
+        probe.send_signal(signal.SIGCONT)
+        assert graph.spin_until(lambda: all(p.poll() is not None for p in graph.procs.values()), timeout=60,
+                                stop_on_failure=False), graph.post_mortem()
+        if ack_timeout < 3.0:
+            time.sleep(2.0)  # (what it would still receive)
+            probe.send_signal(signal.SIGINT)
+        out, _ = probe.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        raise AssertionError(("the monitor never heard the end", graph.post_mortem())) from None
+    finally:
+        if probe.poll() is None:
+            probe.send_signal(signal.SIGCONT)
+            probe.kill()
+            probe.wait(timeout=30)
+    heard = json.loads(out)
+    sim_log = graph.output("rod_simulator")
+    obs, _ = paper_core
+    if ack_timeout > 3.0:
+        assert heard == {"state": "finished", "status_step": obs.k, "last_step": obs.k}, (heard, sim_log[-2000:])
+        assert "not acknowledged" not in sim_log
+    else:
+        assert heard["state"] != "finished" and heard["last_step"] != obs.k, heard
+        assert "exiting with messages not acknowledged by every subscriber of" in sim_log and topics.ROD_STATE in sim_log
+    assert all(code == 0 for code in graph.close().values())

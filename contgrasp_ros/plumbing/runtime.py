@@ -37,6 +37,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.context import Context
+from rclpy.duration import Duration
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -456,9 +457,15 @@ ON_FINISH = ("idle", "exit", "supervised")
 class FinishPolicy:
     """What the node does when the run is over, by its ``on_finish`` parameter: ``idle`` (the
     default) stays up and says so (the simulator can be reset with ``~/reset``; Ctrl-C stops a
-    node); ``exit`` ends the process ``grace_s`` wall seconds later (so the last messages are
-    delivered), with status 0 for a finished run and 1 for a failed one; ``supervised`` stays up
-    without a word (``contgrasp-launch`` gives it to its nodes: it stops them itself).
+    node); ``exit`` ends the process ``grace_s`` wall seconds later, once every subscriber has
+    acknowledged what the node published (at most ``finish_ack_timeout`` wall seconds more),
+    with status 0 for a finished run and 1 for a failed one; ``supervised`` stays up without a
+    word (``contgrasp-launch`` gives it to its nodes: it stops them itself).
+
+    The wait for acknowledgements is what delivers a run's end: a reliable writer repairs a
+    subscriber's lost samples only while it exists, so a subscriber starved of CPU for a moment
+    (a monitor, a recorder, a test's probe on a loaded machine) lost the final state and status
+    for good when the simulator exited a fixed second after finishing.
 
     The simulator reports the end itself (:meth:`done`); the other nodes learn it from the
     simulator's status on ``/diagnostics`` (``watch_simulator``: state ``finished`` or
@@ -473,6 +480,8 @@ class FinishPolicy:
         declare(node, "on_finish", "idle", "when the run is over: 'idle' (stay up), 'exit' (status 0 finished, 1 failed) or "
                 "'supervised' (stay up quietly: a launcher stops the node)",
                 choices=ON_FINISH)
+        declare(node, "finish_ack_timeout", 10.0, "on_finish exit: wall seconds to wait at most for the subscribers to "
+                "acknowledge the node's last messages before it exits", lo=0.0, hi=3600.0)
         node.stop_requested = False  # type: ignore[attr-defined]
         if watch_simulator:
             from contgrasp_ros.plumbing import qos
@@ -523,10 +532,22 @@ class FinishPolicy:
             timer.cancel()
             if before_exit is not None:
                 before_exit()
+            self._wait_for_acknowledgements()
             self._node.exit_code = max(int(getattr(self._node, "exit_code", 0)), code)
             self._node.stop_requested = True
 
         timer = self._node.create_timer(self._grace, stop, clock=steady)
+
+    def _wait_for_acknowledgements(self) -> None:
+        """Block until every reliable publisher's samples are acknowledged by all its matched
+        subscribers, ``finish_ack_timeout`` wall seconds at most for them all; a warning names
+        the topics still unacknowledged (a subscriber that hung or died unannounced)."""
+        end = time.monotonic() + self._node.get_parameter("finish_ack_timeout").value
+        pending = [pub.topic_name for pub in self._node.publishers
+                   if not pub.wait_for_all_acked(Duration(seconds=max(0.0, end - time.monotonic())))]
+        if pending:
+            self._node.get_logger().warn(f"exiting with messages not acknowledged by every subscriber of {', '.join(pending)} "
+                                         f"(finish_ack_timeout: a subscriber hung or died)")
 
 
 # ---------------------------------------------------------------------------- the object
