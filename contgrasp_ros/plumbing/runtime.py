@@ -66,6 +66,7 @@ __all__ = [
     "sim_time_by_default",
     "FinishPolicy",
     "ON_FINISH",
+    "all_acked",
 ]
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -541,13 +542,32 @@ class FinishPolicy:
     def _wait_for_acknowledgements(self) -> None:
         """Block until every reliable publisher's samples are acknowledged by all its matched
         subscribers, ``finish_ack_timeout`` wall seconds at most for them all; a warning names
-        the topics still unacknowledged (a subscriber that hung or died unannounced)."""
-        end = time.monotonic() + self._node.get_parameter("finish_ack_timeout").value
-        pending = [pub.topic_name for pub in self._node.publishers
-                   if not pub.wait_for_all_acked(Duration(seconds=max(0.0, end - time.monotonic())))]
+        the topics still unacknowledged (a subscriber that hung or died unannounced). Ctrl-C
+        meanwhile ends the wait."""
+        node = self._node
+        end = time.monotonic() + node.get_parameter("finish_ack_timeout").value
+        pending = []
+        for pub in node.publishers:
+            if not all_acked(pub, end - time.monotonic(), node.context):
+                if not node.context.ok():
+                    return
+                pending.append(pub.topic_name)
         if pending:
             self._node.get_logger().warn(f"exiting with messages not acknowledged by every subscriber of {', '.join(pending)} "
                                          f"(finish_ack_timeout: a subscriber hung or died)")
+
+
+def all_acked(publisher: Any, seconds: float, context: Context) -> bool:
+    """``publisher.wait_for_all_acked`` for at most ``seconds`` (< 0: 0): True once every matched
+    reliable subscriber acknowledged its samples; False on the timeout, and when ``context`` was
+    shut down meanwhile (Ctrl-C: rclpy's handler shuts it down from another thread, so checking
+    the context before the call does not keep the call from failing on it)."""
+    try:
+        return bool(publisher.wait_for_all_acked(Duration(seconds=max(0.0, seconds))))
+    except Exception:
+        if context.ok():
+            raise
+        return False
 
 
 # ---------------------------------------------------------------------------- the object

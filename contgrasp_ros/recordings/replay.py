@@ -128,11 +128,11 @@ def replay(
         pass
     finally:
         # reliable subscribers still being served: let them acknowledge before the publishers go
-        from rclpy.duration import Duration
+        # (after Ctrl-C rclpy has shut the context down, at any moment: all_acked then gives up)
+        from contgrasp_ros.plumbing.runtime import all_acked
 
-        if node.context.ok():  # (after Ctrl-C rclpy has already shut the context down)
-            for pub in pubs.values():
-                pub.wait_for_all_acked(Duration(seconds=ack_timeout))
+        for pub in pubs.values():
+            all_acked(pub, ack_timeout, node.context)
         if own:
             node.destroy_node()
             if rclpy.ok():
