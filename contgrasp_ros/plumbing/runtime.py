@@ -41,6 +41,7 @@ from rclpy.duration import Duration
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from std_msgs.msg import Header
 
 from contgrasp_core.boundary import Boundary
@@ -553,11 +554,11 @@ class FinishPolicy:
                     return
                 pending.append(pub.topic_name)
         if pending:
-            self._node.get_logger().warn(f"exiting with messages not acknowledged by every subscriber of {', '.join(pending)} "
-                                         f"(finish_ack_timeout: a subscriber hung or died)")
+            node.get_logger().warn(f"exiting with messages not acknowledged by every subscriber of {', '.join(pending)} "
+                                   "(finish_ack_timeout: a subscriber hung or died)")
 
 
-def all_acked(publisher: Any, seconds: float, context: Context) -> bool:
+def all_acked(publisher: Publisher, seconds: float, context: Context) -> bool:
     """``publisher.wait_for_all_acked`` for at most ``seconds`` (< 0: 0): True once every matched
     reliable subscriber acknowledged its samples; False on the timeout, and when ``context`` was
     shut down meanwhile (Ctrl-C: rclpy's handler shuts it down from another thread, so checking
