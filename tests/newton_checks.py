@@ -9,14 +9,14 @@ import numpy as np
 
 
 def difference_matrix(system: Any, state: Any, z: np.ndarray, dt: float, loads: Any, frame: Any,
-                      eps: float = 1e-6) -> np.ndarray:
+                      eps: float = 1e-6, self_frame: Any = None) -> np.ndarray:
     """Central differences of ``system.newton_system``'s residual in the unknowns ``z``."""
     fd = np.empty((len(z), len(z)))
     for j in range(len(z)):
         e = np.zeros_like(z)
         e[j] = eps
-        fd[:, j] = (system.newton_system(state, z + e, dt, loads, frame)[0]
-                    - system.newton_system(state, z - e, dt, loads, frame)[0]) / (2 * eps)
+        fd[:, j] = (system.newton_system(state, z + e, dt, loads, frame, self_frame)[0]
+                    - system.newton_system(state, z - e, dt, loads, frame, self_frame)[0]) / (2 * eps)
     return fd
 
 

@@ -46,7 +46,7 @@ def f64(x: object) -> np.ndarray:
 
 
 _JIT_NAMES = ("frames_nodes", "kinetic_energy", "newton_system", "chain_solve", "circle_projection",
-              "circle_shadow_geometry", "circle_sense", "joint_couple_jacobian")
+              "circle_shadow_geometry", "circle_sense", "joint_couple_jacobian", "self_contact_pairs")
 
 
 def load() -> None:

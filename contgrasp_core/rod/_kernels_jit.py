@@ -9,7 +9,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["frames_nodes", "kinetic_energy", "newton_system", "chain_solve", "circle_projection",
-           "circle_shadow_geometry", "circle_sense", "joint_couple_jacobian"]
+           "circle_shadow_geometry", "circle_sense", "joint_couple_jacobian", "self_contact_pairs"]
 
 
 @njit(cache=True)
@@ -546,3 +546,56 @@ def joint_couple_jacobian(h: float, g_rho: np.ndarray, g_alpha: np.ndarray, rho:
             du[k, k] += coef
             du[k, k - 1] += coef
     return du
+
+
+@njit(cache=True)
+def _segment_point(c: np.ndarray, i: int, seg: int) -> tuple[float, float]:
+    """Parameter ``t`` of the point of segment ``(seg, seg + 1)`` of the polyline ``c`` closest to
+    ``c[i]``, and the distance to it (as :func:`contgrasp_core.rod.self_contact._segment_geometry`)."""
+    e0 = c[seg + 1, 0] - c[seg, 0]
+    e1 = c[seg + 1, 1] - c[seg, 1]
+    t = ((c[i, 0] - c[seg, 0]) * e0 + (c[i, 1] - c[seg, 1]) * e1) / (e0 * e0 + e1 * e1)
+    t = min(max(t, 0.0), 1.0)
+    return t, math.hypot(c[i, 0] - (c[seg, 0] + t * e0), c[i, 1] - (c[seg, 1] + t * e1))
+
+
+@njit(cache=True)
+def self_contact_pairs(c: np.ndarray, s: np.ndarray, r: np.ndarray, h: float,
+                       margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs of :func:`contgrasp_core.rod.self_contact._pairs` in one loop over centres and
+    segments (the same tests on the same values): centre, segment, ``t``, distance, foot radius."""
+    n = c.shape[0]
+    cap = 8 * n
+    out_i = np.empty(cap, dtype=np.int64)
+    out_seg = np.empty(cap, dtype=np.int64)
+    out_t = np.empty(cap)
+    out_d = np.empty(cap)
+    out_r = np.empty(cap)
+    k = 0
+    r_max = 0.0
+    for j in range(n):
+        r_max = max(r_max, r[j])
+    for i in range(n):
+        reach = r[i] + r_max + margin + h  # (a foot on the segment is within h of its first centre)
+        for seg in range(n - 1):
+            dx = c[i, 0] - c[seg, 0]
+            dy = c[i, 1] - c[seg, 1]
+            if dx * dx + dy * dy > reach * reach:
+                continue
+            t, dist = _segment_point(c, i, seg)
+            r_foot = (1.0 - t) * r[seg] + t * r[seg + 1]
+            if abs(s[i] - (s[seg] + t * h)) <= 0.5 * np.pi * (r[i] + r_foot):
+                continue
+            if not dist - r[i] - r_foot < margin:
+                continue
+            if seg > 0 and not dist <= _segment_point(c, i, seg - 1)[1]:
+                continue
+            if seg < n - 2 and not dist < _segment_point(c, i, seg + 1)[1]:
+                continue
+            if k == cap:
+                cap *= 2
+                out_i, out_seg = np.resize(out_i, cap), np.resize(out_seg, cap)
+                out_t, out_d, out_r = np.resize(out_t, cap), np.resize(out_d, cap), np.resize(out_r, cap)
+            out_i[k], out_seg[k], out_t[k], out_d[k], out_r[k] = i, seg, t, dist, r_foot
+            k += 1
+    return out_i[:k], out_seg[:k], out_t[:k], out_d[:k], out_r[:k]

@@ -56,8 +56,10 @@ from contgrasp_core.rod.coupling import body_coupling
 from contgrasp_core.rod.disturbance import wrench_array
 from contgrasp_core.rod.loads import ContactFrame, contact_forces, contact_frame, contact_tensors, drag_forces
 from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.muscle import saturate, saturate_jacobian
 from contgrasp_core.rod.newton_matrix import ChainMatrix, dense, solve
 from contgrasp_core.rod.obstacle import Obstacle
+from contgrasp_core.rod.self_contact import SelfContactFrame, self_contact_frame, self_contact_load
 
 __all__ = ["RodState", "RodLoads", "StepOptions", "RodSystem", "StepFailedError"]
 
@@ -113,7 +115,8 @@ class RodLoads:
 class StepOptions:
     """Integrator settings: ``method`` ("euler" | "midpoint"), Newton tolerance ``tol`` on the
     angle increment (rad), ``max_iter``, ``max_halvings``, contact search ``contact_margin`` (m),
-    ``max_angle_step`` (rad) the largest element rotation accepted in one step."""
+    ``max_angle_step`` (rad) the largest element rotation accepted in one step; ``self_contact``
+    the arm's contact with itself (:mod:`.self_contact`; off only to measure what it costs)."""
 
     method: str = "euler"
     tol: float = 1e-8
@@ -121,6 +124,7 @@ class StepOptions:
     max_halvings: int = 10
     contact_margin: float = 2e-3
     max_angle_step: float = 0.5
+    self_contact: bool = True
 
     def __post_init__(self) -> None:
         if self.method not in ("euler", "midpoint"):
@@ -134,10 +138,12 @@ class StepOptions:
 @dataclass(frozen=True, kw_only=True)
 class _StepEval:
     """What a Newton iteration reports besides the residual and matrix: the deepest penetration
-    and the stick-slip anchors after a step ending at this iterate."""
+    of the object, the deepest overlap of the arm with itself and the stick-slip anchors after a
+    step ending at this iterate."""
 
     penetration: float
     anchors: np.ndarray | None = None
+    self_overlap: float = 0.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -147,6 +153,22 @@ class _Eval(_StepEval):
     jac_w: np.ndarray
     jac_q: np.ndarray
     jac_m: np.ndarray
+
+
+def _muscles(model: RodModel, loads: RodLoads, theta: np.ndarray, x: np.ndarray,
+             b: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """The loads' active couple at ``theta`` as (held couple, feedback couple, its ``du/dtheta``),
+    each None when absent; with bounded muscles (:mod:`.muscle`) their saturated sum is returned as
+    the feedback couple, with the saturation's Jacobian."""
+    u = du = None
+    if loads.feedback is not None:
+        u, du = loads.feedback.couple_and_jacobian(theta, jacobian=True, nodes=x, normals=b)
+        assert du is not None  # asked for with jacobian=True
+    if model.muscle_bound is None:
+        return loads.couple, u, du
+    n = model.n_elements
+    total = (np.zeros(n) if loads.couple is None else np.asarray(loads.couple, dtype=float)) + (0.0 if u is None else u)
+    return None, saturate(model, total), saturate_jacobian(model, total, np.zeros((n, n)) if du is None else du)
 
 
 @dataclass(frozen=True)
@@ -198,7 +220,7 @@ class RodSystem:
         kap = m.joint_curvature(state.theta)
         e = 0.5 * np.sum(m.joint_ei * kap**2 * m.joint_len)
         if loads is not None and loads.couple is not None:
-            e += np.sum(np.asarray(loads.couple) * kap * m.joint_len)
+            e += np.sum(saturate(m, np.asarray(loads.couple, dtype=float)) * kap * m.joint_len)
         if loads is not None and loads.node_forces is not None:
             e -= np.sum(np.asarray(loads.node_forces) * chain.nodes(m, state.theta))
         if self.body is not None and state.body is not None:
@@ -288,11 +310,10 @@ class RodSystem:
         q = h * np.sum(b * tail, axis=1)
         jac_q[np.diag_indices(n)] += h * np.sum(a * tail, axis=1)
         mom = m.joint_ei * m.joint_curvature(theta)
-        if loads.couple is not None:
-            mom = mom + loads.couple
-        if loads.feedback is not None:
-            u, du = loads.feedback.couple_and_jacobian(theta, jacobian=True, nodes=x, normals=b)
-            assert du is not None  # asked for with jacobian=True
+        couple, u, du = _muscles(m, loads, theta, x, b)
+        if couple is not None:
+            mom = mom + couple
+        if u is not None and du is not None:
             mom = mom + u
             jac_q += du
             jac_q[:-1] -= du[1:]
@@ -311,12 +332,9 @@ class RodSystem:
         theta = f64(theta)
         base = m.base
         a, b, x = _kernels.frames_nodes(theta, m.h, base)
-        u_fb, du = _EMPTY, _EMPTY22
-        if loads.feedback is not None:
-            u_fb, du_ = loads.feedback.couple_and_jacobian(theta, jacobian=True, nodes=x, normals=b)
-            assert du_ is not None  # asked for with jacobian=True
-            u_fb, du = f64(u_fb), f64(du_)
-        couple = _EMPTY if loads.couple is None else f64(loads.couple)
+        held, u_, du_ = _muscles(m, loads, theta, x, b)
+        u_fb, du = (_EMPTY, _EMPTY22) if u_ is None or du_ is None else (f64(u_), f64(du_))
+        couple = _EMPTY if held is None else f64(held)
         nf = _EMPTY2 if loads.node_forces is None else f64(loads.node_forces)
         if frame is None:
             rows, foot, normal, tangent = _EMPTY_ROWS, _EMPTY2, _EMPTY2, _EMPTY2
@@ -351,14 +369,12 @@ class RodSystem:
             if self.body is None:
                 raise InvalidParameterError("a wrench on the object needs a movable object (the object is fixed)")
             wrench_array("the object's wrench", loads.wrench)
-        if _kernels.ENABLED and not self._coupled_contact:  # the structured solve calls no BLAS
-            return self._advance(state, duration, loads, dt_try)
         with single_thread_blas():  # (contgrasp_core.blas: small dense solves, one thread)
             return self._advance(state, duration, loads, dt_try)
 
     def _advance(self, state: RodState, duration: float, loads: RodLoads,
                  dt_try: float | None) -> tuple[RodState, dict]:
-        info = {"iterations": 0, "substeps": 0, "penetration": 0.0}
+        info = {"iterations": 0, "substeps": 0, "penetration": 0.0, "self_overlap": 0.0}
         dt = duration if dt_try is None else min(float(dt_try), duration)
         dt_min = duration / 2.0**self.options.max_halvings
         dt_linear = duration / 2.0 ** min(4, self.options.max_halvings)  # see _linearly_implicit_step
@@ -383,14 +399,45 @@ class RodSystem:
         return state, info
 
     def newton_system(self, state: RodState, w1: np.ndarray, dt: float, loads: RodLoads = RodLoads(),
-                      frame: ContactFrame | None = None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
+                      frame: ContactFrame | None = None,
+                      self_frame: SelfContactFrame | None = None) -> tuple[np.ndarray, np.ndarray, _StepEval]:
         """:meth:`_newton_system` with the Newton matrix as an (N, N) array (the step itself solves
         the structured :class:`.newton_matrix.ChainMatrix` where it has one)."""
-        res, jac, ev = self._newton_system(state, w1, dt, loads, frame)
+        res, jac, ev = self._newton_system(state, w1, dt, loads, frame, self_frame)
         return res, dense(jac), ev
 
+    def _scheme(self, state: RodState, w1: np.ndarray, dt: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+        """The scheme's weights ``cw``, ``cq`` of the rate and angle derivatives and the angles and
+        rates at which it evaluates forces (the step's end, or its midpoint)."""
+        n = len(state.theta)
+        midpoint = self.options.method == "midpoint"
+        cw, cq = (0.5, 0.25 * dt) if midpoint else (1.0, dt)
+        wr1 = w1[:n]
+        w_ = 0.5 * (state.omega + wr1) if midpoint else wr1
+        return cw, cq, state.theta + (0.5 if midpoint else 1.0) * dt * w_, w_
+
     def _newton_system(self, state: RodState, w1: np.ndarray, dt: float, loads: RodLoads,
-                       frame: ContactFrame | None) -> tuple[np.ndarray, np.ndarray | ChainMatrix, _StepEval]:
+                       frame: ContactFrame | None, self_frame: SelfContactFrame | None = None,
+                       ) -> tuple[np.ndarray, np.ndarray | ChainMatrix, _StepEval]:
+        """:meth:`_object_newton_system` and the arm's contact with itself (``self_frame``: the
+        step's frozen pairs, :mod:`.self_contact`), whose terms join the rod's rows; a step where no
+        pair presses is exactly the system without them."""
+        res, jac, ev = self._object_newton_system(state, w1, dt, loads, frame)
+        if self_frame is None:
+            return res, jac, ev
+        cw, cq, th_, w_ = self._scheme(state, w1, dt)
+        load = self_contact_load(self.model, self_frame, th_, w_)
+        if load is None:
+            return res, jac, ev
+        n = len(th_)
+        full = dense(jac).copy()
+        full[:n, :n] -= dt * (cw * load.q_omega + cq * load.q_theta)
+        res = res.copy()
+        res[:n] -= dt * load.q
+        return res, full, replace(ev, self_overlap=load.overlap)
+
+    def _object_newton_system(self, state: RodState, w1: np.ndarray, dt: float, loads: RodLoads,
+                              frame: ContactFrame | None) -> tuple[np.ndarray, np.ndarray | ChainMatrix, _StepEval]:
         """Residual and Newton matrix of the implicit step from ``state`` over ``dt`` at the
         iterate ``w1`` (the new rates): backward Euler ``R = M(theta_1)(w1 - w0) - dt q(theta_1,
         w1)`` with ``theta_1 = theta_0 + dt w1``, or the implicit midpoint rule with both evaluated
@@ -399,13 +446,11 @@ class RodSystem:
         With a movable object ``w1`` is (N+3,): the rod's rates, then the object's velocity, whose
         residual ``M_o (v1 - v0) - dt F`` (Newton-Euler, :mod:`.body`) joins the system with the
         coupling blocks of :func:`.coupling.body_coupling`."""
-        th0, w0 = state.theta, state.omega
-        n = len(th0)
+        w0 = state.omega
+        n = len(w0)
         midpoint = self.options.method == "midpoint"
-        cw, cq = (0.5, 0.25 * dt) if midpoint else (1.0, dt)
-        wr1 = w1[:n] if self.body is not None else w1
-        w_ = 0.5 * (w0 + wr1) if midpoint else wr1
-        th_ = th0 + (0.5 if midpoint else 1.0) * dt * w_
+        cw, cq, th_, w_ = self._scheme(state, w1, dt)
+        wr1 = w1[:n]
         if not self._coupled_contact:
             return self._rod_newton_system(th_, w_, wr1 - w0, dt, cw, cq, loads, frame)
         res, rod_jac, _ = self._rod_newton_system(th_, w_, wr1 - w0, dt, cw, cq, loads, None)
@@ -471,6 +516,17 @@ class RodSystem:
         anchors[new] = start[new]
         return replace(frame, anchors=anchors)
 
+    def self_contact_frame(self, state: RodState, dt: float) -> SelfContactFrame | None:
+        """The pairs of the arm near itself, frozen over a step of ``dt`` from ``state``
+        (:mod:`.self_contact`; None when no two parts are within the contact margin)."""
+        if not self.options.self_contact:
+            return None
+        m, w0 = self.model, state.omega
+        _, b, x = chain.frames_and_nodes(m, state.theta + 0.5 * dt * w0)
+        speed = np.hypot(*np.cumsum(m.h * b * w0[:, None], axis=0).T).max()  # the fastest node (m/s)
+        margin = self.options.contact_margin + 2.0 * dt * speed  # (two parts close at most twice as fast)
+        return self_contact_frame(m, 0.5 * (x[:-1] + x[1:]), margin)
+
     def obstacle_at(self, state: RodState) -> Obstacle:
         """The object where it is in ``state`` (the obstacle itself while it is fixed)."""
         if self.obstacle is None:
@@ -511,9 +567,9 @@ class RodSystem:
         implicit equation may have no root, and halving on to tiny steps only chatters). Stable
         for the stiff linear part, first order like backward Euler; None if it would rotate an
         element by more than ``max_angle_step``. Counted in ``info["linearised_steps"]``."""
-        frame = self.contact_frame(state, dt)
+        frame, self_frame = self.contact_frame(state, dt), self.self_contact_frame(state, dt)
         z0 = self.rates(state)
-        res, jac, ev = self._newton_system(state, z0, dt, loads, frame)
+        res, jac, ev = self._newton_system(state, z0, dt, loads, frame, self_frame)
         w1 = z0 + solve(jac, -res)
         new = self._new_state(state, w1, dt, ev.anchors)
         info["iterations"] += 1
@@ -521,7 +577,7 @@ class RodSystem:
             return None
         info["linearised_steps"] = info.get("linearised_steps", 0) + 1
         info["substeps"] += 1
-        info["penetration"] = max(info["penetration"], ev.penetration)
+        _account(info, ev)
         return new
 
     def _try_step(self, state: RodState, dt: float, loads: RodLoads, info: dict,
@@ -531,12 +587,12 @@ class RodSystem:
         opt = self.options
         th0, n = state.theta, len(state.theta)
         w0 = self.rates(state)
-        frame = self.contact_frame(state, dt)
+        frame, self_frame = self.contact_frame(state, dt), self.self_contact_frame(state, dt)
         w1 = w0.copy() if rate_change is None else w0 + dt * rate_change
         prev = np.inf
         scale = 1.0 + np.abs(th0).max()
         for it in range(1, opt.max_iter + 1):
-            res, jac, ev = self._newton_system(state, w1, dt, loads, frame)
+            res, jac, ev = self._newton_system(state, w1, dt, loads, frame, self_frame)
             dw = solve(jac, -res)
             if self.body is not None:  # the object's translation in rod lengths, beside the angles
                 dw_scaled = dw.copy()
@@ -556,8 +612,14 @@ class RodSystem:
                 if turn > 1.0:
                     return None, 0.9 / turn  # accuracy guard: too large a rotation in one step
                 info["substeps"] += 1
-                info["penetration"] = max(info["penetration"], ev.penetration)
+                _account(info, ev)
                 grow = 2.0 if it <= opt.max_iter // 2 else 1.0
                 return new, min(grow, 0.9 / max(turn, 1e-12))
         info["iterations"] += opt.max_iter
         return None, 0.5
+
+
+def _account(info: dict, ev: _StepEval) -> None:
+    """An accepted step's deepest penetration and self-overlap into the step's ``info``."""
+    info["penetration"] = max(info["penetration"], ev.penetration)
+    info["self_overlap"] = max(info["self_overlap"], ev.self_overlap)

@@ -28,6 +28,9 @@ Parameters (SI):
   point of the object where the contact stuck, capped by the Coulomb cone ``mu f_n`` (the
   anchor slides with the contact at the cap). See :mod:`contgrasp_core.rod.loads` and
   :mod:`contgrasp_core.rod.coupling`.
+* ``max_muscle_stress`` (Pa): the muscles' largest active stress; the active couple of each
+  section is bounded by :attr:`RodModel.muscle_bound` (:mod:`contgrasp_core.rod.muscle`,
+  docs/rod.md "Muscles with limits"); 0 = unbounded (the paper's law as printed).
 """
 
 from __future__ import annotations
@@ -71,6 +74,7 @@ class RodModel:
     friction: float = 0.0
     friction_velocity: float = 1.0e-3
     friction_model: str = "regularised"
+    max_muscle_stress: float = 0.0
 
     def __post_init__(self) -> None:
         _pos("length", self.length)
@@ -81,7 +85,7 @@ class RodModel:
         _pos("density", self.density)
         _pos("youngs_modulus", self.youngs_modulus)
         for name in ("damping", "drag_normal", "drag_tangential", "contact_stiffness",
-                     "contact_damping", "friction"):
+                     "contact_damping", "friction", "max_muscle_stress"):
             _pos(name, getattr(self, name), allow_zero=True)
         _pos("friction_velocity", self.friction_velocity)
         if self.friction_model not in ("regularised", "stick"):
@@ -180,6 +184,14 @@ class RodModel:
         k[idx[1:], idx[:-1]] -= c[1:]
         k[idx[:-1], idx[1:]] -= c[1:]
         return k
+
+    @cached_property
+    def muscle_bound(self) -> np.ndarray | None:
+        """The largest active couple at each joint (N,) in N m, ``2/3 sigma_max r^3`` (the whole
+        half-section pulling at ``max_muscle_stress``: docs/rod.md); None when unbounded."""
+        if self.max_muscle_stress == 0:
+            return None
+        return 2.0 / 3.0 * self.max_muscle_stress * self.radius(self.joint_s) ** 3
 
     def joint_curvature(self, theta: np.ndarray) -> np.ndarray:
         """Discrete curvature at the joints ``(theta_k - theta_{k-1}) / D_k`` (N,)."""
