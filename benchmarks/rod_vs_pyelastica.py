@@ -52,9 +52,9 @@ from contgrasp_core.control import paper_gains  # noqa: E402
 from contgrasp_core.scenario import PAPER  # noqa: E402
 
 
-def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: float, *, check_only: bool = False,
+def pyelastica_run(model: RodModel, obstacle: Obstacle | None, dt: float, duration: float, *, check_only: bool = False,
                    via: str = "rest_curvature", held_couple: np.ndarray | None = None, filter_order: int = 1,
-                   shear_ratio: float = 100.0, stretch_ratio: float = 100.0):
+                   shear_ratio: float = 100.0, stretch_ratio: float = 100.0, self_contact_k: float = 0.0):
     """Simulate the scenario in PyElastica; returns (node positions (N+1, 2), wall s, ok, max node speed).
 
     ``held_couple`` (N,) at the joints: open loop; None: the closed loop (eq. (19)).
@@ -66,6 +66,9 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
     ``shear_ratio`` = G / E and ``stretch_ratio`` scale the shear/stretch stiffness: the paper's
     rod is a Kirchhoff rod (inextensible, unshearable), so PyElastica is made nearly unshearable
     and inextensible (default G = 100 E, stretch x100), which also sets its stable step.
+    ``obstacle`` None: no object (open loop only). ``self_contact_k`` > 0: PyElastica's own
+    ``RodSelfContact`` with that stiffness (N/m per pair of elements) and damping
+    ``model.contact_damping * model.h``.
     ``ok``: finite, max node speed < 10 m/s and max element rate < 1e3 rad/s at the end (the
     probe, ``check_only``, also stops at the first non-finite or > 1e4 rad/s state).
     """
@@ -74,9 +77,11 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
     if via not in ("rest_curvature", "torques"):
         raise ValueError(f"via must be 'rest_curvature' or 'torques', got {via!r}")
     n = model.n_elements
-    gains = paper_gains(model, obstacle.boundary.params["R"])
+    if obstacle is None and held_couple is None:
+        raise ValueError("the closed loop needs the obstacle")
+    gains = None if obstacle is None else paper_gains(model, obstacle.boundary.params["R"])
 
-    class Sim(ea.BaseSystemCollection, ea.Constraints, ea.Forcing, ea.Damping):
+    class Sim(ea.BaseSystemCollection, ea.Constraints, ea.Forcing, ea.Damping, ea.Contact):
         pass
 
     sim = Sim()
@@ -91,6 +96,9 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
         sim.dampen(rod).using(ea.AnalyticalLinearDamper, uniform_damping_constant=model.damping, time_step=dt)
     if filter_order > 0:
         sim.dampen(rod).using(ea.LaplaceDissipationFilter, filter_order=int(filter_order))
+    if self_contact_k > 0:
+        sim.detect_contact_between(rod, rod).using(ea.RodSelfContact, k=self_contact_k,
+                                                   nu=model.contact_damping * model.h)
     ei_joint = model.joint_ei
     h = model.h
     r_el = model.r_centres
@@ -111,10 +119,10 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
             dl = 2.0 * r_el * h
             f = -(model.drag_normal * dl * np.abs(vn) * vn)[:, None] * nrm
             f -= (model.drag_tangential * dl * np.abs(vt) * vt)[:, None] * t
-            pr = obstacle.project(c)
-            pen = r_el - pr.signed_distance
+            pr = None if obstacle is None else obstacle.project(c)
+            pen = np.zeros(n) if pr is None else r_el - pr.signed_distance
             act = pen > 0
-            if np.any(act):
+            if pr is not None and np.any(act):
                 rate = -np.sum(vc * pr.normal_out, axis=1)
                 fn = h * np.maximum(model.contact_stiffness * pen + model.contact_damping * rate, 0.0)
                 f += np.where(act, fn, 0.0)[:, None] * pr.normal_out
@@ -127,6 +135,7 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
             if torque_couple is not None:
                 u = torque_couple
             else:
+                assert obstacle is not None and gains is not None
                 x = system.position_collection[:2].T
                 d3 = system.director_collection[2, :2, :].T  # material tangent director of each element
                 th = np.unwrap(np.arctan2(d3[:, 1], d3[:, 0]))
@@ -142,13 +151,14 @@ def pyelastica_run(model: RodModel, obstacle: Obstacle, dt: float, duration: flo
     sim.finalize()
     # rest curvature about d2 (= +z, index 1) at the N-1 interior nodes = contgrasp joints 1..N-1
     ei_in = ei_joint[1:]
-    mu2_in = gains.mu2[1:] if np.ndim(gains.mu2) else gains.mu2
+    mu2_in = None if gains is None else (gains.mu2[1:] if np.ndim(gains.mu2) else gains.mu2)
     closed_rk = via == "rest_curvature" and held_couple is None
     if via == "rest_curvature" and held_couple is not None:
         rod.rest_kappa[1, :] = -held_couple[1:] / ei_in
 
     def control() -> None:
         """Sense (rho, alpha) at the interior nodes from the centreline; kappa_rest = -u / EI."""
+        assert obstacle is not None and gains is not None
         x = rod.position_collection[:2].T
         e = np.diff(x, axis=0)
         tn = e[:-1] + e[1:]  # node tangent: the mean of the adjacent edges (the angles' mean, up to O(h^2))

@@ -293,6 +293,9 @@ class HoldExperiment:
             if not contact.in_contact.any():
                 raise GraspFailure("no contact", f"no node touched the object for {wait:g} s (at t = {obs.t:.3g} s, "
                                    f"the arm moving at up to {obs.max_speed:.3g} m/s); no holding to measure")
+            if not grasp.health.valid:
+                raise GraspFailure("invalid", f"the grasp left the model's validity: {'; '.join(grasp.health.broken())}; "
+                                   "no holding to measure")
             raise GraspFailure("not settled", f"the grasp did not settle within {self.scenario.loop.duration:g} s (still "
                                f"moving at up to {obs.max_speed:.3g} m/s, {int(contact.in_contact.sum())} nodes in "
                                "contact); no holding to measure")

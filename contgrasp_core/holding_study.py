@@ -85,7 +85,7 @@ class StudySpec:
     perimeter (``length_fraction``: the map's and the rod's; 0.5 the paper's map) or the rod
     scenario's arm (``arm``: module docstring), and the holding law's depth regulation
     (``depth_gain``, 1/s, docs/holding.md (H7); 0: none) and dwell (``dwell``, s, (H8); 0:
-    none)."""
+    none), and the arm's muscles' ``max_muscle_stress`` (Pa; 0: unbounded, docs/rod.md)."""
 
     object: str = "circle"
     psi_steps: int = 24
@@ -101,6 +101,7 @@ class StudySpec:
     arm: str = "map"
     depth_gain: float = 0.0
     dwell: float = 0.0
+    max_muscle_stress: float = 0.0
 
     def __post_init__(self) -> None:
         if self.arm not in ARMS:
@@ -114,6 +115,7 @@ class StudySpec:
             raise InvalidParameterError(f"scale must be a finite number > 0 (m per paper unit), got {self.scale!r}")
         if int(self.nodes) != self.nodes or not 3 <= self.nodes <= 1001:
             raise InvalidParameterError(f"nodes must be an integer in [3, 1001], got {self.nodes!r}")
+        replace(PAPER.rod, max_muscle_stress=self.max_muscle_stress)  # (validates it)
         if not (np.isfinite(self.duration) and self.duration > 0):
             raise InvalidParameterError(f"duration must be a finite number > 0 (s), got {self.duration!r}")
         if self.law not in LAWS:
@@ -187,7 +189,8 @@ def pose_scenario(spec: StudySpec, base_paper: tuple[float, float, float]) -> Sc
     ``base_paper`` (x, y, heading in the paper's units about the object)."""
     x, y, heading = base_si(spec, base_paper)
     obj = spec.rod_object()
-    rod = replace(PAPER.rod, n_elements=spec.nodes - 1, base_position=(x, y), base_angle=heading)
+    rod = replace(PAPER.rod, n_elements=spec.nodes - 1, base_position=(x, y), base_angle=heading,
+                  max_muscle_stress=spec.max_muscle_stress)
     if spec.arm == "map":
         ms = spec.map_spec()
         rod = replace(rod, length=ms.length_fraction * obj.boundary().length, radius_base=ms.arm_radius * spec.scale,
@@ -415,7 +418,8 @@ def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...]
     return out
 
 
-_LATER_FIELDS = {"law": "paper", "length_fraction": 0.5, "arm": "map", "depth_gain": 0.0, "dwell": 0.0}
+_LATER_FIELDS = {"law": "paper", "length_fraction": 0.5, "arm": "map", "depth_gain": 0.0, "dwell": 0.0,
+                 "max_muscle_stress": 0.0}
 """StudySpec's fields added after studies were recorded, with their defaults: written only when
 they differ, so a file recorded before them resumes (it holds a study at those defaults)."""
 

@@ -45,7 +45,7 @@ HOLD_PREFIX = "hold_"
 
 ROD_PARAMETERS = ("length", "n_elements", "radius_base", "radius_tip", "density", "youngs_modulus", "damping",
                   "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction",
-                  "base_x", "base_y", "base_angle")
+                  "max_muscle_stress", "base_x", "base_y", "base_angle")
 """The rod's parameters (ROS names), shared by the simulator and the controller."""
 
 _LOOP_PARAMETERS = ("duration", "control_period", "dt", "settle_speed", "settle_hold", "min_time")

@@ -137,16 +137,17 @@ def test_an_arm_that_does_not_touch_the_object_is_a_no_contact_outcome() -> None
 
 
 def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Two base poses of the circle's map and the three optima, a coarse rod and short ramps:
-    every pose gets a result line; running again computes nothing and returns the same rows; a
-    file of another specification is refused before the map is computed."""
-    spec = StudySpec(object="ellipse", psi_steps=4, d_steps=1, nodes=31,
-                     hold=HoldSettings(directions=1, ramp_time=0.4, hold_time=0.3, release_time=0.3))
+    """Two base poses of the circle's map and the three optima, the rod scenario's arm (the map's
+    thick uniform arm folds through itself under the paper's law: outcome "invalid"), a coarse rod
+    and short ramps: every pose gets a result line; running again computes nothing and returns the
+    same rows; a file of another specification is refused before the map is computed."""
+    spec = StudySpec(object="circle", psi_steps=4, d_steps=2, nodes=51, arm="rod",
+                     hold=HoldSettings(directions=1, ramp_time=0.4, hold_time=0.3, release_time=0.3, contact_wait=3.0))
     out = tmp_path / "study.jsonl"
     qm, rows = run_study(spec, out, executor="processes", workers=2)  # (the process pool in a real study)
-    # (rows 2 and 3 are the half-turns of rows 0 and 1)
-    assert sorted(r["key"] for r in rows) == ["grid:0,0", "grid:1,0", "optimum:Q1", "optimum:Q2", "optimum:Q3"]
-    assert all(r["outcome"] in ("held", "no contact", "not settled", "not held") for r in rows)
+    # (the circle's rows are its row 0 turned)
+    assert sorted(r["key"] for r in rows) == ["grid:0,0", "grid:0,1", "optimum:Q1", "optimum:Q2", "optimum:Q3"]
+    assert all(r["outcome"] in ("held", "no contact", "not settled", "not held", "invalid") for r in rows)
     assert all(r["versions"]["numpy"] == np.__version__ and set(r["versions"]) == {"numpy", "scipy", "numba"} for r in rows)
     ok = [r for r in rows if r["status"] == "ok"]
     assert ok, [r["status"] for r in rows]
@@ -166,10 +167,10 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest
     assert out.read_text().splitlines() == lines and rows2 == rows
     assert load_results(out)[0]["key"] == "spec"
     # a file that names the object as it was given (before the study named it by its one name,
-    # "ellipse:8,4") resumes: the same object
-    assert load_results(out)[0]["object"] == "ellipse:8,4" == spec.object
+    # "circle:5") resumes: the same object
+    assert load_results(out)[0]["object"] == "circle:5" == spec.object
     older = tmp_path / "older.jsonl"
-    older.write_text(out.read_text().replace('"object": "ellipse:8,4"', '"object": "ellipse"', 1))
+    older.write_text(out.read_text().replace('"object": "circle:5"', '"object": "circle"', 1))
     assert run_study(spec, older, executor="serial")[1] == rows and older.read_text().count("\n") == len(lines)
     # a row measured with another static map (here: its static Q1 altered) is reported with
     # today's map and marked, the others are not

@@ -7,7 +7,7 @@ import argparse
 
 from ..objects import SYNTAX, ObjectScale, ObjectSpec
 
-__all__ = ["add_object_arguments", "object_from_args"]
+__all__ = ["add_object_arguments", "object_from_args", "add_muscle_argument"]
 
 
 def add_object_arguments(parser: argparse.ArgumentParser, scale: ObjectScale) -> None:
@@ -22,6 +22,14 @@ def add_object_arguments(parser: argparse.ArgumentParser, scale: ObjectScale) ->
     group.add_argument("--outline", metavar="FILE.csv", default=None,
                        help=f"your own object: a CSV outline, rows x, y in the same units ({scale.name}), "
                        "closed implicitly")
+
+
+def add_muscle_argument(parser: argparse.ArgumentParser) -> None:
+    """Register ``--max-muscle-stress`` (Pa; the rod's :attr:`~contgrasp_core.rod.RodModel.max_muscle_stress`)."""
+    parser.add_argument("--max-muscle-stress", type=float, default=0.0, metavar="PA",
+                        help="the muscles' largest stress, Pa: bounds the couple each section of the arm can make "
+                        "(docs/rod.md, 'Muscles with limits'; published octopus-arm models use 1e4-1e5); default 0: "
+                        "unbounded, the paper's law as printed")
 
 
 def object_from_args(args: argparse.Namespace, scale: ObjectScale) -> ObjectSpec:

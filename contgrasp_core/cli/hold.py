@@ -23,7 +23,7 @@ from ..holding import HoldSettings, measure_holding
 from ..holding_measure import cage_capacity
 from ..objects import ROD_SCALE
 from ..scenario import PAPER
-from .common import add_object_arguments, object_from_args
+from .common import add_muscle_argument, add_object_arguments, object_from_args
 from .simulate import add_law_arguments, hold_law_from_args
 
 __all__ = ["add_parser", "run", "format_text"]
@@ -50,6 +50,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
                    help=f"escaped beyond this displacement, in object radii (default {d.escape_distance:g})")
     p.add_argument("--escape-angle", type=float, default=d.escape_angle,
                    help=f"escaped beyond this rotation, rad (default {d.escape_angle:g})")
+    add_muscle_argument(p)
     add_law_arguments(p)
     p.set_defaults(func=run, format_text=format_text)
 
@@ -96,7 +97,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if not 3 <= args.nodes <= 1001:
         raise InvalidParameterError(f"--nodes must be in [3, 1001], got {args.nodes}")
     obj = object_from_args(args, ROD_SCALE)
-    rod = replace(PAPER.rod, n_elements=args.nodes - 1)
+    rod = replace(PAPER.rod, n_elements=args.nodes - 1, max_muscle_stress=args.max_muscle_stress)
     if args.base is not None:
         if not np.all(np.isfinite(args.base)):
             raise InvalidParameterError(f"--base must be three finite numbers, got {args.base}")

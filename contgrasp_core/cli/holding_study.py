@@ -23,7 +23,7 @@ from ..control.hold_law import LAWS
 from .hold import add_ramp_arguments
 from ..holding_study import ARMS, PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
 from ..objects import FIG2_SCALE
-from .common import add_object_arguments, object_from_args
+from .common import add_muscle_argument, add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run", "format_text"]
 
@@ -52,6 +52,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--dwell", type=float, default=d.dwell,
                    help="with --law hold: stay at the close gap this long, s >= 0, and latch the mean curvature over "
                    f"it (docs/holding.md (H8); default {d.dwell:g}: one sample)")
+    add_muscle_argument(p)
     p.add_argument("--support", type=float, default=d.hold.support,
                    help=f"support stiffness under the released object, N/m (default {d.hold.support:g}; 0: entirely free)")
     p.add_argument("--length-fraction", type=float, default=d.length_fraction,
@@ -95,6 +96,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     spec = StudySpec(object=object_from_args(args, FIG2_SCALE).text(), psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
                      d_max=args.d_max, nodes=args.nodes, duration=args.duration, law=args.law,
                      length_fraction=args.length_fraction, arm=args.arm, depth_gain=args.depth_gain, dwell=args.dwell,
+                     max_muscle_stress=args.max_muscle_stress,
                      hold=replace(StudySpec().hold, directions=args.directions, support=args.support, rate=args.rate,
                                   ramp_time=args.ramp_time, contact_wait=args.contact_wait))
     qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,

@@ -21,11 +21,12 @@ from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.rod import RodModel, RodSystem
 from contgrasp_core.rod.body import MODES, ObjectDynamics
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
+from contgrasp_core.rod.self_contact import self_gap
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_core.scenario import PAPER, rod_system
 from contgrasp_core.tracking import contact_stats
 
-from .common import add_object_arguments, object_from_args
+from .common import add_muscle_argument, add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run", "summarize", "loop_config", "add_law_arguments", "hold_law_from_args"]
 
@@ -68,6 +69,7 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
     p.add_argument("--friction", type=float, default=PAPER.rod.friction,
                    help="Coulomb friction coefficient of the contact, stick-slip (docs/rod.md; default: the "
                    f"paper's frictionless contact, {PAPER.rod.friction:g})")
+    add_muscle_argument(p)
     add_law_arguments(p)
     p.add_argument("--plot", metavar="FILE", help="write the paper's Fig. 4 (PNG/PDF/SVG)")
     p.add_argument("--animate", metavar="FILE.gif", help="write an animation of the grasp")
@@ -129,10 +131,25 @@ def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_
         "final_penetration_ratio": float(res.penetration_ratio[-1]),
         "contact_tolerance": float(contact_tol),
         **asdict(stats),
+        **run_health(res),
         "damping_per_s": m.damping,
         "control": "continuous" if res.config.control_period is None else f"{hold} {res.config.control_period} s",
         **_object_motion(res),
     }
+
+
+def run_health(res: ClosedLoopResult) -> dict[str, Any]:
+    """The run's ``validity`` block, the muscles' effort (``peak_couple``...) and the final
+    ``self_gap`` (m, the smallest gap between parts of the arm that are not neighbours)."""
+    assert res.health is not None  # (both runners measure it)
+    gap = self_gap(res.model, res.final_state.theta).gap
+    return {"validity": res.health.validity(), **res.health.effort(), "self_gap": None if np.isinf(gap) else gap}
+
+
+def validity_warning(out: dict[str, Any]) -> str | None:
+    """The one warning line of a run that left the model's validity (None when valid)."""
+    broken = out["validity"]["broken"]
+    return None if not broken else "warning: the run left the model's validity, so it is not settled: " + "; ".join(broken)
 
 
 def _object_motion(res: ClosedLoopResult) -> dict[str, Any]:
@@ -197,6 +214,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     from contgrasp_core.contact import sense
     from contgrasp_core.control import FeedbackExpansion, feedback_at_joints
     from contgrasp_core.rod import chain
+    from contgrasp_core.rod.muscle import saturate
     from contgrasp_core.rod.session import LoopSession
 
     m = system.model
@@ -215,10 +233,10 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
         expansion: FeedbackExpansion | ShapeHold
         if isinstance(command, ShapeHold):
             expansion = command
-            couple = command.couple + command.couple_and_jacobian(session.state.theta, jacobian=False)[0]
+            couple = saturate(m, command.couple + command.couple_and_jacobian(session.state.theta, jacobian=False)[0])
         else:
             expansion = feedback_at_joints(m, command, sn.rho, sn.alpha)
-            couple = expansion.u
+            couple = saturate(m, expansion.u)
         pen_c = m.r_centres - obstacle.project(chain.centres(m, session.state.theta)).signed_distance
         ratio = max(float((sn.delta / obs.radius).max()), float((pen_c / m.r_centres).max()), 0.0)
         max_ratio = max(max_ratio, ratio)
@@ -237,7 +255,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
         settle_time=session.settle_time, wall_time=time.perf_counter() - wall0, newton_iterations=session.iterations,
         final_state=session.state, model=m, gains=gains, config=config, steps=session.k,
         integrator_steps=session.k * config.substeps, max_penetration=session.max_penetration,
-        max_penetration_ratio=max_ratio)
+        max_penetration_ratio=max_ratio, health=session.health)
 
 
 MAX_NODES = 10_001
@@ -292,7 +310,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     boundary, r_obj = obj.boundary(), obj.radius
     if not (np.isfinite(args.friction) and args.friction >= 0.0):
         raise InvalidParameterError(f"--friction must be a finite number >= 0, got {args.friction}")
-    overrides: dict[str, Any] = {} if args.damping is None else {"damping": args.damping}
+    overrides: dict[str, Any] = {"max_muscle_stress": args.max_muscle_stress}
+    if args.damping is not None:
+        overrides["damping"] = args.damping
     if args.friction > 0:
         overrides.update(friction=args.friction, friction_model="stick")
     model = replace(PAPER.rod, n_elements=args.nodes - 1, **overrides)
@@ -314,6 +334,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out.update(object=obj.text(), object_mode=args.object_mode, law=args.law, friction=model.friction)
     if law is not None:
         out["law_phase"] = law.phase
+    warning = validity_warning(out)
+    if warning:
+        print(f"contgrasp simulate: {warning}", file=sys.stderr)
     if args.plot:
         plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" else None)
     if args.animate:

@@ -32,6 +32,8 @@ from contgrasp_core.control.rod_feedback import StateFeedback
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.muscle import saturate
+from contgrasp_core.rod.validity import RunHealth
 
 if TYPE_CHECKING:  # (imported by the runner: the scenario's ClosedLoopConfig comes without the engine)
     from contgrasp_core.control.hold_law import Law
@@ -94,9 +96,11 @@ class ClosedLoopResult:
     ``max_penetration`` (m) and ``max_penetration_ratio``: their largest values over *every*
     control step, recorded or not (what the ROS simulator's ``LoopSession.max_penetration``
     reports, on the nodes and element centres);
-    ``settled``, ``settle_time`` (s or None), ``wall_time`` (s), ``newton_iterations``,
+    ``settled`` (quiet, and the run stayed valid: ``health``), ``settle_time`` (s or None),
+    ``wall_time`` (s), ``newton_iterations``,
     the ``final_state`` and the run's ``model``, ``gains`` and ``config``; ``steps`` the control
-    periods advanced and ``integrator_steps`` the accepted implicit steps (substeps included)."""
+    periods advanced and ``integrator_steps`` the accepted implicit steps (substeps included);
+    ``health`` the run's validity and muscle effort (:class:`~contgrasp_core.rod.validity.RunHealth`)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -119,6 +123,7 @@ class ClosedLoopResult:
     integrator_steps: int = 0
     max_penetration: float = 0.0
     max_penetration_ratio: float = 0.0
+    health: RunHealth | None = None
 
 
 def _speeds(system: RodSystem, st: RodState) -> float:
@@ -157,6 +162,8 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / period)))
     continuous = config.control_period is None
     r_nodes = m.radius(m.s_nodes)
+    s_points = np.concatenate((m.s_nodes, m.s_centres))
+    health = RunHealth(m)
     rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
     iters = 0
     steps = substeps = 0
@@ -177,6 +184,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         else:
             u = feedback_couple(sn.rho[:-1], sn.alpha[:-1], ei, command.mu1, command.mu2,
                                 length_unit=command.length_unit)
+        u = saturate(m, u)
         speed = _speeds(system, st)
         done = False
         if speed < config.settle_speed and (law is None or law.holding):
@@ -186,7 +194,9 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
             quiet_since = None
         pen_c = m.r_centres - obstacle.project(chain.centres(m, st.theta)).signed_distance
         pen = max(float(sn.delta.max()), float(pen_c.max()), 0.0)
-        ratio = max(float((sn.delta / r_nodes).max()), float((pen_c / m.r_centres).max()), 0.0)
+        ratios = np.concatenate((sn.delta / r_nodes, pen_c / m.r_centres))
+        ratio = max(float(ratios.max()), 0.0)
+        health.observe(st.t, st.theta, ratios, s_points)
         max_pen, max_ratio = max(max_pen, pen), max(max_ratio, ratio)
         if k % rec_every == 0 or done or k == n_ctrl:
             for key, val in (("t", st.t), ("x", shape.r), ("theta", shape.theta),
@@ -194,10 +204,11 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
                              ("speed", speed)):
                 rec[key].append(val)
         if done:
-            settled = True
+            settled = health.valid
             break
         if k == n_ctrl:
             break
+        health.applied(st.t, u)
         if isinstance(command, ShapeHold):
             loads = RodLoads(couple=command.couple, feedback=command)
         else:
@@ -214,4 +225,4 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=settled,
         settle_time=(quiet_since if settled else None), wall_time=wall, newton_iterations=iters,
         final_state=st, model=m, gains=gains, config=config, steps=steps, integrator_steps=substeps,
-        max_penetration=max_pen, max_penetration_ratio=max_ratio)
+        max_penetration=max_pen, max_penetration_ratio=max_ratio, health=health)

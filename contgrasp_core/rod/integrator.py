@@ -59,7 +59,7 @@ from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.muscle import saturate, saturate_jacobian
 from contgrasp_core.rod.newton_matrix import ChainMatrix, dense, solve
 from contgrasp_core.rod.obstacle import Obstacle
-from contgrasp_core.rod.self_contact import SelfContactFrame, self_contact_frame, self_contact_load
+from contgrasp_core.rod.self_contact import SelfContactFrame, missed_pairs, self_contact_frame, self_contact_load
 
 __all__ = ["RodState", "RodLoads", "StepOptions", "RodSystem", "StepFailedError"]
 
@@ -583,14 +583,39 @@ class RodSystem:
     def _try_step(self, state: RodState, dt: float, loads: RodLoads, info: dict,
                   rate_change: np.ndarray | None = None) -> tuple[RodState | None, float]:
         """One implicit step; returns the new state (None if rejected) and the factor for the next
-        step (module docstring). ``rate_change`` extrapolates the first Newton iterate."""
-        opt = self.options
-        th0, n = state.theta, len(state.theta)
-        w0 = self.rates(state)
+        step (module docstring). ``rate_change`` extrapolates the first Newton iterate. A step
+        that ends with parts of the arm overlapping that its self-contact frame did not foresee is
+        solved again with them (:func:`.self_contact.missed_pairs`, at most twice)."""
         frame, self_frame = self.contact_frame(state, dt), self.self_contact_frame(state, dt)
-        w1 = w0.copy() if rate_change is None else w0 + dt * rate_change
+        w0 = self.rates(state)
+        first = w0.copy() if rate_change is None else w0 + dt * rate_change
+        for _ in range(3):
+            w1, ev, it = self._newton(state, dt, loads, frame, self_frame, first)
+            info["iterations"] += it
+            if w1 is None or ev is None:
+                return None, 0.5
+            new = self._new_state(state, w1, dt, ev.anchors)
+            missed = self._missed(state, new, self_frame)
+            if missed is None:
+                break
+            self_frame = missed
+        assert ev is not None  # (a failed solve returned above)
+        turn = np.abs(new.theta - state.theta).max() / self.options.max_angle_step
+        if turn > 1.0:
+            return None, 0.9 / turn  # accuracy guard: too large a rotation in one step
+        info["substeps"] += 1
+        _account(info, ev)
+        grow = 2.0 if it <= self.options.max_iter // 2 else 1.0
+        return new, min(grow, 0.9 / max(turn, 1e-12))
+
+    def _newton(self, state: RodState, dt: float, loads: RodLoads, frame: ContactFrame | None,
+                self_frame: SelfContactFrame | None,
+                w1: np.ndarray) -> tuple[np.ndarray | None, _StepEval | None, int]:
+        """Newton from the iterate ``w1``: the step's unknowns, the last evaluation and the
+        iterations (None, None when it diverges or does not converge in ``max_iter``)."""
+        opt, n = self.options, len(state.theta)
         prev = np.inf
-        scale = 1.0 + np.abs(th0).max()
+        scale = 1.0 + np.abs(state.theta).max()
         for it in range(1, opt.max_iter + 1):
             res, jac, ev = self._newton_system(state, w1, dt, loads, frame, self_frame)
             dw = solve(jac, -res)
@@ -601,22 +626,19 @@ class RodSystem:
             else:
                 size = dt * np.abs(dw).max()
             if not np.isfinite(size) or (it >= 3 and size > 2.0 * prev):  # diverging: give up early
-                info["iterations"] += it
-                return None, 0.5
+                return None, None, it
             prev = size
             w1 = w1 + dw
             if size <= opt.tol * (scale + dt * np.abs(w1[:n]).max()):
-                info["iterations"] += it
-                new = self._new_state(state, w1, dt, ev.anchors)
-                turn = np.abs(new.theta - th0).max() / opt.max_angle_step
-                if turn > 1.0:
-                    return None, 0.9 / turn  # accuracy guard: too large a rotation in one step
-                info["substeps"] += 1
-                _account(info, ev)
-                grow = 2.0 if it <= opt.max_iter // 2 else 1.0
-                return new, min(grow, 0.9 / max(turn, 1e-12))
-        info["iterations"] += opt.max_iter
-        return None, 0.5
+                return w1, ev, it
+        return None, None, opt.max_iter
+
+    def _missed(self, state: RodState, new: RodState, self_frame: SelfContactFrame | None) -> SelfContactFrame | None:
+        """The step's self-contact frame with the pairs that overlap at its end unforeseen (None: none)."""
+        if not self.options.self_contact:
+            return None
+        m = self.model
+        return missed_pairs(m, self_frame, chain.centres(m, state.theta), chain.centres(m, new.theta))
 
 
 def _account(info: dict, ev: _StepEval) -> None:

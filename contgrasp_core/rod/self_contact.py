@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.model import RodModel
 
-__all__ = ["SelfContactFrame", "SelfContactLoad", "SelfGap", "self_contact_frame", "self_contact_load",
+__all__ = ["SelfContactFrame", "SelfContactLoad", "SelfGap", "self_contact_frame", "missed_pairs", "self_contact_load",
            "self_contact_energy", "self_gap"]
 
 Array = NDArray[np.float64]
@@ -58,8 +58,8 @@ class SelfContactLoad:
 class SelfGap:
     """The smallest surface gap between parts of the arm that are not neighbours: ``gap`` (m;
     negative: they overlap; +inf when no two parts are near), ``ratio`` the overlap over the
-    thinner part's radius (0 without overlap), at arclengths ``s`` and ``s_other`` (m). Gaps wider
-    than twice the largest radius are not searched (``gap`` +inf)."""
+    thinner part's radius (0 without overlap), at arclengths ``s`` and ``s_other`` (m); +inf
+    beyond the search's margin."""
 
     gap: float
     ratio: float
@@ -128,13 +128,40 @@ def self_contact_frame(model: RodModel, c: Array, margin: float) -> SelfContactF
     found = _pairs(model, c, margin)
     if found is None or found[0].size == 0:
         return None
-    i, seg, t, foot, dist, _ = found
-    d = c[i] - foot
+    i, seg, t = found[:3]
+    return SelfContactFrame(centre=i.astype(np.int64), segment=seg.astype(np.int64), t=t, normal=_normals(c, i, seg, t))
+
+
+def _normals(c: Array, i: NDArray[np.int64], seg: NDArray[np.int64], t: Array) -> Array:
+    """Unit normals from the feet at ``t`` on the segments to the centres ``i`` (the segment's
+    normal for a centre on it)."""
     e = c[seg + 1] - c[seg]
-    along = np.stack([-e[:, 1], e[:, 0]], axis=1)  # (a centre on the polyline: the segment's normal)
-    normal = np.where((dist > 0)[:, None], d / np.where(dist > 0, dist, 1.0)[:, None], along)
-    normal /= np.hypot(*normal.T)[:, None]
-    return SelfContactFrame(centre=i.astype(np.int64), segment=seg.astype(np.int64), t=t, normal=normal)
+    d = c[i] - (c[seg] + t[:, None] * e)
+    dist = np.hypot(*d.T)
+    normal = np.where((dist > 0)[:, None], d / np.where(dist > 0, dist, 1.0)[:, None], np.stack([-e[:, 1], e[:, 0]], axis=1))
+    return normal / np.hypot(*normal.T)[:, None]
+
+
+def missed_pairs(model: RodModel, frame: SelfContactFrame | None, c_start: Array,
+                 c_end: Array) -> SelfContactFrame | None:
+    """``frame`` with the pairs that overlap at the end of a step (centres ``c_end``) but were not
+    in it (the step moved them faster than its margin foresaw), their normals taken where the
+    step started (``c_start``: from the side they came from); None when none was missed."""
+    found = _pairs(model, c_end, 0.0)
+    if found is None or found[0].size == 0:
+        return None
+    i, seg, t = found[:3]
+    n = model.n_elements
+    if frame is not None:
+        new = ~np.isin(i * n + seg, frame.centre * n + frame.segment)
+        i, seg, t = i[new], seg[new], t[new]
+    if i.size == 0:
+        return None
+    normal = _normals(c_start, i, seg, t)
+    if frame is None:
+        return SelfContactFrame(centre=i.astype(np.int64), segment=seg.astype(np.int64), t=t, normal=normal)
+    return SelfContactFrame(centre=np.concatenate([frame.centre, i]), segment=np.concatenate([frame.segment, seg]),
+                            t=np.concatenate([frame.t, t]), normal=np.concatenate([frame.normal, normal]))
 
 
 def self_contact_load(model: RodModel, frame: SelfContactFrame, theta: Array, omega: Array) -> SelfContactLoad | None:
@@ -184,11 +211,12 @@ def self_contact_energy(model: RodModel, theta: Array) -> float:
     return float(0.25 * model.h * model.contact_stiffness * np.sum(pen**2))
 
 
-def self_gap(model: RodModel, theta: Array) -> SelfGap:
+def self_gap(model: RodModel, theta: Array, margin: float | None = None) -> SelfGap:
     """The smallest surface gap between non-neighbouring parts of the arm at angles ``theta``
-    (the measure of "passed through itself"; :class:`SelfGap`)."""
+    (the measure of "passed through itself"; :class:`SelfGap`), searched up to ``margin`` (m;
+    default twice the largest radius; 0: overlaps only)."""
     c = chain.centres(model, theta)
-    found = _pairs(model, c, 2.0 * float(model.r_centres.max()))
+    found = _pairs(model, c, 2.0 * float(model.r_centres.max()) if margin is None else margin)
     if found is None or found[0].size == 0:
         return SelfGap(gap=np.inf, ratio=0.0, s=np.nan, s_other=np.nan)
     i, seg, t, _, dist, r_foot = found

@@ -38,7 +38,9 @@ from contgrasp_core.rod import chain
 from contgrasp_core.rod.body import BodyState, shape_in_object_frame
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
+from contgrasp_core.rod.muscle import saturate
 from contgrasp_core.rod.obstacle import Obstacle
+from contgrasp_core.rod.validity import RunHealth
 
 __all__ = [
     "Observation",
@@ -131,9 +133,10 @@ class SettleDetector:
 class LoopSession:
     """Steps a :class:`RodSystem` in control periods and decides when the run is over.
 
-    The run finishes when the rod has settled (every node slower than ``settle_speed`` for
+    The run finishes when the rod is quiet (every node slower than ``settle_speed`` for
     ``settle_hold`` seconds, not before ``min_time``) or after ``duration``; both are judged on
-    the observed state, before the couple for it is applied.
+    the observed state, before the couple for it is applied. It is settled when quiet and still
+    within the model's validity (``health``, :class:`~contgrasp_core.rod.validity.RunHealth`).
     """
 
     def __init__(self, system: RodSystem, config: ClosedLoopConfig, state: RodState | None = None) -> None:
@@ -156,14 +159,16 @@ class LoopSession:
         self._radius = system.model.radius(system.model.s_nodes)  # (the same every step: shared, read-only)
         self._radius.flags.writeable = False
         self._surface_radius = np.concatenate((self._radius, system.model.r_centres))  # at the nodes and centres
+        self._surface_s = np.concatenate((system.model.s_nodes, system.model.s_centres))
+        self.health = RunHealth(system.model)
 
     @property
     def settled(self) -> bool:
-        return self.settle.settled
+        return self.settle.settled and self.health.valid
 
     @property
     def settle_time(self) -> float | None:
-        return self.settle.settle_time
+        return self.settle.settle_time if self.health.valid else None
 
     def observe(self, ready: bool = True) -> Observation:
         """Arrays of the current state; updates the settle/finish status (idempotent per step: the
@@ -182,8 +187,10 @@ class LoopSession:
         radius = self._radius
         obstacle = self.system.obstacle_at(st)
         points = np.concatenate((x, 0.5 * (x[:-1] + x[1:])))  # the nodes and the centres (chain.centres)
-        pen = max(float(-(obstacle.project(points).signed_distance - self._surface_radius).min()), 0.0)
+        depth = self._surface_radius - obstacle.project(points).signed_distance
+        pen = max(float(depth.max()), 0.0)
         self.max_penetration = max(self.max_penetration, pen)
+        self.health.observe(float(st.t), st.theta, depth / self._surface_radius, self._surface_s)
         obs = Observation(
             k=self.k,
             t=float(st.t),
@@ -199,7 +206,7 @@ class LoopSession:
             body=st.body,
         )
         self.settle.update(float(st.t), speed, ready)
-        self.finished = self.settled or self.k >= self.n_control
+        self.finished = self.settle.settled or self.k >= self.n_control
         self._observed = obs
         return obs
 
@@ -231,7 +238,9 @@ class LoopSession:
         law's hold, linear in the state) is applied exactly. ``wrench`` (3,) is held on a movable
         object.
         """
+        t, theta = float(self.state.t), self.state.theta
         if isinstance(couple, ShapeHold):
+            self.health.applied(t, saturate(self.system.model, couple.couple + couple.couple_and_jacobian(theta, jacobian=False)[0]))
             self._step(RodLoads(couple=couple.couple, feedback=couple, wrench=wrench))
             return
         expansion = couple if isinstance(couple, FeedbackExpansion) else None
@@ -243,6 +252,7 @@ class LoopSession:
             parts = (expansion.rho_ref, expansion.alpha_ref, expansion.g_rho, expansion.g_alpha)
             if any(np.shape(p) != (n,) for p in parts) or not np.isfinite(parts).all():
                 raise InvalidParameterError(f"the feedback expansion needs {n} finite values per field")
+        self.health.applied(t, saturate(self.system.model, u))  # (a held expansion's couple at the state it expands about)
         obstacle = self.system.obstacle_at(self.state)
         held = None if expansion is None else HeldExpansion(self.system.model, obstacle, expansion)
         self._step(RodLoads(couple=u, feedback=held, wrench=wrench))

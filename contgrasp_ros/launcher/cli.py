@@ -95,6 +95,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="the controller's law: paper (eq. (19)) or hold (docs/holding.md) (default: the parameter file's)")
     p.add_argument("--object-mode", choices=MODES, default=None,
                    help="how the object moves: fixed (the paper), spring or free (default: the parameter file's)")
+    p.add_argument("--max-muscle-stress", type=float, default=None, metavar="PA",
+                   help="the muscles' largest stress, Pa: bounds each section's couple (docs/rod.md); 0: unbounded "
+                   "(default: the parameter file's)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds to run at most (overrides the parameter file)")
     p.add_argument("--in-process", action="store_true", help="run all nodes in this process on one executor")
     p.add_argument("--executor", choices=("lean", "single", "events"), default=None,
@@ -180,7 +183,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
             raise InvalidParameterError(f"--duration must be a finite number > 0 (simulated seconds), got {args.duration}")
         params["rod_simulator"]["duration"] = float(args.duration)
     obj = object_from_args(args, ROD_SCALE) if args.object is not None or args.outline is not None else None
-    changes = launch_overrides(params, obj, args.law, args.object_mode)
+    changes = launch_overrides(params, obj, args.law, args.object_mode, args.max_muscle_stress)
     if changes:  # (the nodes read the changed scenario from a file of their own, removed at the end)
         for node, values in changes.items():
             params[node].update(values)
@@ -239,6 +242,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
         run_figure(summary, params, str(args.plot))
         summary["plot"] = str(args.plot)
     summary.pop("history", None)
+    for broken in (summary.get("validity") or {}).get("broken", []):
+        print(f"contgrasp-launch: warning: the run left the model's validity, so it is not settled: {broken}", file=sys.stderr)
     if args.summary_file is not None:
         args.summary_file.parent.mkdir(parents=True, exist_ok=True)
         args.summary_file.write_text(json.dumps(summary, indent=1))

@@ -127,9 +127,11 @@ def object_parameters(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> dic
 
 
 def launch_overrides(params: dict[str, dict[str, Any]], obj: ObjectSpec | None = None, law: str | None = None,
-                     object_mode: str | None = None) -> dict[str, dict[str, Any]]:
+                     object_mode: str | None = None,
+                     max_muscle_stress: float | None = None) -> dict[str, dict[str, Any]]:
     """The parameters per node that a launch's options change: the object (:func:`object_parameters`),
-    the controller's ``law`` and the simulator's ``object_mode`` (None: unchanged); the result,
+    the controller's ``law``, the simulator's ``object_mode`` and the arm's ``max_muscle_stress``
+    (the simulator's and the controller's: they describe one rod) (None: unchanged); the result,
     merged into ``params``, is checked as a scenario (:meth:`Scenario.from_ros_parameters`: an
     unknown law or mode, an impossible start)."""
     out = {} if obj is None else object_parameters(params, obj)
@@ -137,6 +139,9 @@ def launch_overrides(params: dict[str, dict[str, Any]], obj: ObjectSpec | None =
         out.setdefault(CONTROLLER, {})["law"] = law
     if object_mode is not None:
         out.setdefault(SIMULATOR, {})["object_mode"] = object_mode
+    if max_muscle_stress is not None:
+        for node in (SIMULATOR, CONTROLLER):
+            out.setdefault(node, {})["max_muscle_stress"] = float(max_muscle_stress)
     Scenario.from_ros_parameters({node: {**params[node], **out.get(node, {})} for node in params})
     return out
 

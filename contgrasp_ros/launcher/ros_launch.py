@@ -55,6 +55,9 @@ def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
                               description="the controller's law: paper (eq. (19)) or hold (docs/holding.md) (default: the parameter file's)"),
         DeclareLaunchArgument("object_mode", default_value="", choices=["", *MODES],
                               description="how the object moves: fixed (the paper), spring or free (default: the parameter file's)"),
+        DeclareLaunchArgument("max_muscle_stress", default_value="",
+                              description="the muscles' largest stress [Pa]: bounds each section's couple; 0: unbounded "
+                                          "(default: the parameter file's)"),
         DeclareLaunchArgument("lockstep", default_value=str(lockstep).lower(), choices=["true", "false"],
                               description="true: lock-step simulated time, deterministic; false: the wall clock (real time)"),
         DeclareLaunchArgument("duration", default_value="", description="simulated seconds at most (default: the parameter file's)"),
@@ -70,18 +73,29 @@ def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
     ]
 
 
+def _number(name: str, text: str) -> float | None:
+    """A launch argument's number (None when not given)."""
+    if not text:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise InvalidParameterError(f"{name}:={text!r} is not a number") from None
+
+
 def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node | RegisterEventHandler]:
     """The graph's node processes with the launch arguments applied (the launcher's rules:
     an override file beside the scenario's parameter file, removed when the launch ends)."""
     arg = {name: LaunchConfiguration(name).perform(context) for name in
-           ("params_file", "object", "outline", "law", "object_mode", "lockstep", "duration", "compose", "record", "bag",
-            "on_finish")}
+           ("params_file", "object", "outline", "law", "object_mode", "max_muscle_stress", "lockstep", "duration", "compose",
+            "record", "bag", "on_finish")}
     params_file = Path(arg["params_file"]) if arg["params_file"] else default_params_file()
     params = load_params(params_file)
     record = arg["record"] == "true"
     overrides: dict[str, dict[str, Any]] = {name: {"use_sim_time": True, "on_finish": arg["on_finish"]} for name in nodes}
     obj = ObjectSpec.from_cli(arg["object"] or None, arg["outline"] or None, ROD_SCALE) if arg["object"] or arg["outline"] else None
-    for name, values in launch_overrides(params, obj, arg["law"] or None, arg["object_mode"] or None).items():
+    for name, values in launch_overrides(params, obj, arg["law"] or None, arg["object_mode"] or None,
+                                         _number("max_muscle_stress", arg["max_muscle_stress"])).items():
         if name in overrides:
             overrides[name].update(values)
     sim = overrides[SIMULATOR]

@@ -14,6 +14,7 @@ launcher measures them; ``None`` from a recording). Nothing here imports rclpy.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -85,8 +86,11 @@ class RunSummary:
     ``sim_time_s``, ``steps``, ``missed_deadlines`` (lock-step timeouts that applied the
     fallback couple; free-running: control periods lost behind the wall clock),
     ``late_couples`` (free-running steps that went on without the couple answering their state,
-    :class:`~contgrasp_ros.nodes.lockstep.CoupleWait`; 0 in lock-step) and ``max_penetration`` (m) are the simulator's last ``/diagnostics``
-    status; ``final``, ``final_quality`` and the contact statistics
+    :class:`~contgrasp_ros.nodes.lockstep.CoupleWait`; 0 in lock-step), ``max_penetration`` (m),
+    ``validity`` (what broke the model, :class:`~contgrasp_core.rod.validity.RunHealth`; ``None``
+    from an older recording) and the muscles' effort (``peak_couple`` N m, at ``peak_couple_s``
+    m and ``peak_couple_t`` s, ``peak_couple_ratio`` to the bound, ``None`` when unbounded) are
+    the simulator's last ``/diagnostics`` status; ``final``, ``final_quality`` and the contact statistics
     (:class:`~contgrasp_core.tracking.ContactStats`: mean and max tracking errors over the
     ``contact_nodes`` nodes in contact, ``contact_length`` m) the last rod state, grasp
     quality and contact state; ``wall_time_s`` (the whole launcher run) and ``loop_wall_time_s``
@@ -103,6 +107,11 @@ class RunSummary:
     missed_deadlines: int
     late_couples: int
     max_penetration: float | None
+    validity: dict[str, Any] | None
+    peak_couple: float | None
+    peak_couple_s: float | None
+    peak_couple_t: float | None
+    peak_couple_ratio: float | None
     final: FinalState | None
     final_quality: FinalQuality | None
     mean_abs_rho_ratio_minus_1_contact: float | None
@@ -126,6 +135,14 @@ def _num(status: Mapping[str, str], key: str) -> float | None:
         return float(status[key])
     except (KeyError, ValueError):
         return None
+
+
+def _json(status: Mapping[str, str], key: str) -> dict[str, Any] | None:
+    try:
+        value = json.loads(status[key])
+    except (KeyError, ValueError):
+        return None
+    return value if isinstance(value, dict) else None
 
 
 def build_summary(
@@ -152,6 +169,11 @@ def build_summary(
         missed_deadlines=int(_num(status, "missed_deadlines") or 0),
         late_couples=int(_num(status, "late_couples") or 0),
         max_penetration=_num(status, "max_penetration"),
+        validity=_json(status, "validity"),
+        peak_couple=_num(status, "peak_couple"),
+        peak_couple_s=_num(status, "peak_couple_s"),
+        peak_couple_t=_num(status, "peak_couple_t"),
+        peak_couple_ratio=_num(status, "peak_couple_ratio"),
         final=final,
         final_quality=final_quality,
         mean_abs_rho_ratio_minus_1_contact=contact.mean_abs_rho_ratio_minus_1_contact,

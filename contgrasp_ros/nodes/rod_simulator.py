@@ -56,6 +56,7 @@ complete) keeps the next state from counting as settled, as in the core loop.
 
 from __future__ import annotations
 
+import json
 import time
 from typing import Any
 
@@ -349,6 +350,8 @@ class RodSimulator(Node):
             "late_couples": str(self.wait.late),
             "dropped_messages": str(self.drops.total),
             "max_penetration": repr(float(s.max_penetration)),
+            "validity": json.dumps(s.health.validity()),
+            **{k: "" if v is None else repr(float(v)) for k, v in s.health.effort().items()},
             "message": self.failure,
         }
         return *self._status_summary(), values
@@ -376,6 +379,8 @@ class RodSimulator(Node):
             self.rule.stop()
             s = self.session
             settled = f"settled at {s.settle_time:.4g} s" if s.settle_time is not None else "not settled"
+            for broken in s.health.broken():
+                self.get_logger().warn(f"the run left the model's validity, so it is not settled: {broken}")
             self.finish.done(False, f"finished at t = {s.state.t:.4g} s ({settled}, missed deadlines: {self.missed})",
                              self._publish_status)
 
