@@ -1,4 +1,4 @@
-"""The holding law through the ROS graph (issue 29, point 4; docs/holding.md, "A law that
+"""The holding law through the ROS graph (docs/holding.md, "A law that
 holds"): the controller's ``law`` parameter, the arm's shape in the contact state, the hold
 (``kappa_ref``, ``hold_gain``) and the ``transition`` flag in the couple, the simulator applying
 the hold in the state; a lock-step run with a free object pushed while held equals the core-only
@@ -176,3 +176,32 @@ def test_the_launcher_refuses_an_unknown_law_in_one_line() -> None:
     proc = subprocess.run([str(BIN / "contgrasp-launch"), "--law", "grip"], capture_output=True, text=True, timeout=60)
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and "--law: invalid choice: 'grip'" in lines[-1], proc.stderr
+
+
+def test_bounded_muscles_through_the_graph_equal_the_core_loop_bit_for_bit() -> None:
+    """``contgrasp-launch --law hold --object-mode free --max-muscle-stress 20000``: the simulator
+    saturates the couple as the core loop does (the same arm, object and effort to the bit); the
+    couple never exceeds the muscles' bound; the summary reports the effort and the validity."""
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--law", "hold",
+                           "--object-mode", "free", "--max-muscle-stress", "20000", "--duration", "0.8", "--no-record",
+                           "--json"], capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads(proc.stdout)
+    p = load_params(default_params_file())
+    p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "hold", "free"
+    p["rod_simulator"].update(max_muscle_stress=20000.0, duration=0.8)
+    p["grasp_controller"]["max_muscle_stress"] = 20000.0
+    scenario = Scenario.from_ros_parameters(p)
+    session = run_sampled(scenario)
+    obs = session.observe()
+    assert obs.body is not None and summary["steps"] == obs.k
+    np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
+    np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
+    assert summary["final"]["object_q"] == obs.body.q.tolist()
+    effort = session.health.effort()
+    assert summary["peak_couple"] == effort["peak_couple"] and summary["peak_couple_s"] == effort["peak_couple_s"]
+    assert summary["peak_couple_ratio"] == effort["peak_couple_ratio"] and 0.99 < effort["peak_couple_ratio"] <= 1.0
+    assert summary["validity"] == json.loads(json.dumps(session.health.validity()))
+    bound = scenario.rod.muscle_bound
+    assert bound is not None and effort["peak_couple"] <= bound[0]
