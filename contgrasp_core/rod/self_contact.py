@@ -19,7 +19,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.model import RodModel
@@ -94,6 +93,8 @@ def _pairs(model: RodModel, c: Array, margin: float) -> _Pairs | None:
         i, seg, t, dist, r_foot = _kernels.self_contact_pairs(_kernels.f64(c), model.s_centres, r, h, float(margin))
         foot = (1.0 - t)[:, None] * c[seg] + t[:, None] * c[seg + 1]
         return i, seg, t, foot, dist, r_foot
+    from scipy.spatial import cKDTree  # (the reference path only: the light ROS nodes import this module without scipy)
+
     close = cKDTree(c).query_pairs(2.0 * float(r.max()) + margin + h, output_type="ndarray")
     if close.size:  # keep the pairs near enough for their radii whose nearby feet are not all neighbours
         i, j = close[:, 0], close[:, 1]
