@@ -292,6 +292,59 @@ def test_launcher_bad_input_and_usage_exit_2(capsys: pytest.CaptureFixture[str],
                       "(see 'contgrasp-launch --help')")
 
 
+@pytest.fixture
+def launched(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
+    """The parameters each ``contgrasp-launch`` run hands to the graph (the run itself left out)."""
+    import contgrasp_ros.launcher.graph_run
+
+    runs: list[dict[str, Any]] = []
+
+    def record(params: dict[str, Any], **_k: object) -> tuple[dict[str, Any], int]:
+        runs.append(params)
+        return {}, 0
+
+    monkeypatch.setattr(contgrasp_ros.launcher.graph_run, "run_graph", record)
+    for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR"):  # the launcher sets them
+        monkeypatch.setenv(var, os.environ.get(var, "0"))
+    return runs
+
+
+@pytest.mark.parametrize("text", ["", "{}\n", "grasp_controller:\n  ros__parameters:\n    law: hold\n",
+                                  "/rod_simulator:\n  ros__parameters: {}\n"])
+def test_launcher_merges_a_partial_parameter_file_over_the_defaults(text: str, tmp_path: Path, launched: list[dict[str, Any]],
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_ros.launcher import cli as launcher
+    from contgrasp_ros.launcher.graph import default_params_file, load_params
+
+    params = tmp_path / "partial.yaml"
+    params.write_text(text)
+    assert launcher.main(["--params", str(params), "--no-record", "--json"]) == 0, capsys.readouterr().err
+    want = load_params(default_params_file())
+    if "law" in text:
+        want["grasp_controller"]["law"] = "hold"
+    assert launched == [want]
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("rod_simulatr:\n  ros__parameters:\n    duration: 1.0\n", "unknown node 'rod_simulatr'"),
+    ("rod_simulator:\n  ros__parameters:\n    durtion: 1.0\n",
+     "unknown parameter 'durtion' of rod_simulator (did you mean 'duration'?)"),
+    ("/**:\n  ros__parameters:\n    lenght: 0.2\n", "unknown parameter 'lenght' of /**"),
+    ("boundary_sensor:\n  ros__parameters:\n    law: hold\n", "unknown parameter 'law' of boundary_sensor"),
+])
+def test_launcher_refuses_an_unknown_node_or_parameter(text: str, message: str, tmp_path: Path, launched: list[dict[str, Any]],
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_ros.launcher import cli as launcher
+
+    params = tmp_path / "typo.yaml"
+    params.write_text(text)
+    capsys.readouterr()
+    assert launcher.main(["--params", str(params), "--no-record"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"contgrasp-launch: error: {params}: {message}"), err
+    assert launched == []
+
+
 def test_launcher_run_failure_exits_1(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """A RunFailure out of the graph run (injected: a real one needs a whole graph) exits 1."""
     import contgrasp_ros.launcher.graph_run

@@ -17,6 +17,7 @@ from contgrasp_core.errors import InvalidBoundaryError, InvalidParameterError
 from contgrasp_core.objects import FIG2_SCALE, ROD_SCALE, ObjectSpec
 from contgrasp_core.scenario import NODES, PAPER, Scenario
 from contgrasp_ros.launcher.cli import default_params_file, load_params
+from contgrasp_ros.launcher.graph import known_parameters
 
 KIDNEY = Path(__file__).parent / "data" / "kidney_outline.csv"
 
@@ -99,6 +100,7 @@ def test_node_without_parameter_file_runs_the_paper_scenario(node: str, ros_cont
         declared = {k: v for k, v in yaml_params.items() if n.has_parameter(k)}
         assert declared.keys() >= own.keys()
         assert {k: n.get_parameter(k).value for k in declared} == declared
+        assert set(n.list_parameters([], 0).names) <= known_parameters(node)  # what a parameter file may set for it
         if node == "rod_simulator":
             assert n.model == PAPER.rod and n.config == PAPER.loop
             assert n.boundary.kind == "circle" and n.boundary.params["R"] == 0.025
