@@ -197,6 +197,44 @@ def _child(argv: list[str], *, fsize: int | None = None, module: str = "contgras
     return subprocess.run([sys.executable, "-m", module, *argv], capture_output=True, text=True, timeout=timeout, env=env,
                           preexec_fn=None if fsize is None else _limited(fsize), cwd=ROOT)
 
+NOWHERE = "/proc/contgrasp-none"
+"""A folder no one can create, root included (``/proc`` takes no new files)."""
+
+UNWRITABLE_OUTPUTS = [
+    ["quality-map", "--psi-steps", "4", "--d-steps", "2", "--nodes", "40", "--no-optimise", "--executor", "serial",
+     "--out", f"{NOWHERE}/map"],
+    ["simulate", "--duration", "0.01", "--nodes", "11", "--plot", f"{NOWHERE}/fig.png"],
+    ["simulate", "--duration", "0.01", "--nodes", "11", "--animate", f"{NOWHERE}/run.gif"],
+    ["analyze", str(BAG), "--csv", f"{NOWHERE}/csv"],
+    ["analyze", str(BAG), "--plot", f"{NOWHERE}/fig.png"],
+    ["figures", "--nodes", "40", "--no-maps", "--out", f"{NOWHERE}/figures"],
+    ["holding-study", "--psi-steps", "1", "--d-steps", "1", "--out", f"{NOWHERE}/study.jsonl"],
+]
+
+
+@pytest.mark.parametrize("argv", UNWRITABLE_OUTPUTS, ids=[" ".join(a[:1] + a[-2:-1]) for a in UNWRITABLE_OUTPUTS])
+def test_an_output_that_cannot_be_written_is_refused_before_the_work(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    """(Were the work done first, the write would fail after it: exit 1.)"""
+    code, line = run_cli(capsys, argv)
+    command = " ".join(a for a in argv[:2] if not a.startswith("-") and "/" not in a)
+    assert code == 2 and line.startswith(f"contgrasp {command}: error: {argv[-2]} {argv[-1]}"), line
+    assert line.endswith(": cannot create a file in /proc (No such file or directory)"), line
+
+
+def test_the_output_check_leaves_nothing_behind(tmp_path: Path) -> None:
+    from contgrasp_core.outputs import check_output
+
+    (tmp_path / "kept.json").write_text("as it was")
+    assert check_output(tmp_path / "kept.json", "--out") == tmp_path / "kept.json"
+    assert check_output(tmp_path / "new" / "deeper" / "s.json", "--out") == tmp_path / "new" / "deeper" / "s.json"
+    assert check_output(tmp_path / "dir", "--csv", folder=True) == tmp_path / "dir"
+    assert [p.name for p in tmp_path.iterdir()] == ["kept.json"] and (tmp_path / "kept.json").read_text() == "as it was"
+    for path, folder, message in ((tmp_path / "kept.json" / "s.json", False, "kept.json is not a directory"),
+                                  (tmp_path / "kept.json", True, "exists and is not a directory"),
+                                  (tmp_path, False, "is a directory")):
+        with pytest.raises(InvalidParameterError, match=message):
+            check_output(path, "--out", folder=folder)
+
 
 WRITE_FAILURES = [
     (["kinematics", "--plot", "{tmp}/k.png"], "cannot write the figure"),
@@ -342,6 +380,22 @@ def test_launcher_refuses_an_unknown_node_or_parameter(text: str, message: str, 
     assert launcher.main(["--params", str(params), "--no-record"]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith(f"contgrasp-launch: error: {params}: {message}"), err
+    assert launched == []
+
+
+@pytest.mark.parametrize("option", [["--summary-file", "{tmp}/afile/s.json", "--no-record"],
+                                    ["--plot", "{tmp}/afile/run.png", "--no-record"],
+                                    ["--bag", f"{NOWHERE}/run"], ["--bag", f"{NOWHERE}/run.mcap"]])
+def test_launcher_refuses_an_output_it_cannot_write_before_the_run(option: list[str], tmp_path: Path, launched: list[dict[str, Any]],
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_ros.launcher import cli as launcher
+
+    (tmp_path / "afile").write_text("a file, not a folder")
+    argv = [a.format(tmp=tmp_path) for a in option]
+    capsys.readouterr()
+    assert launcher.main(argv) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"contgrasp-launch: error: {argv[0]} {argv[1]}: "), err
     assert launched == []
 
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,6 +19,7 @@ import numpy as np
 from .._validate import MAX_NODES
 from ..errors import InvalidParameterError, WriteError
 from ..objects import FIG2_SCALE, PAPER_OBJECTS, ObjectSpec
+from ..outputs import check_output
 from ..optimal import GraspResult, forward_backward, paper_problem, solve
 from .common import add_object_arguments, object_from_args
 
@@ -111,12 +111,7 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
     from ..figures.grasp import save_grasp_figure
     from ..quality_map import MapSpec
 
-    out_dir = Path(args.out)
-    for d in (out_dir, *out_dir.parents):
-        if d.exists():
-            if not d.is_dir():
-                raise InvalidParameterError(f"--out {out_dir}: {d} exists and is not a directory")
-            break
+    out_dir = check_output(args.out, "--out", folder=True)
     if not 3 <= args.nodes <= MAX_NODES:
         raise InvalidParameterError(f"--nodes must be in [3, {MAX_NODES}], got {args.nodes}")
     MapSpec(ObjectSpec.parse("circle"), psi_steps=args.psi_steps, d_steps=args.d_steps)  # checks both before any solve

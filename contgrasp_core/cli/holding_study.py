@@ -23,6 +23,7 @@ from ..control.hold_law import LAWS
 from .hold import add_ramp_arguments
 from ..holding_study import ARMS, PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
 from ..objects import FIG2_SCALE
+from ..outputs import check_output
 from .common import add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run", "format_text"]
@@ -92,6 +93,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run (or resume) the study; return the JSON-able summary."""
     if args.workers is not None and args.workers < 1:
         raise InvalidParameterError(f"--workers must be >= 1, got {args.workers}")
+    check_output(args.out, "--out")
+    if args.plot:
+        from ..figures.draw import check_figure_path
+
+        check_figure_path(args.plot)
     spec = StudySpec(object=object_from_args(args, FIG2_SCALE).text(), psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
                      d_max=args.d_max, nodes=args.nodes, duration=args.duration, law=args.law,
                      length_fraction=args.length_fraction, arm=args.arm, depth_gain=args.depth_gain, dwell=args.dwell,

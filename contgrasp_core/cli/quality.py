@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidParameterError, output_error
+from ..outputs import check_output
 from ..objects import FIG2_SCALE
 from ..quality_map import METRICS, MapSpec, load_map, quality_map, save_map
 from .common import add_object_arguments, object_from_args
@@ -81,15 +82,8 @@ def format_text(out: dict[str, Any]) -> str:
 
 def _check_out_path(path: str) -> None:
     """``--out FILE``: FILE.npz and FILE.json must be creatable (checked before computing)."""
-    p = Path(path)
-    for f in (p.with_suffix(".npz"), p.with_suffix(".json")):
-        if f.is_dir():
-            raise InvalidParameterError(f"--out {path}: {f} is a directory")
-    for parent in p.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise InvalidParameterError(f"--out {path}: {parent} is not a directory")
-            break
+    for f in (Path(path).with_suffix(".npz"), Path(path).with_suffix(".json")):
+        check_output(f, "--out")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:

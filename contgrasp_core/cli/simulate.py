@@ -22,6 +22,7 @@ from contgrasp_core.rod import RodModel, RodSystem
 from contgrasp_core.rod.body import MODES, ObjectDynamics
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
 from contgrasp_core.objects import ROD_SCALE
+from contgrasp_core.outputs import check_output
 from contgrasp_core.scenario import PAPER, rod_system
 from contgrasp_core.tracking import contact_stats
 
@@ -253,8 +254,7 @@ def _check_animation_path(path: str) -> None:
     fmt = Image.registered_extensions().get(p.suffix.lower())
     if fmt not in ("GIF", "WEBP", "PNG"):
         raise InvalidParameterError(f"--animate {path}: use a .gif, .webp or .png file name")
-    if p.is_dir() or (p.parent.exists() and not p.parent.is_dir()):
-        raise InvalidParameterError(f"--animate {path}: not a writable file name")
+    check_output(p, "--animate")
 
 
 SPRING_DEFAULTS = ((50.0, 50.0, 0.05), (1.0, 1.0, 0.001))

@@ -32,6 +32,7 @@ from contgrasp_core.cli.common import add_object_arguments, object_from_args
 from contgrasp_core.control.hold_law import LAWS
 from contgrasp_core.errors import InvalidParameterError, exit_code, one_line
 from contgrasp_core.objects import ROD_SCALE
+from contgrasp_core.outputs import check_output
 from contgrasp_core.rod.body import MODES
 from contgrasp_core.scenario import Scenario
 from contgrasp_ros.bag import BagError
@@ -205,6 +206,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
         layout = args.bag_layout or ("file" if out.suffix == ".mcap" else "folder")
         if out.exists():
             raise InvalidParameterError(f"--bag {out} already exists (give a new folder or .mcap file name)")
+        check_output(out, "--bag", folder=layout == "folder")
         # the file as the user named it (or the packaged one by name), never a path of this machine:
         # the parameters themselves are in ``params``
         run_info = {"params": params, "params_file": str(args.params) if args.params else PACKAGED_PARAMS,
@@ -220,6 +222,12 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
                   "decimate_period": args.bag_decimate, "max_bag_duration": args.max_bag_duration,
                   "max_bag_size": args.max_bag_size}
     compose = _compose_groups(args.compose, args.in_process)
+    if args.plot is not None:
+        from contgrasp_core.figures.draw import check_figure_path  # (matplotlib: only when drawing)
+
+        check_figure_path(args.plot, "--plot")
+    if args.summary_file is not None:
+        check_output(args.summary_file, "--summary-file")
     if args.respawn < 0 or (args.respawn and args.in_process):
         raise InvalidParameterError(f"--respawn takes N >= 0 and applies to separate node processes only, got {args.respawn}"
                                     + (" with --in-process" if args.in_process else ""))
@@ -239,7 +247,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
         run_figure(summary, params, str(args.plot))
         summary["plot"] = str(args.plot)
     summary.pop("history", None)
-    if args.summary_file is not None:
+    if args.summary_file is not None:  # (checked before the run)
         args.summary_file.parent.mkdir(parents=True, exist_ok=True)
         args.summary_file.write_text(json.dumps(summary, indent=1))
     if events is not None:
