@@ -7,6 +7,7 @@ QoS with rclpy's field names."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -60,6 +61,19 @@ def test_launcher_usage_errors_are_one_line(argv: list[str]) -> None:
     (line,) = proc.stderr.strip().splitlines()
     assert line.startswith("contgrasp-launch: error: ") and line.endswith("(see 'contgrasp-launch --help')")
     assert line.count("error:") == 1
+
+
+@pytest.mark.parametrize("argv", [["contgrasp", "bag", "info", str(SAMPLE_BAG)], ["contgrasp", "kinematics", "--json"]])
+def test_a_reader_that_closed_stdout_gets_no_traceback(argv: list[str]) -> None:
+    """``contgrasp bag info X | head -2``: the reader is gone before the output is; the command
+    ends quietly with exit code 1 (Python's recipe for SIGPIPE), nothing on stderr."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        proc = subprocess.run([str(BIN / argv[0]), *argv[1:]], stdout=write, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write)
+    assert (proc.returncode, proc.stderr) == (1, "")
 
 
 def _text(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:

@@ -399,6 +399,31 @@ def test_launcher_refuses_an_output_it_cannot_write_before_the_run(option: list[
     assert launched == []
 
 
+def test_launcher_summary_to_a_closed_stdout_ends_quietly(tmp_path: Path, launched: list[dict[str, Any]],
+                                                          monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """The summary's reader (``contgrasp-launch --json | head -c 1``) is gone: exit 1, no error line."""
+    from contgrasp_ros.launcher import cli as launcher
+
+    class Closed:
+        def __init__(self) -> None:
+            self.fd = os.open(tmp_path / "fd", os.O_WRONLY | os.O_CREAT)
+
+        def write(self, _text: str) -> int:
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self) -> None:
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def fileno(self) -> int:
+            return self.fd
+
+    monkeypatch.setattr(sys, "stdout", Closed())
+    capsys.readouterr()
+    assert launcher.main(["--no-record", "--json"]) == 1
+    assert [line for line in capsys.readouterr().err.splitlines() if not line.startswith("[launcher] ")] == []
+    assert len(launched) == 1
+
+
 def test_launcher_run_failure_exits_1(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """A RunFailure out of the graph run (injected: a real one needs a whole graph) exits 1."""
     import contgrasp_ros.launcher.graph_run

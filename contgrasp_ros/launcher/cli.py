@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from contgrasp_core.cli import ArgumentParser, report
+from contgrasp_core.cli import ArgumentParser, closed_stdout_safe, report
 from contgrasp_core.cli.common import add_object_arguments, object_from_args
 from contgrasp_core.control.hold_law import LAWS
 from contgrasp_core.errors import InvalidParameterError, exit_code, one_line
@@ -149,7 +149,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     An error of the launcher itself is one line on stderr, ``contgrasp-launch: error: ...``:
     exit code 2 for bad usage or input (argparse, :class:`~contgrasp_core.errors.InputError`),
     1 otherwise (:class:`~contgrasp_core.errors.RunFailure`, any other exception); ``--debug``
-    shows the traceback, with the same code."""
+    shows the traceback, with the same code. A reader that closed stdout early ends it quietly
+    (:func:`~contgrasp_core.cli.closed_stdout_safe`)."""
+    return closed_stdout_safe(lambda: _main(argv))
+
+
+def _main(argv: Sequence[str] | None) -> int:
     args = _parser().parse_args(argv)
     events: EventWriter | None = None
     try:
@@ -159,6 +164,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             events = open_events(args.events)
         with tempfile.TemporaryDirectory(prefix="contgrasp_params_") as folder:  # (a changed scenario's file)
             return _launch(args, argv, Path(folder), events)
+    except BrokenPipeError:  # (stdout closed by its reader: not the launcher's error)
+        raise
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback (--debug shows it)
         if events is not None:
             events("finished", exit_code=exit_code(exc), error=one_line(exc) or type(exc).__name__)
