@@ -66,6 +66,20 @@ def test_bad_input_is_one_line_exit_2(args: list[str], needle: str) -> None:
     assert len(proc.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.parametrize(("argv", "line"), [
+    (["simulate", "--duration", "0.01", "--nodes", "11", "--squeeze", "0.001", "--depth-gain", "5"],
+     "contgrasp simulate: error: --squeeze, --depth-gain do nothing under --law paper: they need --law hold"),
+    (["hold", "--nodes", "11", "--hold-gain", "10"],
+     "contgrasp hold: error: --hold-gain does nothing under --law paper: it needs --law hold"),
+])
+def test_the_holding_laws_options_under_the_papers_law_are_refused(argv: list[str], line: str,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """The paper's law ignores them: given, they would pass silently."""
+    capsys.readouterr()
+    assert main(argv) == 2
+    assert capsys.readouterr().err.splitlines() == [line]
+
+
 def test_argparse_usage_error_is_exit_2() -> None:
     proc = run_cli("kinematics", "--nodes", "many")
     assert proc.returncode == 2

@@ -424,6 +424,20 @@ def test_launcher_summary_to_a_closed_stdout_ends_quietly(tmp_path: Path, launch
     assert len(launched) == 1
 
 
+@pytest.mark.parametrize(("options", "names"), [(["--bag", "DIR"], "--bag does"),
+                                                (["--bag-decimate", "0.1", "--allow-unrecorded"],
+                                                 "--bag-decimate, --allow-unrecorded do")])
+def test_launcher_refuses_recording_options_with_no_record(options: list[str], names: str, launched: list[dict[str, Any]],
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_ros.launcher import cli as launcher
+
+    capsys.readouterr()
+    assert launcher.main(["--no-record", *options]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"contgrasp-launch: error: {names} nothing with --no-record: {'it needs' if ',' not in names else 'they need'} a recorded run"]
+    assert launched == []
+
+
 def test_launcher_run_failure_exits_1(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """A RunFailure out of the graph run (injected: a real one needs a whole graph) exits 1."""
     import contgrasp_ros.launcher.graph_run

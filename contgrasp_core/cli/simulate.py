@@ -16,7 +16,7 @@ import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.control import FeedbackGains, paper_gains
-from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold
+from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold, check_law_settings
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.rod import RodModel, RodSystem
 from contgrasp_core.rod.body import MODES, ObjectDynamics
@@ -100,9 +100,12 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
-    """The holding law's parameters of the command line (refused with an input error when out of range)."""
-    return HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
-                           stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell)
+    """The holding law's parameters of the command line, refused with an input error when out of
+    range or given to the paper's law, which ignores them (:func:`~contgrasp_core.control.hold_law.check_law_settings`)."""
+    settings = HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
+                               stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell)
+    check_law_settings(args.law, settings, lambda name: "--hold-gain" if name == "stiffness_gain" else f"--{name.replace('_', '-')}")
+    return settings
 
 
 def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_tolerance, hold: str = "zoh") -> dict[str, Any]:

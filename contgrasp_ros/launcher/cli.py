@@ -30,7 +30,7 @@ import numpy as np
 from contgrasp_core.cli import ArgumentParser, closed_stdout_safe, report
 from contgrasp_core.cli.common import add_object_arguments, object_from_args
 from contgrasp_core.control.hold_law import LAWS
-from contgrasp_core.errors import InvalidParameterError, exit_code, one_line
+from contgrasp_core.errors import InvalidParameterError, exit_code, one_line, refuse_ignored
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_core.outputs import check_output
 from contgrasp_core.rod.body import MODES
@@ -154,10 +154,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     return closed_stdout_safe(lambda: _main(argv))
 
 
+RECORDING_OPTIONS = ("--bag", "--bag-layout", "--bag-exclude", "--bag-decimate", "--bag-log-time", "--max-bag-duration",
+                     "--max-bag-size", "--allow-unrecorded")
+"""The options that set how the run is recorded: with ``--no-record`` they would do nothing."""
+
+
 def _main(argv: Sequence[str] | None) -> int:
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
     events: EventWriter | None = None
     try:
+        if args.no_record:
+            dests = {option: option[2:].replace("-", "_") for option in RECORDING_OPTIONS}
+            refuse_ignored([o for o, d in dests.items() if getattr(args, d) != parser.get_default(d)], "with --no-record",
+                           "a recorded run")
         if args.events is not None:
             if args.events == "-" and args.json:
                 raise InvalidParameterError("--events - and --json both write to stdout: give --events a file")
