@@ -80,6 +80,22 @@ def test_the_holding_laws_options_under_the_papers_law_are_refused(argv: list[st
     assert capsys.readouterr().err.splitlines() == [line]
 
 
+@pytest.mark.parametrize("solver", ["fast", "forward-backward"])
+def test_grasp_json_histories_have_an_entry_per_iteration(solver: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """``cost_history`` and ``residual_history`` (docs/cli.md): the starting iterate and one
+    entry after each iteration but the fast solver's SQP steps, whose end is the start."""
+    capsys.readouterr()
+    assert main(["grasp", "--json", "--nodes", "120", "--solver", solver, "--max-iterations", "20"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    entries = out["iterations"] - out["sqp_steps"] + 1
+    assert len(out["cost_history"]) == len(out["residual_history"]) == entries
+    assert out["cost_history"][-1] == out["cost"]
+    if solver == "fast":
+        assert out["sqp_steps"] >= 1 and out["residual_history"][-1] == out["residual"]
+    else:
+        assert out["sqp_steps"] == 0 and out["iterations"] == 20
+
+
 def test_argparse_usage_error_is_exit_2() -> None:
     proc = run_cli("kinematics", "--nodes", "many")
     assert proc.returncode == 2
