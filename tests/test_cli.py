@@ -96,6 +96,19 @@ def test_grasp_json_histories_have_an_entry_per_iteration(solver: str, capsys: p
         assert out["sqp_steps"] == 0 and out["iterations"] == 20
 
 
+def test_loading_a_missing_quality_map_names_the_missing_file(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
+    """``--load FILE``: FILE.npz and FILE.json; the first missing one is named, with no exception's class."""
+    base = tmp_path / "map"
+    hint = "(a map is FILE.npz with FILE.json beside it, as --out writes them)"
+    for present, missing in (((), "map.npz"), ((".npz",), "map.json")):
+        for suffix in present:
+            base.with_suffix(suffix).write_bytes(b"")
+        capsys.readouterr()
+        assert main(["quality-map", "--load", str(base)]) == 2
+        assert capsys.readouterr().err.splitlines() == [
+            f"contgrasp quality-map: error: cannot load quality map {base}: no file {tmp_path / missing} {hint}"]
+
+
 def test_argparse_usage_error_is_exit_2() -> None:
     proc = run_cli("kinematics", "--nodes", "many")
     assert proc.returncode == 2
