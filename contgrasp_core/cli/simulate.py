@@ -20,7 +20,7 @@ from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSetting
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.rod import RodModel, RodSystem
 from contgrasp_core.rod.body import MODES, ObjectDynamics
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, object_motion, run_closed_loop
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_core.outputs import check_output
 from contgrasp_core.scenario import PAPER, rod_system
@@ -206,7 +206,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     m = system.model
     assert system.obstacle is not None and config.control_period is not None
     rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / config.control_period)))
-    rec: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
+    rec: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed", "q")}
     wall0 = time.perf_counter()
     session = LoopSession(system, config)
     period = config.control_period
@@ -229,7 +229,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
         if session.k % rec_every == 0 or session.finished:
             for key, val in (("t", obs.t), ("x", obs.x), ("theta", obs.theta), ("rho", sn.rho), ("alpha", sn.alpha),
                              ("couple", couple), ("pen", obs.penetration), ("ratio", ratio),
-                             ("speed", obs.max_speed)):
+                             ("speed", obs.max_speed), ("q", None if session.state.body is None else session.state.body.q)):
                 rec[key].append(val)
         if session.finished:
             break
@@ -241,7 +241,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
         settle_time=session.settle_time, wall_time=time.perf_counter() - wall0, newton_iterations=session.iterations,
         final_state=session.state, model=m, gains=gains, config=config, steps=session.k,
         integrator_steps=session.k * config.substeps, max_penetration=session.max_penetration,
-        max_penetration_ratio=max_ratio)
+        max_penetration_ratio=max_ratio, **object_motion(system, rec["q"], law))
 
 
 MAX_NODES = 10_001
@@ -318,7 +318,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if law is not None:
         out["law_phase"] = law.phase
     if args.plot:
-        plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" else None)
+        # (the static solution is the paper's law's equilibrium: drawn for it only)
+        plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" and args.law == "paper" else None)
     if args.animate:
         animate(res, boundary, args.animate)
     return out

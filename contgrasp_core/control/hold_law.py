@@ -45,6 +45,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -181,6 +182,7 @@ class PaperLaw:
     :class:`HoldController` (it keeps no state)."""
 
     fixed: FeedbackGains
+    name: ClassVar[str] = "paper"
 
     @property
     def holding(self) -> bool:
@@ -197,6 +199,8 @@ class HoldController:
     ``close`` or ``hold``, the current gap ``gap`` (m), and in the hold the latched reference.
     :meth:`command` is called once per control period with what the arm senses; in the dwell
     (H8) the phase is ``close`` at ``gap == close_gap``."""
+
+    name: ClassVar[str] = "hold"
 
     def __init__(self, model: RodModel, object_radius: float, settings: HoldLawSettings = HoldLawSettings(),
                  length_unit: float = CENTIMETRE) -> None:

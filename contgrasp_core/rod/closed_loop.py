@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +31,7 @@ from contgrasp_core.control.law import feedback_couple
 from contgrasp_core.control.rod_feedback import StateFeedback
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import chain
+from contgrasp_core.rod.body import to_world
 from contgrasp_core.rod.model import RodModel
 
 if TYPE_CHECKING:  # (imported by the runner: the scenario's ClosedLoopConfig comes without the engine)
@@ -38,7 +39,7 @@ if TYPE_CHECKING:  # (imported by the runner: the scenario's ClosedLoopConfig co
     from contgrasp_core.rod.integrator import RodState, RodSystem
     from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "run_closed_loop"]
+__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "run_closed_loop", "object_motion"]
 
 
 @dataclass(frozen=True)
@@ -96,7 +97,10 @@ class ClosedLoopResult:
     reports, on the nodes and element centres);
     ``settled``, ``settle_time`` (s or None), ``wall_time`` (s), ``newton_iterations``,
     the ``final_state`` and the run's ``model``, ``gains`` and ``config``; ``steps`` the control
-    periods advanced and ``integrator_steps`` the accepted implicit steps (substeps included)."""
+    periods advanced and ``integrator_steps`` the accepted implicit steps (substeps included);
+    the ``law`` that ran (:data:`~contgrasp_core.control.hold_law.LAWS`); a movable object's
+    displacement ``object_q`` (K, 3: dx, dy m, dpsi rad) from its start pose, about its start
+    ``object_centroid`` (both None while the object is fixed)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -119,6 +123,16 @@ class ClosedLoopResult:
     integrator_steps: int = 0
     max_penetration: float = 0.0
     max_penetration_ratio: float = 0.0
+    law: str = "paper"
+    object_q: np.ndarray | None = None
+    object_centroid: tuple[float, float] | None = None
+
+    def object_at(self, k: int, points: np.ndarray) -> np.ndarray:
+        """``points`` (n, 2) of the object at its start pose, moved to where it is at record ``k``
+        (unchanged while it is fixed)."""
+        if self.object_q is None or self.object_centroid is None:
+            return np.asarray(points)
+        return to_world(points, self.object_q[k], np.asarray(self.object_centroid))
 
 
 def _speeds(system: RodSystem, st: RodState) -> float:
@@ -157,7 +171,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / period)))
     continuous = config.control_period is None
     r_nodes = m.radius(m.s_nodes)
-    rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
+    rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed", "q")}
     iters = 0
     steps = substeps = 0
     dt_next = dt
@@ -191,7 +205,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         if k % rec_every == 0 or done or k == n_ctrl:
             for key, val in (("t", st.t), ("x", shape.r), ("theta", shape.theta),
                              ("rho", sn.rho), ("alpha", sn.alpha), ("couple", u), ("pen", pen), ("ratio", ratio),
-                             ("speed", speed)):
+                             ("speed", speed), ("q", None if st.body is None else st.body.q)):
                 rec[key].append(val)
         if done:
             settled = True
@@ -214,4 +228,12 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=settled,
         settle_time=(quiet_since if settled else None), wall_time=wall, newton_iterations=iters,
         final_state=st, model=m, gains=gains, config=config, steps=steps, integrator_steps=substeps,
-        max_penetration=max_pen, max_penetration_ratio=max_ratio)
+        max_penetration=max_pen, max_penetration_ratio=max_ratio, **object_motion(system, rec["q"], law))
+
+
+def object_motion(system: RodSystem, q: list[np.ndarray | None], law: Law | None) -> dict[str, Any]:
+    """The :class:`ClosedLoopResult` fields of the ``law`` that ran (None: the paper's) and a
+    movable object's recorded displacements ``q`` (each None while the object is fixed)."""
+    body = system.body
+    return {"law": "paper" if law is None else law.name, "object_q": None if body is None else np.array(q, dtype=float),
+            "object_centroid": None if body is None else body.centroid}
