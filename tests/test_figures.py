@@ -281,6 +281,29 @@ def test_run_figure_shares_fig4s_units_and_colour_map() -> None:
     np.testing.assert_allclose(colours, snapshot_colours(len(colours))[:, :3])  # Fig. 4's colours
 
 
+def test_study_figure_has_readable_colour_bar_labels_and_whole_ranks() -> None:
+    """The stiffness's symmetric log colour bar: no two tick labels overlap (those of 0 and of the
+    linear part's edges did); the rank axes tick whole numbers only."""
+    from contgrasp_core.figures.holding import study_figure
+    from contgrasp_core.quality_map import MapSpec, quality_map
+
+    qm = quality_map(MapSpec("circle", psi_steps=6, d_steps=3, nodes=40), executor="serial", optimise=False)
+    rng = np.random.default_rng(1)
+    rows = [{"key": f"grid:{i},{j}", "status": "ok", "stiffness_min": float(rng.choice([-1, 1]) * 10 ** rng.uniform(-1, 3)),
+             "capacity_min": float(rng.uniform(0.1, 2.0)), "static_Q1": float(rng.uniform()), "Q1": float(rng.uniform())}
+            for i in range(6) for j in range(3)]
+    fig = study_figure(qm, rows)
+    FigureCanvasAgg(fig).draw()
+    (bar,) = [ax for ax in fig.get_axes() if ax.get_label() == "<colorbar>" and ax.get_ylabel() == "N/m"]
+    boxes = sorted((t.get_window_extent() for t in bar.get_yticklabels() if t.get_text()), key=lambda b: b.y0)
+    assert len(boxes) >= 5 and "0" in [t.get_text() for t in bar.get_yticklabels()]
+    assert all(low.y1 <= high.y0 for low, high in zip(boxes[:-1], boxes[1:], strict=True)), [(b.y0, b.y1) for b in boxes]
+    (ranks,) = [ax for ax in fig.get_axes() if ax.get_xlabel().startswith("rank")]
+    for ticks, (lo, hi) in ((ranks.get_xticks(), ranks.get_xlim()), (ranks.get_yticks(), ranks.get_ylim())):
+        shown = ticks[(ticks >= lo) & (ticks <= hi)]
+        assert len(shown) >= 3 and np.all(shown == np.round(shown)), shown
+
+
 def test_quality_history_has_units_no_axis_offsets_and_explains_the_settled_line(tmp_path) -> None:  # type: ignore[no-untyped-def]
     from contgrasp_core.figures.run import CREEP_NOTE, quality_history_figure
 

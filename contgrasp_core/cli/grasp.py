@@ -55,6 +55,9 @@ def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()
         "figures",
         parents=list(parents),
         help="regenerate the paper's Fig. 2 (optimal grasps) and Fig. 3 (quality maps) for the three objects",
+        description="Regenerate the paper's Fig. 2 (the optimal grasps of the circle, the ellipse and the deformed "
+        "circle, fig2_<object>.png) and Fig. 3 (their quality maps, fig3_<object>.png, each metric's optimum in "
+        "fig3_<object>.json) into --out.",
     )
     f.add_argument("--out", default="docs/figures", help="output directory (default docs/figures)")
     f.add_argument("--nodes", type=int, default=500, help="grid nodes along the arm (default 500)")
