@@ -37,6 +37,7 @@ __all__ = [
     "WriteError",
     "IntegrationError",
     "output_error",
+    "refuse_ignored",
     "one_line",
     "exit_code",
 ]
@@ -127,3 +128,13 @@ def output_error(what: str, exc: BaseException) -> ContgraspError:
     if isinstance(exc, OSError):
         return WriteError(f"cannot write {what}: {exc.strerror or exc}")
     return InvalidParameterError(f"cannot write {what}: {exc}")
+
+
+def refuse_ignored(names: list[str], where: str, needs: str) -> None:
+    """Refuse settings that would pass silently: ``names`` (those given, or changed from their
+    defaults) do nothing ``where`` (``"under --law paper"``) and take ``needs`` (``"--law hold"``).
+    An :class:`InvalidParameterError` in one line naming them all; nothing when ``names`` is empty."""
+    if names:
+        one = len(names) == 1
+        raise InvalidParameterError(f"{', '.join(names)} {'does' if one else 'do'} nothing {where}: "
+                                    f"{'it needs' if one else 'they need'} {needs}")

@@ -38,7 +38,7 @@ from filelock import FileLock, Timeout
 
 from .arm import BasePose
 from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
-from .control.hold_law import LAWS, HoldLawSettings
+from .control.hold_law import LAWS, HoldLawSettings, check_law_settings
 from .executors import run_tasks
 from .holding import GraspFailure, HoldSettings, measure_holding
 from .objects import FIG2_SCALE, OUTLINE, SHAPES, SYNTAX, ObjectSpec
@@ -120,11 +120,7 @@ class StudySpec:
             raise InvalidParameterError(f"duration must be a finite number > 0 (s), got {self.duration!r}")
         if self.law not in LAWS:
             raise InvalidParameterError(f"unknown law {self.law!r}; the laws are {', '.join(LAWS)}")
-        self.hold_law()  # (validates the depth gain and the dwell)
-        if self.depth_gain and self.law != "hold":
-            raise InvalidParameterError("the depth gain regulates the holding law's squeeze; it needs law hold")
-        if self.dwell and self.law != "hold":
-            raise InvalidParameterError("the dwell is the holding law's latch; it needs law hold")
+        check_law_settings(self.law, self.hold_law())  # (also validates the depth gain and the dwell)
 
     def hold_law(self) -> HoldLawSettings:
         """The holding law's settings of every pose: the defaults with the study's depth gain and dwell."""

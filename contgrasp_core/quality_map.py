@@ -478,6 +478,10 @@ def load_map(path: str | Path) -> QualityMap:
         p = Path(path).with_suffix(".npz")
     except (TypeError, ValueError) as exc:
         raise InvalidParameterError(f"cannot load quality map {path!r}: not a file path ({exc})") from exc
+    for f in (p, p.with_suffix(".json")):  # (the map's arrays first: a typo names the file the user meant)
+        if not f.is_file():
+            raise InvalidParameterError(f"cannot load quality map {path}: no file {f} "
+                                        "(a map is FILE.npz with FILE.json beside it, as --out writes them)")
     try:
         meta = json.loads(p.with_suffix(".json").read_text())
         with np.load(p) as z:
@@ -495,6 +499,8 @@ def load_map(path: str | Path) -> QualityMap:
             raise ValueError(f"arrays {bad} do not match the map's grid {P} x {D}")
     except ContgraspError as exc:
         raise InvalidParameterError(f"cannot load quality map {p}: invalid settings ({exc})") from exc
+    except OSError as exc:
+        raise InvalidParameterError(f"cannot load quality map {p}: cannot read {exc.filename or p}: {exc.strerror or exc}") from exc
     except Exception as exc:  # noqa: BLE001 - any failure to parse the files means a corrupt map
         raise InvalidParameterError(f"cannot load quality map {p}: {type(exc).__name__}: {exc}") from exc
     return qm

@@ -92,17 +92,27 @@ def _replay(args: argparse.Namespace) -> dict[str, Any]:
 
 def register(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     """Add ``bag info``, ``bag recover``, ``replay`` and ``analyze`` to the ``contgrasp`` parser."""
-    bag = sub.add_parser("bag", help="inspect or repair recordings (MCAP, rosbag2 layout)")
+    bag = sub.add_parser("bag", help="inspect or repair recordings (MCAP, rosbag2 layout)",
+                         description="Inspect (info) or repair (recover) a recording: a rosbag2 bag folder "
+                         "(metadata.yaml and .mcap files) or one .mcap file. No ROS needed.")
     bag_sub = bag.add_subparsers(dest="bag_command", metavar="BAG_COMMAND", required=True)
-    p = bag_sub.add_parser("info", parents=parents, help="topics, types, counts, duration, QoS (like ros2 bag info)")
+    p = bag_sub.add_parser("info", parents=parents, help="topics, types, counts, duration, QoS (like ros2 bag info)",
+                           description="What ros2 bag info shows: files, size, the log times' clock and span, message "
+                           "and chunk counts, and per topic its type, count and its publishers' QoS. No ROS needed.")
     p.add_argument("bag", type=Path, help="bag folder or .mcap file")
     p.set_defaults(func=_bag_info, format_text=_info_text)
     p = bag_sub.add_parser("recover", parents=parents,
-                           help="copy every intact chunk of a truncated/damaged recording into a new, finished one")
+                           help="copy every intact chunk of a truncated/damaged recording into a new, finished one",
+                           description="Copy every intact chunk and metadata record of a truncated or damaged "
+                           "recording into a new, finished one, and say what was lost (against the recording's own "
+                           "statistics where they survived, else \"unknown\"). No ROS needed.")
     p.add_argument("input", type=Path, help="damaged bag folder or .mcap file")
     p.add_argument("output", type=Path, help="new recording: a folder, or a .mcap file")
     p.set_defaults(func=_bag_recover)
-    p = sub.add_parser("replay", parents=parents, help="republish a recording with its original timing (needs ROS)")
+    p = sub.add_parser("replay", parents=parents, help="republish a recording with its original timing (needs ROS)",
+                       description="Republish a recording's messages with their original timing (divided by --rate), "
+                       "each topic with the type and QoS its publishers offered, /clock included when it was recorded, "
+                       "so the nodes, RViz or Foxglove run against a recorded run. Needs ROS.")
     p.add_argument("bag", type=Path, help="bag folder or .mcap file")
     p.add_argument("--rate", type=float, default=1.0, help="speed factor (2 = twice as fast)")
     p.add_argument("--topics", nargs="+", default=None, help="only these topics")

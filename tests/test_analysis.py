@@ -283,6 +283,19 @@ def test_summary_builder_reads_the_simulator_status() -> None:
     assert empty["final"] is None and empty["sim_time_s"] is None
 
 
+def test_an_interrupted_runs_steps_are_its_last_states() -> None:
+    """Ctrl-C stops a run between two statuses (one every 0.2 s of wall time at most): its last
+    status says step 394 while the last rod state is step 400 and the quality was evaluated
+    there. The summary's steps and simulated time are the newest."""
+    status = {"state": "running", "sim_time_s": "0.788", "step": "394"}
+    final = FinalState.of(400, 0.8, [0.0, 0.1], [0.0, 0.1], [0.0, 0.0], [0.0, 0.0])
+    d = build_summary(status, final=final, final_quality=FinalQuality.of(1.0, 2.0, 0.5, True, 0.1, 400),
+                      contact=contact_stats(None), loop_wall_time_s=2.0).to_dict()
+    assert d["steps"] == d["final"]["step"] == d["final_quality"]["step"] == 400
+    assert d["sim_time_s"] == 0.8 and d["real_time_factor"] == 0.4 and d["step_wall_ms"] == 5.0
+    assert d["simulator_state"] == "running"
+
+
 def test_bad_input_is_one_line_and_exit_code_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert cli(str(tmp_path / "missing")) == 2
     err = capsys.readouterr().err

@@ -66,6 +66,49 @@ def test_bad_input_is_one_line_exit_2(args: list[str], needle: str) -> None:
     assert len(proc.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.parametrize(("argv", "line"), [
+    (["simulate", "--duration", "0.01", "--nodes", "11", "--squeeze", "0.001", "--depth-gain", "5"],
+     "contgrasp simulate: error: --squeeze, --depth-gain do nothing under --law paper: they need --law hold"),
+    (["hold", "--nodes", "11", "--hold-gain", "10"],
+     "contgrasp hold: error: --hold-gain does nothing under --law paper: it needs --law hold"),
+])
+def test_the_holding_laws_options_under_the_papers_law_are_refused(argv: list[str], line: str,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """The paper's law ignores them: given, they would pass silently."""
+    capsys.readouterr()
+    assert main(argv) == 2
+    assert capsys.readouterr().err.splitlines() == [line]
+
+
+@pytest.mark.parametrize("solver", ["fast", "forward-backward"])
+def test_grasp_json_histories_have_an_entry_per_iteration(solver: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """``cost_history`` and ``residual_history`` (docs/cli.md): the starting iterate and one
+    entry after each iteration but the fast solver's SQP steps, whose end is the start."""
+    capsys.readouterr()
+    assert main(["grasp", "--json", "--nodes", "120", "--solver", solver, "--max-iterations", "20"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    entries = out["iterations"] - out["sqp_steps"] + 1
+    assert len(out["cost_history"]) == len(out["residual_history"]) == entries
+    assert out["cost_history"][-1] == out["cost"]
+    if solver == "fast":
+        assert out["sqp_steps"] >= 1 and out["residual_history"][-1] == out["residual"]
+    else:
+        assert out["sqp_steps"] == 0 and out["iterations"] == 20
+
+
+def test_loading_a_missing_quality_map_names_the_missing_file(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:  # type: ignore[no-untyped-def]
+    """``--load FILE``: FILE.npz and FILE.json; the first missing one is named, with no exception's class."""
+    base = tmp_path / "map"
+    hint = "(a map is FILE.npz with FILE.json beside it, as --out writes them)"
+    for present, missing in (((), "map.npz"), ((".npz",), "map.json")):
+        for suffix in present:
+            base.with_suffix(suffix).write_bytes(b"")
+        capsys.readouterr()
+        assert main(["quality-map", "--load", str(base)]) == 2
+        assert capsys.readouterr().err.splitlines() == [
+            f"contgrasp quality-map: error: cannot load quality map {base}: no file {tmp_path / missing} {hint}"]
+
+
 def test_argparse_usage_error_is_exit_2() -> None:
     proc = run_cli("kinematics", "--nodes", "many")
     assert proc.returncode == 2

@@ -197,6 +197,44 @@ def _child(argv: list[str], *, fsize: int | None = None, module: str = "contgras
     return subprocess.run([sys.executable, "-m", module, *argv], capture_output=True, text=True, timeout=timeout, env=env,
                           preexec_fn=None if fsize is None else _limited(fsize), cwd=ROOT)
 
+NOWHERE = "/proc/contgrasp-none"
+"""A folder no one can create, root included (``/proc`` takes no new files)."""
+
+UNWRITABLE_OUTPUTS = [
+    ["quality-map", "--psi-steps", "4", "--d-steps", "2", "--nodes", "40", "--no-optimise", "--executor", "serial",
+     "--out", f"{NOWHERE}/map"],
+    ["simulate", "--duration", "0.01", "--nodes", "11", "--plot", f"{NOWHERE}/fig.png"],
+    ["simulate", "--duration", "0.01", "--nodes", "11", "--animate", f"{NOWHERE}/run.gif"],
+    ["analyze", str(BAG), "--csv", f"{NOWHERE}/csv"],
+    ["analyze", str(BAG), "--plot", f"{NOWHERE}/fig.png"],
+    ["figures", "--nodes", "40", "--no-maps", "--out", f"{NOWHERE}/figures"],
+    ["holding-study", "--psi-steps", "1", "--d-steps", "1", "--out", f"{NOWHERE}/study.jsonl"],
+]
+
+
+@pytest.mark.parametrize("argv", UNWRITABLE_OUTPUTS, ids=[" ".join(a[:1] + a[-2:-1]) for a in UNWRITABLE_OUTPUTS])
+def test_an_output_that_cannot_be_written_is_refused_before_the_work(capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
+    """(Were the work done first, the write would fail after it: exit 1.)"""
+    code, line = run_cli(capsys, argv)
+    command = " ".join(a for a in argv[:2] if not a.startswith("-") and "/" not in a)
+    assert code == 2 and line.startswith(f"contgrasp {command}: error: {argv[-2]} {argv[-1]}"), line
+    assert line.endswith(": cannot create a file in /proc (No such file or directory)"), line
+
+
+def test_the_output_check_leaves_nothing_behind(tmp_path: Path) -> None:
+    from contgrasp_core.outputs import check_output
+
+    (tmp_path / "kept.json").write_text("as it was")
+    assert check_output(tmp_path / "kept.json", "--out") == tmp_path / "kept.json"
+    assert check_output(tmp_path / "new" / "deeper" / "s.json", "--out") == tmp_path / "new" / "deeper" / "s.json"
+    assert check_output(tmp_path / "dir", "--csv", folder=True) == tmp_path / "dir"
+    assert [p.name for p in tmp_path.iterdir()] == ["kept.json"] and (tmp_path / "kept.json").read_text() == "as it was"
+    for path, folder, message in ((tmp_path / "kept.json" / "s.json", False, "kept.json is not a directory"),
+                                  (tmp_path / "kept.json", True, "exists and is not a directory"),
+                                  (tmp_path, False, "is a directory")):
+        with pytest.raises(InvalidParameterError, match=message):
+            check_output(path, "--out", folder=folder)
+
 
 WRITE_FAILURES = [
     (["kinematics", "--plot", "{tmp}/k.png"], "cannot write the figure"),
@@ -290,6 +328,114 @@ def test_launcher_bad_input_and_usage_exit_2(capsys: pytest.CaptureFixture[str],
     assert info.value.code == 2 and len(err) == 1
     assert err[0] == ("contgrasp-launch: error: argument --duration: invalid float value: 'soon'  "
                       "(see 'contgrasp-launch --help')")
+
+
+@pytest.fixture
+def launched(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
+    """The parameters each ``contgrasp-launch`` run hands to the graph (the run itself left out)."""
+    import contgrasp_ros.launcher.graph_run
+
+    runs: list[dict[str, Any]] = []
+
+    def record(params: dict[str, Any], **_k: object) -> tuple[dict[str, Any], int]:
+        runs.append(params)
+        return {}, 0
+
+    monkeypatch.setattr(contgrasp_ros.launcher.graph_run, "run_graph", record)
+    for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR"):  # the launcher sets them
+        monkeypatch.setenv(var, os.environ.get(var, "0"))
+    return runs
+
+
+@pytest.mark.parametrize("text", ["", "{}\n", "grasp_controller:\n  ros__parameters:\n    law: hold\n",
+                                  "/rod_simulator:\n  ros__parameters: {}\n"])
+def test_launcher_merges_a_partial_parameter_file_over_the_defaults(text: str, tmp_path: Path, launched: list[dict[str, Any]],
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_ros.launcher import cli as launcher
+    from contgrasp_ros.launcher.graph import default_params_file, load_params
+
+    params = tmp_path / "partial.yaml"
+    params.write_text(text)
+    assert launcher.main(["--params", str(params), "--no-record", "--json"]) == 0, capsys.readouterr().err
+    want = load_params(default_params_file())
+    if "law" in text:
+        want["grasp_controller"]["law"] = "hold"
+    assert launched == [want]
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("rod_simulatr:\n  ros__parameters:\n    duration: 1.0\n", "unknown node 'rod_simulatr'"),
+    ("rod_simulator:\n  ros__parameters:\n    durtion: 1.0\n",
+     "unknown parameter 'durtion' of rod_simulator (did you mean 'duration'?)"),
+    ("/**:\n  ros__parameters:\n    lenght: 0.2\n", "unknown parameter 'lenght' of /**"),
+    ("boundary_sensor:\n  ros__parameters:\n    law: hold\n", "unknown parameter 'law' of boundary_sensor"),
+])
+def test_launcher_refuses_an_unknown_node_or_parameter(text: str, message: str, tmp_path: Path, launched: list[dict[str, Any]],
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_ros.launcher import cli as launcher
+
+    params = tmp_path / "typo.yaml"
+    params.write_text(text)
+    capsys.readouterr()
+    assert launcher.main(["--params", str(params), "--no-record"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"contgrasp-launch: error: {params}: {message}"), err
+    assert launched == []
+
+
+@pytest.mark.parametrize("option", [["--summary-file", "{tmp}/afile/s.json", "--no-record"],
+                                    ["--plot", "{tmp}/afile/run.png", "--no-record"],
+                                    ["--bag", f"{NOWHERE}/run"], ["--bag", f"{NOWHERE}/run.mcap"]])
+def test_launcher_refuses_an_output_it_cannot_write_before_the_run(option: list[str], tmp_path: Path, launched: list[dict[str, Any]],
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_ros.launcher import cli as launcher
+
+    (tmp_path / "afile").write_text("a file, not a folder")
+    argv = [a.format(tmp=tmp_path) for a in option]
+    capsys.readouterr()
+    assert launcher.main(argv) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"contgrasp-launch: error: {argv[0]} {argv[1]}: "), err
+    assert launched == []
+
+
+def test_launcher_summary_to_a_closed_stdout_ends_quietly(tmp_path: Path, launched: list[dict[str, Any]],
+                                                          monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """The summary's reader (``contgrasp-launch --json | head -c 1``) is gone: exit 1, no error line."""
+    from contgrasp_ros.launcher import cli as launcher
+
+    class Closed:
+        def __init__(self) -> None:
+            self.fd = os.open(tmp_path / "fd", os.O_WRONLY | os.O_CREAT)
+
+        def write(self, _text: str) -> int:
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self) -> None:
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def fileno(self) -> int:
+            return self.fd
+
+    monkeypatch.setattr(sys, "stdout", Closed())
+    capsys.readouterr()
+    assert launcher.main(["--no-record", "--json"]) == 1
+    assert [line for line in capsys.readouterr().err.splitlines() if not line.startswith("[launcher] ")] == []
+    assert len(launched) == 1
+
+
+@pytest.mark.parametrize(("options", "names"), [(["--bag", "DIR"], "--bag does"),
+                                                (["--bag-decimate", "0.1", "--allow-unrecorded"],
+                                                 "--bag-decimate, --allow-unrecorded do")])
+def test_launcher_refuses_recording_options_with_no_record(options: list[str], names: str, launched: list[dict[str, Any]],
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_ros.launcher import cli as launcher
+
+    capsys.readouterr()
+    assert launcher.main(["--no-record", *options]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"contgrasp-launch: error: {names} nothing with --no-record: {'it needs' if ',' not in names else 'they need'} a recorded run"]
+    assert launched == []
 
 
 def test_launcher_run_failure_exits_1(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:

@@ -101,6 +101,62 @@ def test_fig4_labels_legend_and_every_curve_inside(short_grasp) -> None:  # type
     assert sum(t.startswith("t = ") for t in legend_texts) >= 6  # the time shading is explained
 
 
+@pytest.fixture(scope="module")
+def drifting_object():  # type: ignore[no-untyped-def]
+    """The holding law for 0.12 s with a free object set drifting at (5, 2) cm/s: it moves
+    about 6 mm before the arm reaches it."""
+    from contgrasp_core.control import paper_gains
+    from contgrasp_core.control.hold_law import HoldController
+    from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+    from contgrasp_core.rod.body import BodyState, ObjectDynamics
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
+    from contgrasp_core.scenario import PAPER, rod_system
+
+    obj = ObjectSpec.from_cli(None, None, ROD_SCALE)
+    model = replace(PAPER.rod, n_elements=20)
+    system = rod_system(model, obj, ObjectDynamics("free"))
+    start = replace(system.straight_state(), body=BodyState(np.zeros(3), np.array([0.05, 0.02, 0.0])))
+    res = run_closed_loop(system, paper_gains(model, obj.radius), ClosedLoopConfig(duration=0.12, dt=0.01, record_period=0.01),
+                          state=start, law=HoldController(model, obj.radius))
+    return res, obj
+
+
+def test_fig4_draws_a_moving_object_where_it_is_and_names_the_law(drifting_object) -> None:  # type: ignore[no-untyped-def]
+    from contgrasp_core.figures.closed_loop import fig4_figure, snapshot_indices
+
+    res, obj = drifting_object
+    assert res.law == "hold" and res.object_q is not None and res.object_q.shape == (len(res.t), 3)
+    assert res.object_q[-1][:2] == pytest.approx([0.05 * res.t[-1], 0.02 * res.t[-1]], rel=0.05)
+    fig = fig4_figure(res, obj.boundary())
+    _check_figure(fig)
+    arm = _axes(fig)[0]
+    assert arm.get_title().startswith("closed-loop grasp (holding law")
+    outlines = [ln for ln in arm.get_lines() if ln.get_linestyle() == "--"]
+    idx = snapshot_indices(res, 6)
+    assert len(outlines) == len(idx)
+    for ln, k in zip(outlines, idx, strict=True):  # each snapshot's object about the centroid it had then
+        centre = np.mean(np.c_[ln.get_xdata(), ln.get_ydata()][:-1], axis=0)
+        assert centre == pytest.approx(np.array(obj.center) + res.object_q[k][:2], abs=1e-5)
+
+
+def test_the_animation_moves_the_object(drifting_object, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The object's grey fill follows it: its pixels' centre moves right and up from the first frame to the last."""
+    from PIL import Image
+
+    from contgrasp_core.figures.closed_loop import animate
+
+    res, obj = drifting_object
+    animate(res, obj.boundary(), str(tmp_path / "a.gif"), frames=8)
+    gif = Image.open(tmp_path / "a.gif")
+    centres = []
+    for frame in (0, gif.n_frames - 1):
+        gif.seek(frame)
+        rgb = np.asarray(gif.convert("RGB")).astype(int)
+        rows, cols = np.nonzero(np.all(np.abs(rgb - 191) <= 2, axis=-1))  # matplotlib's "0.75" grey
+        centres.append((cols.mean(), rows.mean()))
+    assert centres[1][0] - centres[0][0] > 2 and centres[1][1] < centres[0][1]
+
+
 @pytest.mark.skipif(not SAMPLE_BAG.exists(), reason="the sample bag is not in this checkout")
 def test_run_figure_labels_legend_and_every_curve_inside() -> None:
     from contgrasp_core.figures.run import TIME_LABEL, build_run_figure
@@ -223,6 +279,29 @@ def test_run_figure_shares_fig4s_units_and_colour_map() -> None:
     colours = _snapshot_line_colours(rho)
     _check_snapshot_colours(colours)
     np.testing.assert_allclose(colours, snapshot_colours(len(colours))[:, :3])  # Fig. 4's colours
+
+
+def test_study_figure_has_readable_colour_bar_labels_and_whole_ranks() -> None:
+    """The stiffness's symmetric log colour bar: no two tick labels overlap (those of 0 and of the
+    linear part's edges did); the rank axes tick whole numbers only."""
+    from contgrasp_core.figures.holding import study_figure
+    from contgrasp_core.quality_map import MapSpec, quality_map
+
+    qm = quality_map(MapSpec("circle", psi_steps=6, d_steps=3, nodes=40), executor="serial", optimise=False)
+    rng = np.random.default_rng(1)
+    rows = [{"key": f"grid:{i},{j}", "status": "ok", "stiffness_min": float(rng.choice([-1, 1]) * 10 ** rng.uniform(-1, 3)),
+             "capacity_min": float(rng.uniform(0.1, 2.0)), "static_Q1": float(rng.uniform()), "Q1": float(rng.uniform())}
+            for i in range(6) for j in range(3)]
+    fig = study_figure(qm, rows)
+    FigureCanvasAgg(fig).draw()
+    (bar,) = [ax for ax in fig.get_axes() if ax.get_label() == "<colorbar>" and ax.get_ylabel() == "N/m"]
+    boxes = sorted((t.get_window_extent() for t in bar.get_yticklabels() if t.get_text()), key=lambda b: b.y0)
+    assert len(boxes) >= 5 and "0" in [t.get_text() for t in bar.get_yticklabels()]
+    assert all(low.y1 <= high.y0 for low, high in zip(boxes[:-1], boxes[1:], strict=True)), [(b.y0, b.y1) for b in boxes]
+    (ranks,) = [ax for ax in fig.get_axes() if ax.get_xlabel().startswith("rank")]
+    for ticks, (lo, hi) in ((ranks.get_xticks(), ranks.get_xlim()), (ranks.get_yticks(), ranks.get_ylim())):
+        shown = ticks[(ticks >= lo) & (ticks <= hi)]
+        assert len(shown) >= 3 and np.all(shown == np.round(shown)), shown
 
 
 def test_quality_history_has_units_no_axis_offsets_and_explains_the_settled_line(tmp_path) -> None:  # type: ignore[no-untyped-def]

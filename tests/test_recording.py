@@ -245,6 +245,43 @@ def test_any_corrupted_byte_is_detected_and_recovery_keeps_the_intact_chunks(sma
         assert set(got) <= set(data)  # whatever is recovered is genuine
 
 
+def test_recovery_says_what_was_lost_against_the_recordings_own_counts(small_bag, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Against the file's statistics record when it survives, else metadata.yaml's count, else
+    "unknown": a file cut in half has lost its statistics and an unknown number of chunks."""
+    from io import BytesIO
+
+    from mcap.reader import make_reader
+
+    raw, data = small_bag
+    (tmp_path / "whole.mcap").write_bytes(raw)
+    whole = recover(tmp_path / "whole.mcap", tmp_path / "w.mcap")
+    assert (whole["chunks_lost"], whole["records_lost"], whole["messages_expected"], whole["messages_lost"]) == (0, 0, 300, 0)
+
+    (tmp_path / "half.mcap").write_bytes(raw[: len(raw) // 2])
+    half = recover(tmp_path / "half.mcap", tmp_path / "h.mcap")
+    assert 0 < half["messages"] < 300 and half["truncated"]
+    assert (half["chunks_lost"], half["records_lost"], half["messages_expected"], half["messages_lost"]) == ("unknown",) * 4
+
+    chunk = make_reader(BytesIO(raw)).get_summary().chunk_indexes[1]  # (the summary survives a damaged chunk)
+    flipped = bytearray(raw)
+    flipped[chunk.chunk_start_offset + chunk.chunk_length // 2] ^= 0xFF
+    (tmp_path / "flipped.mcap").write_bytes(bytes(flipped))
+    hit = recover(tmp_path / "flipped.mcap", tmp_path / "f.mcap")
+    assert (hit["chunks_lost"], hit["records_lost"], hit["messages_expected"]) == (1, 0, 300)
+    assert hit["messages_lost"] == 300 - hit["messages"] > 0
+
+    w = BagWriter(tmp_path / "bag", chunk_size=4096)  # a bag folder: metadata.yaml lists each file's messages
+    w.add_topic("/chatter", "std_msgs/msg/String")
+    for i, d in enumerate(data):
+        w.write("/chatter", d, 10**9 + i * 10**6)
+    w.close()
+    (mcap_file,) = (tmp_path / "bag").glob("*.mcap")
+    mcap_file.write_bytes(mcap_file.read_bytes()[: mcap_file.stat().st_size // 2])
+    folder = recover(tmp_path / "bag", tmp_path / "b")
+    assert (folder["chunks_lost"], folder["messages_expected"]) == ("unknown", 300)
+    assert folder["messages_lost"] == 300 - folder["messages"] > 0
+
+
 def test_unwritable_outputs_are_clear_errors(tmp_path: Path) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("x")

@@ -17,6 +17,7 @@ from contgrasp_core.errors import InvalidBoundaryError, InvalidParameterError
 from contgrasp_core.objects import FIG2_SCALE, ROD_SCALE, ObjectSpec
 from contgrasp_core.scenario import NODES, PAPER, Scenario
 from contgrasp_ros.launcher.cli import default_params_file, load_params
+from contgrasp_ros.launcher.graph import known_parameters
 
 KIDNEY = Path(__file__).parent / "data" / "kidney_outline.csv"
 
@@ -99,6 +100,7 @@ def test_node_without_parameter_file_runs_the_paper_scenario(node: str, ros_cont
         declared = {k: v for k, v in yaml_params.items() if n.has_parameter(k)}
         assert declared.keys() >= own.keys()
         assert {k: n.get_parameter(k).value for k in declared} == declared
+        assert set(n.list_parameters([], 0).names) <= known_parameters(node)  # what a parameter file may set for it
         if node == "rod_simulator":
             assert n.model == PAPER.rod and n.config == PAPER.loop
             assert n.boundary.kind == "circle" and n.boundary.params["R"] == 0.025
@@ -242,6 +244,33 @@ def test_user_outline_through_the_ros_graph(tmp_path: Path) -> None:
     assert summary["steps"] == obs.k
     np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
     np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
+
+
+def test_a_fine_outline_of_the_circle_grasps_as_the_circle(tmp_path: Path) -> None:
+    """The launcher's quality node takes its wrench reference from the object: an outline's is its
+    centroid, not its file's origin (0, 0), 11 cm away, which turned Q1 by 1.5 % and Q3 by 3 %
+    while Q2 (det W, reference-free) agreed. The same arm wrapped around the circle and around
+    its 72-point outline then gives the same Q1-Q3."""
+    from contgrasp_core.arm import ArmShape
+    from contgrasp_core.contact import sense
+    from contgrasp_core.quality import quality_of_state
+    from contgrasp_ros.launcher.graph import launch_overrides
+
+    t = np.linspace(0.0, 2.0 * np.pi, 72, endpoint=False)
+    path = tmp_path / "circle72.csv"
+    np.savetxt(path, np.c_[0.08 + 0.025 * np.cos(t), 0.08 + 0.025 * np.sin(t)], delimiter=",")
+    outline, circle = ObjectSpec.from_outline(path), ObjectSpec.from_cli("circle", None, ROD_SCALE)
+    params = load_params(default_params_file())
+    for obj in (outline, circle):
+        quality = launch_overrides(params, obj)["grasp_quality"]
+        assert (quality["reference_x"], quality["reference_y"]) == pytest.approx((0.08, 0.08), abs=1e-9)
+    s = np.linspace(0.0, 0.12, 61)  # an arm 1 mm off the circle's surface over 275 degrees
+    phi = -np.pi / 2 + s / 0.026
+    arm = ArmShape(s, np.c_[0.08 + 0.026 * np.cos(phi), 0.08 + 0.026 * np.sin(phi)], phi + np.pi / 2)
+    q = [quality_of_state(sense(arm, obj.boundary(), 0.0015, tol=0.0005), obj.boundary(),
+                          ref=Scenario.from_ros_parameters({**params, **launch_overrides(params, obj)}).reference)
+         for obj in (outline, circle)]
+    assert q[0].Q1 == pytest.approx(q[1].Q1, rel=1e-3) and q[0].Q3 == pytest.approx(q[1].Q3, rel=1e-3) and q[1].Q1 > 0
 
 
 def test_an_outline_travels_in_the_object_message_exactly(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import traceback
 from collections.abc import Callable, Sequence
@@ -25,7 +26,7 @@ import numpy as np
 from .. import __version__
 from ..errors import ContgraspError, exit_code, one_line
 
-__all__ = ["ArgumentParser", "build_parser", "main", "report", "summary_lines"]
+__all__ = ["ArgumentParser", "build_parser", "main", "report", "summary_lines", "closed_stdout_safe"]
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -74,6 +75,22 @@ def report(prog: str, exc: BaseException) -> int:
         text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
     print(f"{prog}: error: {text or type(exc).__name__}", file=sys.stderr)
     return exit_code(exc)
+
+
+def closed_stdout_safe(run: Callable[[], int]) -> int:
+    """``run()``, its output flushed; a reader that closed stdout early (``contgrasp ... | head``)
+    ends it quietly with exit code 1, the recipe of Python's docs ("Note on SIGPIPE" in the
+    :mod:`signal` module): stdout goes to ``os.devnull``, so that the interpreter's last flush
+    does not fail again."""
+    try:
+        try:
+            return run()
+        finally:  # (also after --help's SystemExit)
+            sys.stdout.flush()
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 
 
 Registrar = Callable[[Any, list[argparse.ArgumentParser]], None]
@@ -180,6 +197,10 @@ def _summary(result: dict[str, Any]) -> str:
 
 def main(argv: Sequence[str] | None = None, extra: Sequence[Registrar] | None = None) -> int:
     """Entry point of the ``contgrasp`` command; returns the process exit code."""
+    return closed_stdout_safe(lambda: _main(argv, extra))
+
+
+def _main(argv: Sequence[str] | None, extra: Sequence[Registrar] | None) -> int:
     try:  # the subcommands' modules load here: a Ctrl-C meanwhile ends as one during a command does
         parser = build_parser(extra)
     except KeyboardInterrupt:

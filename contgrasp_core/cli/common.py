@@ -1,13 +1,15 @@
-"""Arguments every subcommand that takes an object shares: ``--object NAME[:PARAMS]`` or
-``--outline FILE.csv`` (:class:`contgrasp_core.objects.ObjectSpec`, one syntax everywhere)."""
+"""Arguments several subcommands share: the object, ``--object NAME[:PARAMS]`` or ``--outline
+FILE.csv`` (:class:`contgrasp_core.objects.ObjectSpec`, one syntax everywhere), and how a sweep
+runs, ``--executor``, ``--workers``, ``--scheduler`` (:mod:`contgrasp_core.executors`)."""
 
 from __future__ import annotations
 
 import argparse
 
+from ..executors import EXECUTORS
 from ..objects import SYNTAX, ObjectScale, ObjectSpec
 
-__all__ = ["add_object_arguments", "object_from_args", "add_muscle_argument"]
+__all__ = ["add_object_arguments", "object_from_args", "add_executor_arguments", "add_muscle_argument"]
 
 
 def add_object_arguments(parser: argparse.ArgumentParser, scale: ObjectScale) -> None:
@@ -35,3 +37,12 @@ def add_muscle_argument(parser: argparse.ArgumentParser) -> None:
 def object_from_args(args: argparse.Namespace, scale: ObjectScale) -> ObjectSpec:
     """The object the parsed ``--object`` / ``--outline`` name."""
     return ObjectSpec.from_cli(args.object, args.outline, scale)
+
+
+def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
+    """Register ``--executor``, ``--workers`` and ``--scheduler``: how the sweep's poses run."""
+    parser.add_argument("--executor", choices=EXECUTORS, default="processes",
+                        help="run the poses one after the other (serial), on a process pool (processes, the default) or "
+                        "on a Dask cluster (dask, with --scheduler); the results are the same")
+    parser.add_argument("--workers", type=int, default=None, help="process-pool size (default: all cores)")
+    parser.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (with --executor dask)")

@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,6 +19,7 @@ import numpy as np
 from .._validate import MAX_NODES
 from ..errors import InvalidParameterError, WriteError
 from ..objects import FIG2_SCALE, PAPER_OBJECTS, ObjectSpec
+from ..outputs import check_output
 from ..optimal import GraspResult, forward_backward, paper_problem, solve
 from .common import add_object_arguments, object_from_args
 
@@ -55,6 +55,9 @@ def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()
         "figures",
         parents=list(parents),
         help="regenerate the paper's Fig. 2 (optimal grasps) and Fig. 3 (quality maps) for the three objects",
+        description="Regenerate the paper's Fig. 2 (the optimal grasps of the circle, the ellipse and the deformed "
+        "circle, fig2_<object>.png) and Fig. 3 (their quality maps, fig3_<object>.png, each metric's optimum in "
+        "fig3_<object>.json) into --out.",
     )
     f.add_argument("--out", default="docs/figures", help="output directory (default docs/figures)")
     f.add_argument("--nodes", type=int, default=500, help="grid nodes along the arm (default 500)")
@@ -111,12 +114,7 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
     from ..figures.grasp import save_grasp_figure
     from ..quality_map import MapSpec
 
-    out_dir = Path(args.out)
-    for d in (out_dir, *out_dir.parents):
-        if d.exists():
-            if not d.is_dir():
-                raise InvalidParameterError(f"--out {out_dir}: {d} exists and is not a directory")
-            break
+    out_dir = check_output(args.out, "--out", folder=True)
     if not 3 <= args.nodes <= MAX_NODES:
         raise InvalidParameterError(f"--nodes must be in [3, {MAX_NODES}], got {args.nodes}")
     MapSpec(ObjectSpec.parse("circle"), psi_steps=args.psi_steps, d_steps=args.d_steps)  # checks both before any solve

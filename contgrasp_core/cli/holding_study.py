@@ -18,12 +18,12 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidParameterError
-from ..executors import EXECUTORS
 from ..control.hold_law import LAWS
 from .hold import add_ramp_arguments
 from ..holding_study import ARMS, PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
 from ..objects import FIG2_SCALE
-from .common import add_muscle_argument, add_object_arguments, object_from_args
+from ..outputs import check_output
+from .common import add_executor_arguments, add_muscle_argument, add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run", "format_text"]
 
@@ -65,9 +65,7 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
                    help=f"force directions of the capacity ramps, plus two torques (default {d.hold.directions})")
     add_ramp_arguments(p, d.hold)
     p.add_argument("--out", required=True, metavar="FILE.jsonl", help="results, one pose per line (resumed if present)")
-    p.add_argument("--executor", choices=EXECUTORS, default="processes")
-    p.add_argument("--workers", type=int, default=None, help="process-pool size (default: all cores)")
-    p.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (with --executor dask)")
+    add_executor_arguments(p)
     p.add_argument("--plot", metavar="FILE", help="the static quality map beside the measured stiffness and capacity")
     p.set_defaults(func=run, format_text=format_text)
 
@@ -93,6 +91,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run (or resume) the study; return the JSON-able summary."""
     if args.workers is not None and args.workers < 1:
         raise InvalidParameterError(f"--workers must be >= 1, got {args.workers}")
+    check_output(args.out, "--out")
+    if args.plot:
+        from ..figures.draw import check_figure_path
+
+        check_figure_path(args.plot)
     spec = StudySpec(object=object_from_args(args, FIG2_SCALE).text(), psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
                      d_max=args.d_max, nodes=args.nodes, duration=args.duration, law=args.law,
                      length_fraction=args.length_fraction, arm=args.arm, depth_gain=args.depth_gain, dwell=args.dwell,

@@ -9,9 +9,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidParameterError, output_error
+from ..outputs import check_output
 from ..objects import FIG2_SCALE
 from ..quality_map import METRICS, MapSpec, load_map, quality_map, save_map
-from .common import add_object_arguments, object_from_args
+from .common import add_executor_arguments, add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run"]
 
@@ -27,14 +28,14 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     add_object_arguments(p, FIG2_SCALE)
     p.add_argument("--psi-steps", type=int, default=24, help="polar angles of the base (default 24)")
     p.add_argument("--d-steps", type=int, default=6, help="distances in [d_min, d_max] (default 6)")
-    p.add_argument("--d-min", type=float, default=3.0)
-    p.add_argument("--d-max", type=float, default=13.0)
+    p.add_argument("--d-min", type=float, default=3.0,
+                   help="nearest base distance from the object, paper units (default 3)")
+    p.add_argument("--d-max", type=float, default=13.0,
+                   help="farthest base distance, paper units, below the arm length (half the object's perimeter; default 13)")
     p.add_argument("--nodes", type=int, default=200, help="inner optimal-grasp grid nodes (default 200)")
     p.add_argument("--contact-tol", type=float, default=0.05, help="contact where delta >= -tol (default 0.05)")
     p.add_argument("--metric", choices=(*METRICS, "all"), default="all", help="metric(s) to maximise and plot")
-    p.add_argument("--executor", choices=("serial", "processes", "dask"), default="processes")
-    p.add_argument("--workers", type=int, default=None, help="process-pool size (default: all cores)")
-    p.add_argument("--scheduler", help="Dask scheduler address tcp://host:port (with --executor dask)")
+    add_executor_arguments(p)
     p.add_argument("--no-optimise", action="store_true", help="skip the Nelder-Mead maximisation")
     p.add_argument("--out", metavar="FILE", help="save the map (FILE.npz + FILE.json) for later re-plotting")
     p.add_argument("--load", metavar="FILE", help="re-plot / report a saved map instead of computing")
@@ -81,15 +82,8 @@ def format_text(out: dict[str, Any]) -> str:
 
 def _check_out_path(path: str) -> None:
     """``--out FILE``: FILE.npz and FILE.json must be creatable (checked before computing)."""
-    p = Path(path)
-    for f in (p.with_suffix(".npz"), p.with_suffix(".json")):
-        if f.is_dir():
-            raise InvalidParameterError(f"--out {path}: {f} is a directory")
-    for parent in p.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise InvalidParameterError(f"--out {path}: {parent} is not a directory")
-            break
+    for f in (Path(path).with_suffix(".npz"), Path(path).with_suffix(".json")):
+        check_output(f, "--out")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:

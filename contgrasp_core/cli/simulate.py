@@ -16,13 +16,14 @@ import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.control import FeedbackGains, paper_gains
-from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold
+from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold, check_law_settings
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.rod import RodModel, RodSystem
 from contgrasp_core.rod.body import MODES, ObjectDynamics
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, object_motion, run_closed_loop
 from contgrasp_core.rod.self_contact import self_gap
 from contgrasp_core.objects import ROD_SCALE
+from contgrasp_core.outputs import check_output
 from contgrasp_core.scenario import PAPER, rod_system
 from contgrasp_core.tracking import contact_stats
 
@@ -101,9 +102,12 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
-    """The holding law's parameters of the command line (refused with an input error when out of range)."""
-    return HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
-                           stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell)
+    """The holding law's parameters of the command line, refused with an input error when out of
+    range or given to the paper's law, which ignores them (:func:`~contgrasp_core.control.hold_law.check_law_settings`)."""
+    settings = HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
+                               stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell)
+    check_law_settings(args.law, settings, lambda name: "--hold-gain" if name == "stiffness_gain" else f"--{name.replace('_', '-')}")
+    return settings
 
 
 def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_tolerance, hold: str = "zoh") -> dict[str, Any]:
@@ -220,7 +224,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
     m = system.model
     assert system.obstacle is not None and config.control_period is not None
     rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / config.control_period)))
-    rec: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
+    rec: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed", "q")}
     wall0 = time.perf_counter()
     session = LoopSession(system, config)
     period = config.control_period
@@ -243,7 +247,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
         if session.k % rec_every == 0 or session.finished:
             for key, val in (("t", obs.t), ("x", obs.x), ("theta", obs.theta), ("rho", sn.rho), ("alpha", sn.alpha),
                              ("couple", couple), ("pen", obs.penetration), ("ratio", ratio),
-                             ("speed", obs.max_speed)):
+                             ("speed", obs.max_speed), ("q", None if session.state.body is None else session.state.body.q)):
                 rec[key].append(val)
         if session.finished:
             break
@@ -255,7 +259,7 @@ def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
         settle_time=session.settle_time, wall_time=time.perf_counter() - wall0, newton_iterations=session.iterations,
         final_state=session.state, model=m, gains=gains, config=config, steps=session.k,
         integrator_steps=session.k * config.substeps, max_penetration=session.max_penetration,
-        max_penetration_ratio=max_ratio, health=session.health)
+        max_penetration_ratio=max_ratio, health=session.health, **object_motion(system, rec["q"], law))
 
 
 MAX_NODES = 10_001
@@ -271,8 +275,7 @@ def _check_animation_path(path: str) -> None:
     fmt = Image.registered_extensions().get(p.suffix.lower())
     if fmt not in ("GIF", "WEBP", "PNG"):
         raise InvalidParameterError(f"--animate {path}: use a .gif, .webp or .png file name")
-    if p.is_dir() or (p.parent.exists() and not p.parent.is_dir()):
-        raise InvalidParameterError(f"--animate {path}: not a writable file name")
+    check_output(p, "--animate")
 
 
 SPRING_DEFAULTS = ((50.0, 50.0, 0.05), (1.0, 1.0, 0.001))
@@ -338,7 +341,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if warning:
         print(f"contgrasp simulate: {warning}", file=sys.stderr)
     if args.plot:
-        plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" else None)
+        # (the static solution is the paper's law's equilibrium: drawn for it only)
+        plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" and args.law == "paper" else None)
     if args.animate:
         animate(res, boundary, args.animate)
     return out

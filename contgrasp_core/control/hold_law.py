@@ -43,17 +43,19 @@ and the wrap angle, and the arm's own curvature for the hold; never the object's
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from contgrasp_core.control.gains import FeedbackGains
 from contgrasp_core.control.law import CENTIMETRE, adaptive_mu2
-from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.errors import InvalidParameterError, refuse_ignored
 from contgrasp_core.rod.model import RodModel
 
-__all__ = ["LAWS", "HoldLawSettings", "ShapeHold", "PaperLaw", "HoldController", "Law", "wrap_angle",
+__all__ = ["LAWS", "HoldLawSettings", "check_law_settings", "ShapeHold", "PaperLaw", "HoldController", "Law", "wrap_angle",
            "parallel_curvature", "cage_gains"]
 
 Array = NDArray[np.float64]
@@ -102,6 +104,15 @@ class HoldLawSettings:
         if not np.pi <= self.wrap_angle < 2 * np.pi:
             raise InvalidParameterError(f"hold law wrap_angle must be in [pi, 2 pi) rad (a cage surrounds more than "
                                         f"half of the object), got {self.wrap_angle!r}")
+
+
+def check_law_settings(law: str, settings: HoldLawSettings, name: Callable[[str], str] = str) -> None:
+    """Refuse holding-law ``settings`` other than the defaults under another ``law``, which
+    ignores them (:func:`~contgrasp_core.errors.refuse_ignored`); ``name`` gives a setting's name
+    (and ``law``'s) as the caller knows it, e.g. a command-line option."""
+    if law != "hold":
+        changed = [name(f.name) for f in fields(settings) if getattr(settings, f.name) != f.default]
+        refuse_ignored(changed, f"under {name('law')} {law}", f"{name('law')} hold")
 
 
 def wrap_angle(theta: Array, alpha: Array, band: NDArray[np.bool_]) -> float:
@@ -171,6 +182,7 @@ class PaperLaw:
     :class:`HoldController` (it keeps no state)."""
 
     fixed: FeedbackGains
+    name: ClassVar[str] = "paper"
 
     @property
     def holding(self) -> bool:
@@ -187,6 +199,8 @@ class HoldController:
     ``close`` or ``hold``, the current gap ``gap`` (m), and in the hold the latched reference.
     :meth:`command` is called once per control period with what the arm senses; in the dwell
     (H8) the phase is ``close`` at ``gap == close_gap``."""
+
+    name: ClassVar[str] = "hold"
 
     def __init__(self, model: RodModel, object_radius: float, settings: HoldLawSettings = HoldLawSettings(),
                  length_unit: float = CENTIMETRE) -> None:

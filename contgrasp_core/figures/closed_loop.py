@@ -23,13 +23,15 @@ from ..rod.closed_loop import ClosedLoopResult
 from .draw import save
 
 __all__ = ["snapshot_indices", "snapshot_colours", "plane_axes", "finish_profile_panels", "fig4_figure", "plot_fig4", "animate",
-           "data_limits", "ratio_axis", "STATIC_LABEL", "SNAPSHOT_CMAP", "LENGTH_UNIT"]
+           "data_limits", "ratio_axis", "STATIC_LABEL", "SNAPSHOT_CMAP", "LENGTH_UNIT", "LAW_TITLES"]
 
 SNAPSHOT_CMAP = "turbo"
 """Colour map of the arm snapshots (and their rho, alpha curves) in Fig. 4, its animation and the
 run figure of the ROS graph: ordered in time, successive snapshots distinguishable."""
 LENGTH_UNIT = "m"
 """Length unit of the plane (x, y) axes of Fig. 4, its animation and the run figure."""
+LAW_TITLES = {"paper": "feedback law eq. (19)", "hold": "holding law, docs/holding.md"}
+"""How a figure's title names the law that ran (:data:`~contgrasp_core.control.hold_law.LAWS`)."""
 
 
 def snapshot_colours(count: int) -> np.ndarray:
@@ -116,9 +118,12 @@ def finish_profile_panels(ax_r: Axes, ax_a: Axes, ratios: list[np.ndarray], alph
 
 def fig4_figure(res: ClosedLoopResult, boundary: Boundary, obstacle_radius: float | None = None) -> Figure:
     """Paper Fig. 4 as a :class:`~matplotlib.figure.Figure`: six snapshots of the arm (with its
-    radius) around the object, coloured by simulated time (:func:`snapshot_colours`, legend); rho/rho_d (log scale, limits
+    radius) around the object, coloured by simulated time (:func:`snapshot_colours`, legend); a
+    movable object filled where it started and outlined where it is at each snapshot, in the
+    snapshot's colour; rho/rho_d (log scale, limits
     from the data, so every curve shows) and alpha along s at the same times, with the targets
-    rho = rho_d and alpha = pi/2 and, for a circle, the static solution of eq. (20) dashed."""
+    rho = rho_d and alpha = pi/2 and, for a circle, the static solution of eq. (20) dashed.
+    The title names the law that ran."""
     m = res.model
     r = m.radius(m.s_nodes)
     fig = Figure(figsize=(8.0, 9.0), layout="constrained")
@@ -127,14 +132,19 @@ def fig4_figure(res: ClosedLoopResult, boundary: Boundary, obstacle_radius: floa
     ax0 = top.add_subplot(1, 1, 1)
     idx = snapshot_indices(res, 6)
     _, pts = boundary.sample(400)
-    ax0.fill(pts[:, 0], pts[:, 1], color="0.75", zorder=1, label="object")
+    moving = res.object_q is not None
+    ax0.fill(pts[:, 0], pts[:, 1], color="0.75", zorder=1, label="object at the start" if moving else "object")
     colours = snapshot_colours(len(idx))
     for colour, k in zip(colours, idx, strict=True):
         _draw_arm(ax0, res.x[k], r, color=colour, alpha=0.6, lw=0, zorder=2, label=f"t = {res.t[k]:.2f} s")
+        if moving:  # (the object where it is then: the arm wraps it there, not where it started)
+            moved = res.object_at(k, np.vstack([pts, pts[:1]]))
+            ax0.plot(moved[:, 0], moved[:, 1], color=colour, lw=1.2, ls="--", zorder=3)
     ax0.plot(0, 0, "ks", ms=5, label="base (clamped)")
     plane_axes(ax0)
-    ax0.legend(title="arm at simulated time", fontsize=7, title_fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    ax0.set_title("closed-loop grasp (feedback law eq. (19)), six time instances")
+    ax0.legend(title="arm (and object, dashed) at simulated time" if moving else "arm at simulated time", fontsize=7,
+               title_fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    ax0.set_title(f"closed-loop grasp ({LAW_TITLES[res.law]}), six time instances")
     ax1, ax2 = bottom.subplots(1, 2)
     s_n = m.s_nodes / m.length
     ratios, alphas = [], []
@@ -159,7 +169,8 @@ def plot_fig4(res: ClosedLoopResult, boundary: Boundary, path: str, obstacle_rad
 
 
 def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 60) -> None:
-    """GIF of the arm (with its radius) wrapping the object, coloured by time as in Fig. 4."""
+    """GIF of the arm (with its radius) wrapping the object (where it is in each frame, when it
+    moves), coloured by time as in Fig. 4; the title names the law that ran."""
     m = res.model
     r = m.radius(m.s_nodes)
     idx = snapshot_indices(res, frames)
@@ -167,20 +178,21 @@ def animate(res: ClosedLoopResult, boundary: Boundary, path: str, frames: int = 
     fig = Figure(figsize=(4.4, 4), layout="constrained")
     FigureCanvasAgg(fig)  # an animation draws frames through a canvas
     ax = fig.subplots()
-    # limits from every frame and the object, so no frame is clipped
-    xs = np.concatenate([res.x[idx].reshape(-1, 2), pts])
+    # limits from every frame and the object in it, so no frame is clipped
+    xs = np.concatenate([res.x[idx].reshape(-1, 2), *(res.object_at(k, pts) for k in idx)])
     pad = float(r.max()) + 0.005
     colours = dict(zip(idx.tolist(), snapshot_colours(len(idx)), strict=True))
     lo, hi = xs.min(axis=0) - pad, xs.max(axis=0) + pad
 
     def draw(k: int) -> None:
         ax.clear()
-        ax.fill(pts[:, 0], pts[:, 1], color="0.75")
+        obj = res.object_at(k, pts)
+        ax.fill(obj[:, 0], obj[:, 1], color="0.75")
         _draw_arm(ax, res.x[k], r, color=colours[k], alpha=0.7, lw=0)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         plane_axes(ax)
-        ax.set_title(f"simulated time t = {res.t[k]:.2f} s")
+        ax.set_title(f"{LAW_TITLES[res.law]}: simulated time t = {res.t[k]:.2f} s", fontsize=9)
 
     anim = FuncAnimation(fig, draw, frames=idx)
     try:

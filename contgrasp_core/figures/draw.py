@@ -18,14 +18,15 @@ from ..arm import ArmShape
 from ..boundary import Boundary
 from ..contact import ContactKinematics, ContactState
 from ..errors import InvalidParameterError, output_error
+from ..outputs import check_output
 
 __all__ = ["draw_boundary", "draw_arm", "kinematics_figure", "save", "check_figure_path", "wrap_title"]
 
 
 def check_figure_path(path: object, option: str = "--plot") -> None:
     """Raise InvalidParameterError unless ``path`` names a file matplotlib can write (a known
-    suffix, or none for PNG) in a directory that exists or can be created (called before
-    any computation, so a typo does not waste a run)."""
+    suffix, or none for PNG) where this process can write it (:func:`~contgrasp_core.outputs.check_output`;
+    called before any computation, so a typo does not waste a run)."""
     from pathlib import Path
 
     from matplotlib.backend_bases import FigureCanvasBase
@@ -37,13 +38,7 @@ def check_figure_path(path: object, option: str = "--plot") -> None:
     supported = FigureCanvasBase.get_supported_filetypes()
     if fmt and fmt not in supported:
         raise InvalidParameterError(f"{option} {path}: unknown figure format {fmt!r}; use one of {', '.join(sorted(supported))}")
-    if p.is_dir():
-        raise InvalidParameterError(f"{option} {path} is a directory")
-    for parent in p.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise InvalidParameterError(f"{option} {path}: {parent} is not a directory")
-            break
+    check_output(p, option)
 
 
 _KEEP_WITH_NUMBER = re.compile(r" (?=[-+(]?\d)")

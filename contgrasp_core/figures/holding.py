@@ -7,7 +7,9 @@ from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.colors import SymLogNorm
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from ..quality_map import QualityMap
 from .draw import draw_boundary, save
@@ -49,14 +51,9 @@ def study_figure(qm: QualityMap, rows: list[dict[str, Any]]) -> Figure:
         if measured:
             p = np.array([m[0] for m in measured])
             v = np.array([m[1] for m in measured])
-            norm = None
-            if name == "stiffness_min":
-                from matplotlib.colors import SymLogNorm
-
-                span = max(float(np.abs(v).max()), 1e-12)
-                norm = SymLogNorm(linthresh=span * 1e-3, vmin=-span, vmax=span)
+            norm, ticks = _symlog(v) if name == "stiffness_min" else (None, None)
             sc = ax.scatter(p[:, 0], p[:, 1], c=v, cmap="viridis", norm=norm, s=60, edgecolors="k", linewidths=0.4, zorder=3)
-            fig.colorbar(sc, ax=ax, shrink=0.75, label=unit, format="%.3g")
+            fig.colorbar(sc, ax=ax, shrink=0.75, label=unit, format="%.3g", ticks=ticks)
         for outcome, where in sorted(failed.items()):
             f = np.array(where)
             style = _FAILED.get(outcome, ("*", "tab:gray"))
@@ -76,11 +73,24 @@ def study_figure(qm: QualityMap, rows: list[dict[str, Any]]) -> Figure:
         ax.legend(loc="upper left", fontsize=8)
     ax.set_xlabel("rank of the quality measure")
     ax.set_ylabel("rank of the worst capacity")
+    for axis in (ax.xaxis, ax.yaxis):  # (ranks are whole numbers; ties share their mean rank)
+        axis.set_major_locator(MaxNLocator(integer=True))
     ax.set_title("distinct poses: quality against capacity", fontsize=10)
     fig.suptitle(f"holding study, {qm.spec.object.text()}: held at {len(held)} of {len(grid)} grid poses "
                  f"({len(distinct)} distinct up to the object's symmetry)", fontsize=11)
     fig.tight_layout()
     return fig
+
+
+def _symlog(values: np.ndarray) -> tuple[SymLogNorm, list[float]]:
+    """A symmetric log colour scale for ``values`` spanning decades and both signs (linear within
+    three decades of the largest magnitude, about 0) and its colour bar's ticks: 0 and plus and
+    minus each power of ten from two decades below the largest up (a tick at the linear part's
+    edge would print over 0's)."""
+    span = max(float(np.abs(values).max()), 1e-12)
+    top = int(np.floor(np.log10(span)))
+    ticks = [0.0] + [sign * 10.0**k for k in range(top - 2, top + 1) for sign in (-1.0, 1.0)]
+    return SymLogNorm(linthresh=10.0 ** (top - 3), vmin=-span, vmax=span), sorted(ticks)
 
 
 def _where(qm: QualityMap, key: str) -> np.ndarray:

@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 from contgrasp_core.arm import ArmShape
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.control.law import adaptive_mu2, closed_loop_kinematics
-from contgrasp_core.figures.closed_loop import STATIC_LABEL, finish_profile_panels, plane_axes, snapshot_colours
+from contgrasp_core.figures.closed_loop import LAW_TITLES, STATIC_LABEL, finish_profile_panels, plane_axes, snapshot_colours
 from contgrasp_core.figures.draw import draw_arm, draw_boundary, save
 from contgrasp_core.rod.body import to_world
 from contgrasp_core.scenario import Scenario
@@ -36,11 +36,13 @@ def build_run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]])
     """The figure of ``summary['history']`` (snapshots of rod state + contact state of one step,
     each labelled by its header stamp): the arm around the object at six times (legend), and
     rho/rho_d (log scale, limits from the data) and alpha along s at those times, with the
-    targets and, for a circle, the static solution of eq. (20). A movable object is drawn at
-    its start pose (filled) and, dashed, where it is at the last snapshot."""
+    targets and, for a circle under the paper's law, the static solution of eq. (20). A movable
+    object is drawn at its start pose (filled) and, dashed, where it is at the last snapshot.
+    The title names the law that ran."""
     hist = summary["history"]
     ctl = params["grasp_controller"]
-    boundary = Scenario.from_ros_parameters(params).object.boundary()
+    scenario = Scenario.from_ros_parameters(params)
+    boundary = scenario.object.boundary()
     # the motion happens early (the arm swings in within ~0.3 s): snapshots at the start, through
     # the swing, and at the end
     times = np.array([h["t"] for h in hist])
@@ -64,7 +66,7 @@ def build_run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]])
     plane_axes(ax)
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8, title=TIME_LABEL.replace(" (", "\n("),
               title_fontsize=8)
-    ax.set_title("closed-loop grasp through the ROS graph (feedback law eq. (19))")
+    ax.set_title(f"closed-loop grasp through the ROS graph ({LAW_TITLES[scenario.law]})")
     ax_r, ax_a = bottom.subplots(1, 2)
     ratios, alphas = [], []
     for colour, i in zip(colours, picks, strict=True):
@@ -76,7 +78,7 @@ def build_run_figure(summary: dict[str, Any], params: dict[str, dict[str, Any]])
         ax_a.plot(s / s[-1], alphas[-1], color=colour, lw=1.2, label=f"t = {h['t']:.2f} s")
     h = hist[-1]
     s, radius = np.asarray(h["s"]), np.asarray(h["radius"])
-    if boundary.kind == "circle" and ctl.get("adaptive_mu2", True):
+    if boundary.kind == "circle" and scenario.law == "paper" and ctl.get("adaptive_mu2", True):
         lu = ctl["length_unit"]
         mu2 = adaptive_mu2(radius, ctl["object_radius"], length_unit=lu)
         try:

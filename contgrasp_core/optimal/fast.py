@@ -100,8 +100,10 @@ def solve(
     guess); its solution, interpolated, starts SQP steps on the fine grid (the coarse solution is
     within O(h_coarse^2) of the fine one, so they start in Newton's quadratic region).
     Returns a :class:`GraspResult`; ``iterations`` counts fine-grid Newton steps (SQP and
-    reduced); ``history`` = cost, residual, step length and Hessian kind (1 exact,
-    0 Gauss-Newton) per reduced Newton iteration, ``sqp_steps`` (fine grid),
+    reduced); ``history`` = cost and residual of the trajectory the reduced Newton iterations
+    start from and after each of them (the fine SQP steps before them satisfy the dynamics only
+    at their end: that end is the start), step length and Hessian kind (1 exact, 0
+    Gauss-Newton) per reduced Newton iteration, ``sqp_steps`` (fine grid),
     ``coarse_sqp_steps`` and ``coarse_iterations`` (damped Newton on the coarse grid).
     """
     instance("problem", problem, GraspProblem)
@@ -267,6 +269,9 @@ def _newton(
             traj = evaluate(d, traj.u, traj.x, pen, traj.lin)
         lam, grad = adjoint(d, traj, pen)
         res = float(np.max(np.abs(grad / d.w)))
+        if not outer:  # the trajectory the iterations start from
+            hist["cost"].append(traj.cost)
+            hist["residual"].append(res)
         use_exact = hessian == "exact"
         inner_ok = False
         predicted: float | None = None

@@ -305,8 +305,10 @@ class GraspResult:
     costate), ``kappa_o`` = kappa_o(s_o(s)) (tabulated curvature), ``shape`` (arm centreline
     r(s), theta(s) from ``r = gamma(s_o) - rho n``; computed lazily). ``cost`` is J of eq. (9) (trapezoid rule) without
     the constraint penalty (``penalty``). ``residual`` = max_s |kappa + p_2| (the discrete
-    PMP residual, in curvature units). ``history`` holds per-iteration ``cost`` and
-    ``residual`` arrays (and ``step`` for the fast solver).
+    PMP residual, in curvature units). ``history`` holds the ``cost`` and ``residual`` of the
+    starting iterate and after each iteration (the fast solver: each reduced Newton iteration;
+    its ``sqp_steps`` SQP steps before them end in the starting iterate), and ``step`` for the
+    fast solver: ``iterations - sqp_steps + 1`` entries.
     """
 
     problem: GraspProblem
@@ -350,6 +352,7 @@ class GraspResult:
             "residual": self.residual,
             "converged": self.converged,
             "iterations": self.iterations,
+            "sqp_steps": int(self.history.get("sqp_steps", 0)),
             "wall_time_s": self.wall_time,
             "nodes": p.nodes,
             "arm_length": p.arm.length,
@@ -376,6 +379,7 @@ class GraspResult:
                 y=self.shape.r[:, 1].tolist(),
                 theta=self.shape.theta.tolist(),
                 cost_history=self.history.get("cost", np.zeros(0)).tolist(),
+                residual_history=self.history.get("residual", np.zeros(0)).tolist(),
             )
         return out
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +31,7 @@ from contgrasp_core.control.law import feedback_couple
 from contgrasp_core.control.rod_feedback import StateFeedback
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import chain
+from contgrasp_core.rod.body import to_world
 from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.muscle import saturate
 from contgrasp_core.rod.validity import RunHealth
@@ -40,7 +41,7 @@ if TYPE_CHECKING:  # (imported by the runner: the scenario's ClosedLoopConfig co
     from contgrasp_core.rod.integrator import RodState, RodSystem
     from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "run_closed_loop"]
+__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "run_closed_loop", "object_motion"]
 
 
 @dataclass(frozen=True)
@@ -100,7 +101,10 @@ class ClosedLoopResult:
     ``wall_time`` (s), ``newton_iterations``,
     the ``final_state`` and the run's ``model``, ``gains`` and ``config``; ``steps`` the control
     periods advanced and ``integrator_steps`` the accepted implicit steps (substeps included);
-    ``health`` the run's validity and muscle effort (:class:`~contgrasp_core.rod.validity.RunHealth`)."""
+    the ``law`` that ran (:data:`~contgrasp_core.control.hold_law.LAWS`); a movable object's
+    displacement ``object_q`` (K, 3: dx, dy m, dpsi rad) from its start pose, about its start
+    ``object_centroid`` (both None while the object is fixed); ``health`` the run's validity and
+    muscle effort (:class:`~contgrasp_core.rod.validity.RunHealth`)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -124,6 +128,16 @@ class ClosedLoopResult:
     max_penetration: float = 0.0
     max_penetration_ratio: float = 0.0
     health: RunHealth | None = None
+    law: str = "paper"
+    object_q: np.ndarray | None = None
+    object_centroid: tuple[float, float] | None = None
+
+    def object_at(self, k: int, points: np.ndarray) -> np.ndarray:
+        """``points`` (n, 2) of the object at its start pose, moved to where it is at record ``k``
+        (unchanged while it is fixed)."""
+        if self.object_q is None or self.object_centroid is None:
+            return np.asarray(points)
+        return to_world(points, self.object_q[k], np.asarray(self.object_centroid))
 
 
 def _speeds(system: RodSystem, st: RodState) -> float:
@@ -164,7 +178,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     r_nodes = m.radius(m.s_nodes)
     s_points = np.concatenate((m.s_nodes, m.s_centres))
     health = RunHealth(m)
-    rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed")}
+    rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed", "q")}
     iters = 0
     steps = substeps = 0
     dt_next = dt
@@ -201,7 +215,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         if k % rec_every == 0 or done or k == n_ctrl:
             for key, val in (("t", st.t), ("x", shape.r), ("theta", shape.theta),
                              ("rho", sn.rho), ("alpha", sn.alpha), ("couple", u), ("pen", pen), ("ratio", ratio),
-                             ("speed", speed)):
+                             ("speed", speed), ("q", None if st.body is None else st.body.q)):
                 rec[key].append(val)
         if done:
             settled = health.valid
@@ -225,4 +239,12 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=settled,
         settle_time=(quiet_since if settled else None), wall_time=wall, newton_iterations=iters,
         final_state=st, model=m, gains=gains, config=config, steps=steps, integrator_steps=substeps,
-        max_penetration=max_pen, max_penetration_ratio=max_ratio, health=health)
+        max_penetration=max_pen, max_penetration_ratio=max_ratio, health=health, **object_motion(system, rec["q"], law))
+
+
+def object_motion(system: RodSystem, q: list[np.ndarray | None], law: Law | None) -> dict[str, Any]:
+    """The :class:`ClosedLoopResult` fields of the ``law`` that ran (None: the paper's) and a
+    movable object's recorded displacements ``q`` (each None while the object is fixed)."""
+    body = system.body
+    return {"law": "paper" if law is None else law.name, "object_q": None if body is None else np.array(q, dtype=float),
+            "object_centroid": None if body is None else body.centroid}

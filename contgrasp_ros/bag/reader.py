@@ -24,7 +24,7 @@ from typing import Any
 import yaml
 from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
-from mcap.records import Channel, Message, Metadata, Schema
+from mcap.records import Channel, Message, Metadata, Schema, Statistics
 from mcap.stream_reader import StreamReader
 
 from .errors import BagError, BagInputError, read_error
@@ -38,6 +38,7 @@ __all__ = [
     "iter_decoded",
     "info",
     "recover",
+    "UNKNOWN",
 ]
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -307,18 +308,23 @@ def _parse_record(raw: bytes) -> list[Any]:
     return out
 
 
+UNKNOWN = "unknown"
+"""What :func:`recover` reports for a loss it cannot count: the file's end, with its statistics, is gone."""
+
+
 def recover(src: str | Path, dst: str | Path, *, layout: str | None = None) -> dict[str, Any]:
     """Copy every intact record of a damaged or unfinished recording into a finished one.
 
     Each top-level record is parsed on its own (chunks are decompressed and CRC-checked), so a
     corrupt chunk is skipped and counted while the ones after it are kept; the scan ends at the
     first record that runs past the end of the file (where a killed recorder stopped). Returns
-    counts of kept/lost chunks and messages and the new recording's metadata.
+    counts of kept chunks and messages, what was lost (:func:`_losses`: against the recording's
+    own statistics, or :data:`UNKNOWN`) and the new recording's metadata.
     """
     from .writer import BagWriter
 
     src_p, dst_p = _path(src), _path(dst, "output")
-    files, _ = _mcap_files(src_p)
+    files, meta = _mcap_files(src_p)
     for parent in dst_p.parents:  # an output path through a regular file is bad input, found before any work
         if parent.exists():
             if not parent.is_dir():
@@ -329,32 +335,43 @@ def recover(src: str | Path, dst: str | Path, *, layout: str | None = None) -> d
             if stream.read(len(MAGIC)) != MAGIC:
                 raise BagInputError(f"{f} is not an MCAP file (bad or missing magic)")
     layout = layout or ("file" if dst_p.suffix == ".mcap" else "folder")
-    stats = {"chunks_kept": 0, "chunks_lost": 0, "records_lost": 0, "messages": 0, "messages_without_channel": 0, "truncated": False}
+    stats: dict[str, Any] = {"chunks_kept": 0, "chunks_lost": UNKNOWN, "records_lost": UNKNOWN, "messages": 0,
+                             "messages_without_channel": 0, "truncated": False}
+    scans: list[_Scan] = []
     out = BagWriter(dst_p, layout=layout)
     try:
         for f in files:
             data = _read_all(f)
             if not data.startswith(MAGIC):
                 raise BagInputError(f"{f} is not an MCAP file (bad or missing magic)")
+            scan = _Scan(listed=_listed_count(meta, src_p, f))
+            scans.append(scan)
             schemas: dict[int, Schema] = {}
             channels: dict[int, Channel] = {}
             for raw in _records(data, len(MAGIC)):
                 if raw is None:
                     stats["truncated"] = True
                     break
+                scan.data_end = scan.data_end or raw[0] == _OP_DATA_END
                 try:
                     parsed = _parse_record(raw)
                 except Exception:  # noqa: BLE001 - a damaged record of any kind is skipped and counted
-                    stats["chunks_lost" if raw[0] == 0x06 else "records_lost"] += 1
+                    if raw[0] == 0x06:
+                        scan.chunks_lost += 1
+                    else:
+                        scan.records_lost += 1
                     continue
                 if raw[0] == 0x06:
-                    stats["chunks_kept"] += 1
+                    scan.chunks += 1
                 for r in parsed:
                     if isinstance(r, Schema):
                         schemas[r.id] = r
                     elif isinstance(r, Channel):
                         channels[r.id] = r
+                    elif isinstance(r, Statistics):
+                        scan.statistics = r
                     elif isinstance(r, Message):
+                        scan.messages += 1
                         ch = channels.get(r.channel_id)
                         sc = schemas.get(ch.schema_id) if ch else None
                         if ch is None or sc is None:
@@ -366,8 +383,60 @@ def recover(src: str | Path, dst: str | Path, *, layout: str | None = None) -> d
                         stats["messages"] += 1
                     elif isinstance(r, Metadata) and r.name != "rosbag2":
                         out.records[r.name] = dict(r.metadata)
+            stats["chunks_kept"] += scan.chunks
     finally:
-        meta = out.close()
+        meta_out = out.close()
+    stats.update(_losses(scans, stats["messages"]))
     # ``chunks_kept``/``chunks_lost`` count the input's chunks; the copy is chunked anew by the
     # writer, so its own count (what ``bag info`` of the output shows) is reported beside them
-    return {**stats, "output_chunks": info(open_recording(dst_p))["chunk_count"], "output": str(dst_p), "metadata": meta}
+    return {**stats, "output_chunks": info(open_recording(dst_p))["chunk_count"], "output": str(dst_p), "metadata": meta_out}
+
+
+@dataclass
+class _Scan:
+    """What :func:`recover` found in one file: intact chunks and messages, damaged records, whether
+    the data section's end was reached, the file's own statistics record if it survived, and the
+    message count ``metadata.yaml`` lists for the file (None: not listed)."""
+
+    listed: int | None = None
+    chunks: int = 0
+    messages: int = 0
+    chunks_lost: int = 0
+    records_lost: int = 0
+    data_end: bool = False
+    statistics: Statistics | None = None
+
+    def losses(self) -> dict[str, int | str]:
+        """Chunks, other records and messages lost in this file, each :data:`UNKNOWN` when it
+        cannot be counted: the chunks against the statistics' count, else those found damaged
+        when the scan reached the data's end (otherwise the end is gone, with what was in it);
+        the messages against the statistics', else against ``metadata.yaml``'s, else against
+        those found when every chunk was intact."""
+        st = self.statistics
+        chunks: int | str = st.chunk_count - self.chunks if st else self.chunks_lost if self.data_end else UNKNOWN
+        expected = st.message_count if st else self.listed
+        if expected is None and self.data_end and not self.chunks_lost:
+            expected = self.messages
+        return {"chunks_lost": chunks, "records_lost": self.records_lost if self.data_end else UNKNOWN,
+                "messages_expected": UNKNOWN if expected is None else expected}
+
+
+def _losses(scans: list[_Scan], written: int) -> dict[str, int | str]:
+    """The files' losses summed (:data:`UNKNOWN` if any file's is), and ``messages_lost``: the
+    expected messages that were not ``written``."""
+    per_file = [s.losses() for s in scans]
+    out: dict[str, int | str] = {}
+    for key in ("chunks_lost", "records_lost", "messages_expected"):
+        values = [p[key] for p in per_file]
+        out[key] = sum(v for v in values if isinstance(v, int)) if all(isinstance(v, int) for v in values) else UNKNOWN
+    expected = out["messages_expected"]
+    out["messages_lost"] = expected - written if isinstance(expected, int) else UNKNOWN
+    return out
+
+
+def _listed_count(meta: dict[str, Any] | None, folder: Path, file: Path) -> int | None:
+    """The message count ``metadata.yaml`` (``meta``, of the bag ``folder``) lists for ``file``."""
+    for entry in (meta or {}).get("files") or []:
+        if isinstance(entry, dict) and folder / str(entry.get("path")) == file and isinstance(entry.get("message_count"), int):
+            return int(entry["message_count"])
+    return None

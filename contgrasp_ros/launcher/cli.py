@@ -27,11 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from contgrasp_core.cli import ArgumentParser, report
+from contgrasp_core.cli import ArgumentParser, closed_stdout_safe, report
 from contgrasp_core.cli.common import add_object_arguments, object_from_args
 from contgrasp_core.control.hold_law import LAWS
-from contgrasp_core.errors import InvalidParameterError, exit_code, one_line
+from contgrasp_core.errors import InvalidParameterError, exit_code, one_line, refuse_ignored
 from contgrasp_core.objects import ROD_SCALE
+from contgrasp_core.outputs import check_output
 from contgrasp_core.rod.body import MODES
 from contgrasp_core.scenario import Scenario
 from contgrasp_ros.bag import BagError
@@ -151,16 +152,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     An error of the launcher itself is one line on stderr, ``contgrasp-launch: error: ...``:
     exit code 2 for bad usage or input (argparse, :class:`~contgrasp_core.errors.InputError`),
     1 otherwise (:class:`~contgrasp_core.errors.RunFailure`, any other exception); ``--debug``
-    shows the traceback, with the same code."""
-    args = _parser().parse_args(argv)
+    shows the traceback, with the same code. A reader that closed stdout early ends it quietly
+    (:func:`~contgrasp_core.cli.closed_stdout_safe`)."""
+    return closed_stdout_safe(lambda: _main(argv))
+
+
+RECORDING_OPTIONS = ("--bag", "--bag-layout", "--bag-exclude", "--bag-decimate", "--bag-log-time", "--max-bag-duration",
+                     "--max-bag-size", "--allow-unrecorded")
+"""The options that set how the run is recorded: with ``--no-record`` they would do nothing."""
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
     events: EventWriter | None = None
     try:
+        if args.no_record:
+            dests = {option: option[2:].replace("-", "_") for option in RECORDING_OPTIONS}
+            refuse_ignored([o for o, d in dests.items() if getattr(args, d) != parser.get_default(d)], "with --no-record",
+                           "a recorded run")
         if args.events is not None:
             if args.events == "-" and args.json:
                 raise InvalidParameterError("--events - and --json both write to stdout: give --events a file")
             events = open_events(args.events)
         with tempfile.TemporaryDirectory(prefix="contgrasp_params_") as folder:  # (a changed scenario's file)
             return _launch(args, argv, Path(folder), events)
+    except BrokenPipeError:  # (stdout closed by its reader: not the launcher's error)
+        raise
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback (--debug shows it)
         if events is not None:
             events("finished", exit_code=exit_code(exc), error=one_line(exc) or type(exc).__name__)
@@ -208,6 +226,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
         layout = args.bag_layout or ("file" if out.suffix == ".mcap" else "folder")
         if out.exists():
             raise InvalidParameterError(f"--bag {out} already exists (give a new folder or .mcap file name)")
+        check_output(out, "--bag", folder=layout == "folder")
         # the file as the user named it (or the packaged one by name), never a path of this machine:
         # the parameters themselves are in ``params``
         run_info = {"params": params, "params_file": str(args.params) if args.params else PACKAGED_PARAMS,
@@ -223,6 +242,12 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
                   "decimate_period": args.bag_decimate, "max_bag_duration": args.max_bag_duration,
                   "max_bag_size": args.max_bag_size}
     compose = _compose_groups(args.compose, args.in_process)
+    if args.plot is not None:
+        from contgrasp_core.figures.draw import check_figure_path  # (matplotlib: only when drawing)
+
+        check_figure_path(args.plot, "--plot")
+    if args.summary_file is not None:
+        check_output(args.summary_file, "--summary-file")
     if args.respawn < 0 or (args.respawn and args.in_process):
         raise InvalidParameterError(f"--respawn takes N >= 0 and applies to separate node processes only, got {args.respawn}"
                                     + (" with --in-process" if args.in_process else ""))
@@ -244,7 +269,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
     summary.pop("history", None)
     for broken in (summary.get("validity") or {}).get("broken", []):
         print(f"contgrasp-launch: warning: the run left the model's validity, so it is not settled: {broken}", file=sys.stderr)
-    if args.summary_file is not None:
+    if args.summary_file is not None:  # (checked before the run)
         args.summary_file.parent.mkdir(parents=True, exist_ok=True)
         args.summary_file.write_text(json.dumps(summary, indent=1))
     if events is not None:

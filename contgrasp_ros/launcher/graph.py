@@ -10,6 +10,8 @@ No rclpy here: the launch files are loaded by ``ros2 launch`` before any node ex
 from __future__ import annotations
 
 import json
+from difflib import get_close_matches
+from functools import cache
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from importlib import resources
@@ -95,23 +97,69 @@ def default_params_file() -> Path:
     return Path(str(resources.files(PACKAGE) / "config" / "default.yaml"))
 
 
-def load_params(path: Path) -> dict[str, dict[str, Any]]:
-    """Parameters per node from a ROS 2 YAML file (``/**`` entries apply to every node)."""
+RUNTIME_PARAMETERS = ("use_sim_time", "start_type_description_service", "on_finish", "finish_ack_timeout",
+                      "max_future_stamp")
+"""Parameters every node of the loop declares beyond the packaged file's (rclpy's and the node runtime's)."""
+NODE_PARAMETERS = {SIMULATOR: ("start_paused", "wait_for_peers", "peer_timeout", "min_subscribers", "max_kinetic_energy",
+                               "max_penetration_limit")}
+"""Parameters a node declares beyond the packaged file's and :data:`RUNTIME_PARAMETERS` (tests/test_scenario.py
+checks these lists against what each node declares)."""
+
+
+def known_parameters(node: str) -> set[str]:
+    """The parameters ``node`` takes: the packaged file's (``/**`` included), the runtime's and its own."""
+    defaults = _packaged()
+    return {*defaults["/**"], *defaults[node], *RUNTIME_PARAMETERS, *NODE_PARAMETERS.get(node, ())}
+
+
+@cache
+def _packaged() -> dict[str, dict[str, Any]]:
+    """The packaged file's sections (read once; never changed)."""
+    return _sections(default_params_file())
+
+
+def _sections(path: Path) -> dict[str, dict[str, Any]]:
+    """The sections of a ROS 2 YAML parameter file, ``/**`` and each node's (its leading ``/``
+    dropped), each its ``ros__parameters``."""
     try:
         data = yaml.safe_load(path.read_text()) or {}
     except (OSError, yaml.YAMLError) as exc:
         raise InvalidParameterError(f"cannot read parameter file {path}: {exc}") from exc
     if not isinstance(data, dict):
         raise InvalidParameterError(f"{path} is not a ROS 2 parameter file (expected a mapping)")
-    try:
-        common = (data.get("/**") or {}).get("ros__parameters", {})
-        out = {}
-        for node in NODES:
-            section = data.get(node) or data.get(f"/{node}") or {}
-            out[node] = {**common, **section.get("ros__parameters", {})}
-    except AttributeError as exc:
-        raise InvalidParameterError(f"{path} is not a ROS 2 parameter file (node sections need 'ros__parameters' mappings)") from exc
+    out: dict[str, dict[str, Any]] = {"/**": {}}
+    for name, section in data.items():
+        section = section or {}
+        values = section.get("ros__parameters", {}) if isinstance(section, dict) else None
+        if not isinstance(values, dict):
+            raise InvalidParameterError(f"{path} is not a ROS 2 parameter file (node sections need 'ros__parameters' mappings)")
+        out[name if name == "/**" else str(name).lstrip("/")] = values
     return out
+
+
+def _check_known(path: Path, sections: dict[str, dict[str, Any]]) -> None:
+    """Refuse a node of ``sections`` outside the graph, or a parameter its node does not take
+    (one under ``/**`` that no node takes)."""
+    for name, values in sections.items():
+        if name != "/**" and name not in NODES:
+            raise InvalidParameterError(f"{path}: unknown node {name!r}; the graph's nodes are {', '.join(NODES)} "
+                                        "(and /** for all of them)")
+        known = set().union(*(known_parameters(n) for n in (NODES if name == "/**" else (name,))))
+        for key in values:
+            if key not in known:
+                hint = get_close_matches(str(key), known, n=1)
+                raise InvalidParameterError(f"{path}: unknown parameter {key!r} of {name}"
+                                            + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+
+
+def load_params(path: Path) -> dict[str, dict[str, Any]]:
+    """Parameters per node: the packaged file's (the paper's scenario) with those of ``path`` over
+    them, as ROS merges several parameter files (the later file's value wins; ``/**`` entries
+    apply to every node). A node or parameter the graph does not know is refused, naming it."""
+    given = _sections(path)
+    _check_known(path, given)
+    defaults = _packaged()
+    return {node: {**defaults["/**"], **defaults[node], **given["/**"], **given.get(node, {})} for node in NODES}
 
 
 def object_parameters(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> dict[str, dict[str, Any]]:

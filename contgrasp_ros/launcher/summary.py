@@ -90,7 +90,10 @@ class RunSummary:
     ``validity`` (what broke the model, :class:`~contgrasp_core.rod.validity.RunHealth`; ``None``
     from an older recording) and the muscles' effort (``peak_couple`` N m, at ``peak_couple_s``
     m and ``peak_couple_t`` s, ``peak_couple_ratio`` to the bound, ``None`` when unbounded) are
-    the simulator's last ``/diagnostics`` status; ``final``, ``final_quality`` and the contact statistics
+    the simulator's last ``/diagnostics`` status, except that ``sim_time_s`` and ``steps`` are the
+    last rod state's when it is newer (the status goes out at most every 0.2 s of wall time and at
+    a change of state, so a run stopped by Ctrl-C ends with a status some steps old); ``final``,
+    ``final_quality`` and the contact statistics
     (:class:`~contgrasp_core.tracking.ContactStats`: mean and max tracking errors over the
     ``contact_nodes`` nodes in contact, ``contact_length`` m) the last rod state, grasp
     quality and contact state; ``wall_time_s`` (the whole launcher run) and ``loop_wall_time_s``
@@ -156,9 +159,12 @@ def build_summary(
 ) -> RunSummary:
     """The :class:`RunSummary` of a run from the simulator's last ``/diagnostics`` key/values
     (``state``, ``settled``, ``settle_time_s``, ``sim_time_s``, ``step``, ``missed_deadlines``,
-    ``late_couples``, ``max_penetration``; missing or unparsable ones give ``None``/0), the last rod state and
-    quality, and the contact statistics of the last contact state (:func:`contact_stats`)."""
+    ``late_couples``, ``max_penetration``; missing or unparsable ones give ``None``/0; the step and
+    time of ``final`` when it is newer), the last rod state and quality, and the contact statistics
+    of the last contact state (:func:`contact_stats`)."""
     sim_time, steps = _num(status, "sim_time_s"), int(_num(status, "step") or 0)
+    if final is not None and final.step > steps:  # (a run stopped between two statuses: its last state is newer)
+        sim_time, steps = final.t, final.step
     loop = loop_wall_time_s if loop_wall_time_s is not None and loop_wall_time_s > 0 else None
     return RunSummary(
         simulator_state=status.get("state", "unknown"),

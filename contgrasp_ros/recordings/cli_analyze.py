@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.outputs import check_output
 from contgrasp_ros.layer import guarded
 
 __all__ = ["add_parser", "run"]
@@ -50,11 +50,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
         check_figure_path(args.plot)
     if args.csv is not None:
-        for d in (args.csv, *args.csv.parents):  # the nearest existing ancestor must be a directory
-            if d.exists():
-                if not d.is_dir():
-                    raise InvalidParameterError(f"--csv {args.csv}: {d} exists and is not a directory")
-                break
+        check_output(args.csv, "--csv", folder=True)
     from contgrasp_ros.recordings.analysis import analyze, check
 
     out = analyze(args.bag, csv_dir=args.csv, plot=args.plot)
