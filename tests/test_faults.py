@@ -306,3 +306,20 @@ def test_orphaned_shared_memory_files_are_removed_and_files_in_use_kept(tmp_path
     assert sorted(removed) == sorted([orphan_port, orphan_segment])
     assert not orphan_mutex.exists()
     assert all(p.exists() for p in (locked, lock, mapped, other))
+
+
+def test_a_recorder_lost_mid_run_leaves_the_run_unrecorded_and_the_launcher_says_so(tmp_path: Path) -> None:
+    """The recorder killed mid-run (the launcher checks before the run that the recording can be
+    written, so a recording lost later is a fault): the run itself completes and the launcher
+    reports the recorder's failure (exit 1: the run is not recorded; --allow-unrecorded would
+    accept that)."""
+    launch = Launch("--params", str(fault_params(tmp_path)), "--bag", str(tmp_path / "bag"))
+    try:
+        running(launch)
+        launch.signal("mcap_recorder", signal.SIGKILL)
+        code, out = launch.result()
+    finally:
+        launch.close()
+    assert code == 1 and out["exit_codes"]["mcap_recorder"] == -9, "".join(launch.lines[-40:])
+    assert out["simulator_state"] == "finished" and out["steps"] > 0
+    assert out["error"] == "the recorder exited with code -9: the run is not recorded (--allow-unrecorded accepts that)"

@@ -200,7 +200,7 @@ def test_bounded_muscles_through_the_graph_equal_the_core_loop_bit_for_bit() -> 
     np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
     assert summary["final"]["object_q"] == obs.body.q.tolist()
     effort = session.health.effort()
-    assert summary["peak_couple"] == effort["peak_couple"] and summary["peak_couple_s"] == effort["peak_couple_s"]
+    assert summary["peak_couple"] == effort["peak_couple"] and summary["peak_couple_arclength"] == effort["peak_couple_arclength"]
     assert summary["peak_couple_ratio"] == effort["peak_couple_ratio"] and 0.99 < effort["peak_couple_ratio"] <= 1.0
     assert summary["validity"] == json.loads(json.dumps(session.health.validity()))
     bound = scenario.rod.muscle_bound

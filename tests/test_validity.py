@@ -34,7 +34,7 @@ def test_health_names_what_broke_and_where() -> None:
     assert bound is not None
     health.applied(0.0, np.linspace(0.5, 0.0, 10) * bound[0])
     effort = health.effort()
-    assert effort["peak_couple"] == 0.5 * bound[0] and effort["peak_couple_s"] == 0.0
+    assert effort["peak_couple"] == 0.5 * bound[0] and effort["peak_couple_arclength"] == 0.0
     assert effort["peak_couple_ratio"] == pytest.approx(0.5)
     assert RunHealth(RodModel()).effort()["peak_couple_ratio"] is None
 
@@ -61,7 +61,7 @@ def test_the_paper_run_is_valid_and_reports_its_effort() -> None:
     assert out["settled"] and out["validity"] == {"valid": True, "broken": [], "max_penetration_ratio": out["max_penetration_ratio"],
                                                   "penetration_limit": 0.3, "max_self_overlap_ratio": 0.0,
                                                   "self_overlap_limit": 0.3}
-    assert out["peak_couple"] > 0.03 and out["peak_couple_s"] == 0.0 and out["peak_couple_ratio"] is None and err == ""
+    assert out["peak_couple"] > 0.03 and out["peak_couple_arclength"] == 0.0 and out["peak_couple_ratio"] is None and err == ""
     bounded, _ = _simulate("--max-muscle-stress", "20000")
     bound = 2.0 / 3.0 * 20000 * 0.01**3  # at the base, where the paper's law asks most
     assert bounded["peak_couple"] == pytest.approx(bound, rel=1e-12) and bounded["peak_couple_ratio"] == pytest.approx(1.0)

@@ -85,12 +85,12 @@ class RunHealth:
                 "max_self_overlap_ratio": self.self_overlap_ratio, "self_overlap_limit": SELF_OVERLAP_LIMIT}
 
     def effort(self) -> dict[str, Any]:
-        """``peak_couple`` (N m, the largest |u| applied), ``peak_couple_s`` (m, its joint),
-        ``peak_couple_t`` (s) and ``peak_couple_ratio`` (that couple over the muscles' bound at its
+        """``peak_couple`` (N m, the largest |u| applied), ``peak_couple_arclength`` (m, its joint),
+        ``peak_couple_sim_time_s`` (s) and ``peak_couple_ratio`` (that couple over the muscles' bound at its
         joint; None when the muscles are unbounded)."""
         ratio = None if np.isnan(self._bound_at_peak) else self.peak_couple / self._bound_at_peak
-        return {"peak_couple": self.peak_couple, "peak_couple_s": _plain(self.peak_couple_at[1]),
-                "peak_couple_t": _plain(self.peak_couple_at[0]), "peak_couple_ratio": ratio}
+        return {"peak_couple": self.peak_couple, "peak_couple_arclength": _plain(self.peak_couple_at[1]),
+                "peak_couple_sim_time_s": _plain(self.peak_couple_at[0]), "peak_couple_ratio": ratio}
 
 
 def _plain(v: float) -> float | None:

@@ -88,8 +88,8 @@ class RunSummary:
     ``late_couples`` (free-running steps that went on without the couple answering their state,
     :class:`~contgrasp_ros.nodes.lockstep.CoupleWait`; 0 in lock-step), ``max_penetration`` (m),
     ``validity`` (what broke the model, :class:`~contgrasp_core.rod.validity.RunHealth`; ``None``
-    from an older recording) and the muscles' effort (``peak_couple`` N m, at ``peak_couple_s``
-    m and ``peak_couple_t`` s, ``peak_couple_ratio`` to the bound, ``None`` when unbounded) are
+    from an older recording) and the muscles' effort (``peak_couple`` N m, at ``peak_couple_arclength``
+    m and ``peak_couple_sim_time_s`` s, ``peak_couple_ratio`` to the bound, ``None`` when unbounded) are
     the simulator's last ``/diagnostics`` status, except that ``sim_time_s`` and ``steps`` are the
     last rod state's when it is newer (the status goes out at most every 0.2 s of wall time and at
     a change of state, so a run stopped by Ctrl-C ends with a status some steps old); ``final``,
@@ -112,8 +112,8 @@ class RunSummary:
     max_penetration: float | None
     validity: dict[str, Any] | None
     peak_couple: float | None
-    peak_couple_s: float | None
-    peak_couple_t: float | None
+    peak_couple_arclength: float | None
+    peak_couple_sim_time_s: float | None
     peak_couple_ratio: float | None
     final: FinalState | None
     final_quality: FinalQuality | None
@@ -177,8 +177,8 @@ def build_summary(
         max_penetration=_num(status, "max_penetration"),
         validity=_json(status, "validity"),
         peak_couple=_num(status, "peak_couple"),
-        peak_couple_s=_num(status, "peak_couple_s"),
-        peak_couple_t=_num(status, "peak_couple_t"),
+        peak_couple_arclength=_num(status, "peak_couple_arclength"),
+        peak_couple_sim_time_s=_num(status, "peak_couple_sim_time_s"),
         peak_couple_ratio=_num(status, "peak_couple_ratio"),
         final=final,
         final_quality=final_quality,
