@@ -6,6 +6,7 @@ loop does (docs/ros.md, "In a ROS 2 workspace")."""
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -15,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import yaml
 
 pytest.importorskip("rclpy")
 pytest.importorskip("contgrasp_msgs.msg")
@@ -75,6 +77,71 @@ def test_colcon_builds_both_packages_and_installs_what_a_ros_package_installs(wo
                             "print(contgrasp_core.__file__, contgrasp_ros.__file__, contgrasp_msgs.__file__)"],
                            env=workspace["env"], cwd=workspace["ws"], capture_output=True, text=True, check=True).stdout.split()
     assert all(path.startswith(str(workspace["ws"] / "install")) for path in where), where
+
+
+# Evaluates an installed launch file as `ros2 launch` would, without starting a process: prints
+# each node's command line (executable, then its arguments with the parameter files) as JSON.
+_LAUNCH_COMMANDS = """
+import json, sys
+from launch import LaunchContext
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.utilities import perform_substitutions
+from launch_ros.actions import Node
+
+context = LaunchContext()
+context.launch_configurations.update(a.split(":=", 1) for a in sys.argv[2:])
+description = PythonLaunchDescriptionSource(sys.argv[1]).get_launch_description(context)
+
+
+def nodes(entities):
+    for entity in entities:
+        if entity.condition is not None and not entity.condition.evaluate(context):
+            continue
+        if isinstance(entity, Node):
+            entity._perform_substitutions(context)
+            yield [perform_substitutions(context, part) for part in entity.cmd]
+        else:
+            yield from nodes(entity.visit(context) or [])
+
+
+print(json.dumps(list(nodes(description.entities))))
+"""
+
+
+def _launch_commands(workspace: dict[str, Any], file: str, *args: str) -> dict[str, list[str]]:
+    """The node processes the installed launch ``file`` starts with ``args``: executable name ->
+    command line."""
+    launch = workspace["ws"] / "install" / "contgrasp_ros" / "share" / "contgrasp_ros" / "launch" / file
+    out = subprocess.run(["python3", "-c", _LAUNCH_COMMANDS, str(launch), *args], env=workspace["env"], cwd=workspace["ws"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return {Path(cmd[0]).name: cmd for cmd in json.loads(out.stdout)}
+
+
+def _params_files(cmd: list[str]) -> list[Path]:
+    return [Path(cmd[i + 1]) for i, arg in enumerate(cmd) if arg == "--params-file"]
+
+
+def test_the_launch_files_read_the_installed_share_configuration(workspace: dict[str, Any], tmp_path: Path) -> None:
+    """The default parameter file is share/contgrasp_ros/config/default.yaml of the install (the
+    ament index's), not the copy among the Python files; an edit of it is what the nodes get."""
+    pytest.importorskip("launch_ros", reason="launch_ros is part of a ROS 2 install, not a wheel (docs/ros.md)")
+    share = workspace["ws"] / "install" / "contgrasp_ros" / "share" / "contgrasp_ros" / "config" / "default.yaml"
+    commands = _launch_commands(workspace, "paper_grasp.launch.py")
+    assert sorted(commands) == ["boundary_sensor", "grasp_controller", "grasp_quality", "rod_simulator"]
+    for cmd in commands.values():
+        assert _params_files(cmd)[0] == share, cmd
+    original = share.read_text()
+    try:
+        share.write_text(original.replace("    duration: 4.0 ", "    duration: 1.25 "))
+        cmd = _launch_commands(workspace, "paper_grasp.launch.py", "object:=ellipse")["rod_simulator"]
+    finally:
+        share.write_text(original)
+    files = _params_files(cmd)
+    # (the object's override is the scenario of the parameter file with the object changed)
+    overrides = yaml.safe_load(files[1].read_text())
+    shutil.rmtree(files[1].parent, ignore_errors=True)
+    assert files[0] == share and overrides["rod_simulator"]["ros__parameters"]["duration"] == 1.25
 
 
 def test_the_nodes_from_install_give_the_paper_grasp_bitwise(workspace: dict[str, Any], graph: Graph, paper_core: Any) -> None:

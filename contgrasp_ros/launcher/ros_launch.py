@@ -32,7 +32,6 @@ from contgrasp_ros.launcher.graph import (
     PACKAGE,
     RECORDER,
     compose_groups,
-    default_params_file,
     launch_overrides,
     load_params,
     parameter_file,
@@ -45,8 +44,9 @@ __all__ = ["graph_description"]
 
 def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
     return [
-        DeclareLaunchArgument("params_file", default_value="",
-                              description="ROS 2 parameter file of the scenario (default: the package's config/default.yaml, the paper's)"),
+        DeclareLaunchArgument("params_file", default_value=PathJoinSubstitution([FindPackageShare(PACKAGE), "config", "default.yaml"]),
+                              description="ROS 2 parameter file of the scenario (default: the installed package's "
+                                          "share/contgrasp_ros/config/default.yaml, the paper's)"),
         DeclareLaunchArgument("object", default_value="",
                               description="built-in object NAME[:PARAMS] in metres: circle[:R], ellipse[:a,b], "
                                           "deformed[:R,amplitude,lobes,phase] (default: the parameter file's)"),
@@ -76,7 +76,7 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node | Register
     arg = {name: LaunchConfiguration(name).perform(context) for name in
            ("params_file", "object", "outline", "law", "object_mode", "lockstep", "duration", "compose", "record", "bag",
             "on_finish")}
-    params_file = Path(arg["params_file"]) if arg["params_file"] else default_params_file()
+    params_file = Path(arg["params_file"])
     params = load_params(params_file)
     record = arg["record"] == "true"
     overrides: dict[str, dict[str, Any]] = {name: {"use_sim_time": True, "on_finish": arg["on_finish"]} for name in nodes}
