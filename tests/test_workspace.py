@@ -79,6 +79,24 @@ def test_colcon_builds_both_packages_and_installs_what_a_ros_package_installs(wo
     assert all(path.startswith(str(workspace["ws"] / "install")) for path in where), where
 
 
+def test_the_executables_run_the_python_of_the_build_whatever_python3_is_first_on_path(workspace: dict[str, Any],
+                                                                                      tmp_path: Path) -> None:
+    """Each installed executable starts with a #! of the build's interpreter (this venv's), as
+    ament_python's scripts do: a python3 first on PATH without the layer does not run it."""
+    exe = workspace["ws"] / "install" / "contgrasp_ros" / "lib" / "contgrasp_ros"
+    for program in PROGRAMS:
+        shebang = (exe / program).read_text().splitlines()[0]
+        assert Path(shebang.removeprefix("#!")).parent == Path(sys.prefix) / "bin", (program, shebang)
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    (fake / "python3").write_text(f"#!/bin/sh\necho ran > {tmp_path / 'fake_ran'}\nexit 1\n")
+    (fake / "python3").chmod(0o755)
+    env = dict(workspace["env"], PATH=os.pathsep.join([str(fake), workspace["env"]["PATH"]]))
+    out = subprocess.run([str(exe / "container"), "--help"], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.startswith("usage: container NODE"), out.stdout + out.stderr
+    assert not (tmp_path / "fake_ran").exists()
+
+
 # Evaluates an installed launch file as `ros2 launch` would, without starting a process: prints
 # each node's command line (executable, then its arguments with the parameter files) as JSON.
 _LAUNCH_COMMANDS = """
