@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -24,6 +25,7 @@ if shutil.which("colcon", path=os.pathsep.join([str(Path(sys.prefix) / "bin"), o
     pytest.skip("colcon is not installed (the set-up's test extra installs colcon-common-extensions)", allow_module_level=True)
 
 import test_by_hand as by_hand  # noqa: E402 - the by-hand graph and its fixtures
+from conftest import fresh_domain_id  # noqa: E402
 
 Graph = by_hand.Graph
 graph = by_hand.graph
@@ -54,7 +56,7 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         shutil.copy2(ROOT / name, ws / "src" / "contgrasp" / name)
     env = _underlay_env()
     listed = subprocess.run(["colcon", "list", "--names-only"], cwd=ws, env=env, capture_output=True, text=True, check=True)
-    build = subprocess.run(["colcon", "build", "--event-handlers", "console_direct-", "--cmake-args", "-DBUILD_TESTING=OFF"],
+    build = subprocess.run(["colcon", "build", "--event-handlers", "console_direct-"],
                            cwd=ws, env=env, capture_output=True, text=True, timeout=900)
     assert build.returncode == 0, build.stdout[-4000:] + build.stderr[-4000:]
     sourced = subprocess.run(["bash", "-c", "source install/setup.bash && env -0"], cwd=ws, env=env, capture_output=True,
@@ -77,6 +79,24 @@ def test_colcon_builds_both_packages_and_installs_what_a_ros_package_installs(wo
                             "print(contgrasp_core.__file__, contgrasp_ros.__file__, contgrasp_msgs.__file__)"],
                            env=workspace["env"], cwd=workspace["ws"], capture_output=True, text=True, check=True).stdout.split()
     assert all(path.startswith(str(workspace["ws"] / "install")) for path in where), where
+
+
+def test_colcon_test_runs_the_node_tests_and_they_pass(workspace: dict[str, Any]) -> None:
+    """`colcon test` runs the package's node tests (CMakeLists.txt, ament_cmake_pytest) against the
+    install; `colcon test-result` counts them: some, none failed."""
+    env = dict(workspace["env"], ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    test = subprocess.run(["colcon", "test", "--packages-select", "contgrasp_ros", "--event-handlers", "console_direct-"],
+                          cwd=workspace["ws"], env=env, capture_output=True, text=True, timeout=900)
+    assert test.returncode == 0, test.stdout[-4000:] + test.stderr[-4000:]
+    result = subprocess.run(["colcon", "test-result", "--all", "--verbose", "--test-result-base", "build/contgrasp_ros"],
+                            cwd=workspace["ws"], env=env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stdout + result.stderr
+    counts = r"(\d+) tests, (\d+) errors, (\d+) failures, \d+ skipped"
+    files = {name: tuple(map(int, n)) for name, *n in re.findall(r"contgrasp_ros/(test_\w+)\.xunit\.xml: " + counts, result.stdout)}
+    assert sorted(files) == ["test_cdr", "test_lockstep", "test_ros_nodes"], result.stdout
+    assert all(tests > 0 and errors == failures == 0 for tests, errors, failures in files.values()), result.stdout
+    summary = re.search("Summary: " + counts, result.stdout)
+    assert summary is not None and int(summary[1]) >= sum(t for t, _, _ in files.values()) > 0, result.stdout
 
 
 def test_the_executables_run_the_python_of_the_build_whatever_python3_is_first_on_path(workspace: dict[str, Any],
