@@ -24,6 +24,23 @@ def test_step_0_waits_for_every_peer_of_the_loop_then_a_grace_period() -> None:
     assert go and line is not None and "waited 7.5 s" in line
 
 
+def test_the_waiting_line_names_only_the_nodes_still_missing() -> None:
+    def hint(peers: Peers) -> str:
+        go, line = StartGate(wait_for_peers=True, timeout=30.0).check(0.0, peers, 0)
+        assert not go and line is not None
+        return line
+
+    assert "(start boundary_sensor and grasp_controller; wait_for_peers:=false" in hint(Peers(0, 0, 0, 0))
+    # the plant alone (sensor and quality node up): only the controller is missing
+    line = hint(Peers(2, 0, 0, contact_publishers=1))
+    assert "(start grasp_controller; " in line and "boundary_sensor" not in line
+    # a controller and a recorder on the rod state, no sensor
+    line = hint(Peers(1, 1, 0, contact_publishers=0))
+    assert "(start boundary_sensor; " in line and "grasp_controller" not in line
+    # both there, their contact endpoints not matched yet: nothing to start
+    assert "(wait_for_peers:=false starts at once" in hint(Peers(1, 1, 0, contact_publishers=1))
+
+
 def test_a_peer_that_leaves_during_the_grace_period_restarts_it() -> None:
     gate = StartGate(wait_for_peers=True, timeout=0.0, grace=0.5)
     assert not gate.check(0.0, Peers(0, 0, 0), 0)[0]

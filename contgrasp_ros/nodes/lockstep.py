@@ -35,11 +35,13 @@ RESEND_S = 1.0
 class Peers:
     """What the simulator sees of the closed loop: subscribers of its rod state (the sensor, a
     recorder, a monitor), the contact topic's links (the fewer of its publishers and subscribers
-    in the graph: the sensor and the controller) and publishers of couples (the controller)."""
+    in the graph: the sensor and the controller), publishers of couples (the controller) and of
+    contact states (the sensor)."""
 
     rod_state_subscribers: int
     couple_publishers: int
     contact_links: int = 0
+    contact_publishers: int = 0
 
 
 class StartGate:
@@ -96,8 +98,16 @@ class StartGate:
             self._next_log = now + self.log_period
             limit = f"; publishing anyway after peer_timeout = {self.timeout:g} s" if self.timeout > 0 else ""
             return False, (f"waiting for the closed loop's peers before publishing step 0: {_have(peers, need)} "
-                           f"(start boundary_sensor and grasp_controller; wait_for_peers:=false starts at once{limit})")
+                           f"({_absent(peers, need)}wait_for_peers:=false starts at once{limit})")
         return False, None
+
+
+def _absent(peers: Peers, need: Peers) -> str:
+    """The hint naming the loop's nodes not seen yet ('' when each is there, still matching): the
+    sensor is the one contact publisher, the controller the one couple publisher."""
+    missing = [name for name, absent in (("boundary_sensor", need.contact_links > peers.contact_publishers),
+                                         ("grasp_controller", need.couple_publishers > peers.couple_publishers)) if absent]
+    return f"start {' and '.join(missing)}; " if missing else ""
 
 
 def _have(peers: Peers, need: Peers) -> str:

@@ -381,9 +381,10 @@ class RodSimulator(Node):
 
     def _publish_first_observation(self) -> None:
         """The run's first state, once the peers are matched (:class:`~contgrasp_ros.nodes.lockstep.StartGate`)."""
-        contact = min(self.count_publishers(topics.CONTACT), self.count_subscribers(topics.CONTACT))
+        contact_publishers = self.count_publishers(topics.CONTACT)
+        contact = min(contact_publishers, self.count_subscribers(topics.CONTACT))
         subscribers = self.pub_state.get_subscription_count() + self.pub_sampled.get_subscription_count()
-        peers = Peers(subscribers, self.sub_couple.get_publisher_count(), contact)
+        peers = Peers(subscribers, self.sub_couple.get_publisher_count(), contact, contact_publishers)
         go, line = self.gate.check(time.monotonic(), peers, self.get_parameter("min_subscribers").value)
         if line and "anyway" in line:  # (rclpy: one severity per logging call site)
             self.get_logger().warn(line)
