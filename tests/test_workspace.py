@@ -146,12 +146,12 @@ print(json.dumps(list(nodes(description.entities))))
 """
 
 
-def _launch_commands(workspace: dict[str, Any], file: str, *args: str) -> dict[str, list[str]]:
+def _launch_commands(workspace: dict[str, Any], log_dir: Path, file: str, *args: str) -> dict[str, list[str]]:
     """The node processes the installed launch ``file`` starts with ``args``: executable name ->
-    command line."""
+    command line (the launch's log folder, where its override file goes, under ``log_dir``)."""
     launch = workspace["ws"] / "install" / "contgrasp_ros" / "share" / "contgrasp_ros" / "launch" / file
-    out = subprocess.run(["python3", "-c", _LAUNCH_COMMANDS, str(launch), *args], env=workspace["env"], cwd=workspace["ws"],
-                         capture_output=True, text=True, timeout=120)
+    out = subprocess.run(["python3", "-c", _LAUNCH_COMMANDS, str(launch), *args], env=dict(workspace["env"], ROS_LOG_DIR=str(log_dir)),
+                         cwd=workspace["ws"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-3000:]
     return {Path(cmd[0]).name: cmd for cmd in json.loads(out.stdout)}
 
@@ -165,20 +165,19 @@ def test_the_launch_files_read_the_installed_share_configuration(workspace: dict
     ament index's), not the copy among the Python files; an edit of it is what the nodes get."""
     pytest.importorskip("launch_ros", reason="launch_ros is part of a ROS 2 install, not a wheel (docs/ros.md)")
     share = workspace["ws"] / "install" / "contgrasp_ros" / "share" / "contgrasp_ros" / "config" / "default.yaml"
-    commands = _launch_commands(workspace, "paper_grasp.launch.py")
+    commands = _launch_commands(workspace, tmp_path, "paper_grasp.launch.py")
     assert sorted(commands) == ["boundary_sensor", "grasp_controller", "grasp_quality", "rod_simulator"]
     for cmd in commands.values():
         assert _params_files(cmd)[0] == share, cmd
     original = share.read_text()
     try:
         share.write_text(original.replace("    duration: 4.0 ", "    duration: 1.25 "))
-        cmd = _launch_commands(workspace, "paper_grasp.launch.py", "object:=ellipse")["rod_simulator"]
+        cmd = _launch_commands(workspace, tmp_path, "paper_grasp.launch.py", "object:=ellipse")["rod_simulator"]
     finally:
         share.write_text(original)
     files = _params_files(cmd)
     # (the object's override is the scenario of the parameter file with the object changed)
     overrides = yaml.safe_load(files[1].read_text())
-    shutil.rmtree(files[1].parent, ignore_errors=True)
     assert files[0] == share and overrides["rod_simulator"]["ros__parameters"]["duration"] == 1.25
 
 

@@ -8,16 +8,16 @@ workspace").
 
 from __future__ import annotations
 
-import shutil
+import os
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from launch import LaunchContext, LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction, RegisterEventHandler
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.conditions import IfCondition
-from launch.event_handlers import OnShutdown
+from launch.logging import launch_config
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
@@ -70,9 +70,9 @@ def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
     ]
 
 
-def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node | RegisterEventHandler]:
-    """The graph's node processes with the launch arguments applied (the launcher's rules:
-    an override file beside the scenario's parameter file, removed when the launch ends)."""
+def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node]:
+    """The graph's node processes with the launch arguments applied (the launcher's rules: an
+    override file after the scenario's parameter file, kept in the launch's log folder)."""
     arg = {name: LaunchConfiguration(name).perform(context) for name in
            ("params_file", "object", "outline", "law", "object_mode", "lockstep", "duration", "compose", "record", "bag",
             "on_finish")}
@@ -97,17 +97,25 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node | Register
 
         overrides[RECORDER] = {**recorder_params({"output": arg["bag"] or default_output()}), "on_finish": arg["on_finish"]}
     compose = compose_groups([",".join(n for n in COMPOSABLE if n in nodes)], nodes) if arg["compose"] == "true" else []
-    folder = Path(tempfile.mkdtemp(prefix="contgrasp_launch_"))
-    override_file = parameter_file(folder / "overrides.yaml", overrides)
-    remove = RegisterEventHandler(OnShutdown(on_shutdown=lambda *_: shutil.rmtree(folder, ignore_errors=True)))
-    return [remove, *(
+    override_file = parameter_file(_override_path(), overrides)
+    return [
         # (sigterm_timeout: a node's clean-up takes seconds on a busy machine, the recorder's
         # finalises the bag; launch's 5 s default then escalated to SIGTERM)
         Node(package=PACKAGE, executable=proc.executable, arguments=list(proc.arguments), output="screen",
              parameters=[str(override_file)] if proc.name == RECORDER else [str(params_file), str(override_file)],
              sigterm_timeout="20")
         for proc in processes(nodes, compose, record=record)
-    )]
+    ]
+
+
+def _override_path() -> Path:
+    """A new file for the launch's overrides in the launch's own log folder (beside its
+    ``launch.log``; ``ROS_LOG_DIR``, by default ``~/.ros/log/<date>-<host>-<pid>/``): a record of
+    what the nodes were given, and no temporary file to remove, since no way out of ``ros2
+    launch`` (SIGTERM skips the shutdown event) could leave one behind."""
+    fd, name = tempfile.mkstemp(prefix="contgrasp_overrides_", suffix=".yaml", dir=launch_config.log_dir)
+    os.close(fd)
+    return Path(name)
 
 
 def graph_description(nodes: Sequence[str], *, lockstep: bool) -> LaunchDescription:
