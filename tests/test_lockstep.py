@@ -41,6 +41,27 @@ def test_the_waiting_line_names_only_the_nodes_still_missing() -> None:
     assert "(wait_for_peers:=false starts at once" in hint(Peers(1, 1, 0, contact_publishers=1))
 
 
+def test_after_a_peer_joins_a_closed_loop_an_unanswered_state_goes_out_again_until_its_couple() -> None:
+    rule = LockStep(resend=1.0, rejoin_resend=0.25)
+    rule.published(0.0)
+    rule.couple("u0", True)
+    rule.published(0.0)  # state 1, unanswered: the closed loop sends nothing again by itself
+    assert not rule.resend_due(5.0)
+    rule.joined()  # a sensor restarted after a crash matched
+    assert not rule.resend_due(0.2)  # (0.2 s after the state went out: its answer may be under way)
+    assert rule.resend_due(5.0) and rule.rejoin_resent == 1
+    assert not rule.resend_due(5.2) and rule.resend_due(5.25) and rule.rejoin_resent == 2
+    rule.couple("u1", True)  # the loop closed again
+    assert not rule.rejoined
+    rule.published(6.0)
+    assert not rule.resend_due(10.0) and rule.resent == 2
+    # a peer that joins while the loop runs (a recorder): the answer comes first, nothing is re-sent
+    rule.joined()
+    rule.couple("u2", True)
+    rule.published(11.0)
+    assert not rule.resend_due(11.5)
+
+
 def test_a_peer_that_leaves_during_the_grace_period_restarts_it() -> None:
     gate = StartGate(wait_for_peers=True, timeout=0.0, grace=0.5)
     assert not gate.check(0.0, Peers(0, 0, 0), 0)[0]
