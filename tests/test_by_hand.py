@@ -261,29 +261,30 @@ def test_step_0_sent_before_the_controller_existed_still_closes_the_loop(graph: 
     assert all(code == 0 for code in graph.close().values())
 
 
-def test_a_sensor_killed_mid_run_and_restarted_closes_the_loop_again_without_the_timeout(graph: Graph,
-                                                                                       paper_core: Any) -> None:
-    """kill -9 of the sensor mid-run, a new one 2 s later: the simulator sends the state the
-    loop waits on again once the new sensor's reader matches, so the loop closes well before
-    the couple timeout (30 s here: no missed deadline, no fallback), and the run is still the
-    core loop's, bit for bit."""
+@pytest.mark.parametrize("node", ["boundary_sensor", "grasp_controller"])
+def test_a_node_killed_mid_run_and_restarted_closes_the_loop_again_without_the_timeout(graph: Graph, paper_core: Any,
+                                                                                       node: str) -> None:
+    """kill -9 of the sensor (or the controller) mid-run, a new one 2 s later: the simulator
+    sends the state the loop waits on again once the new node matches (its rod-state reader, its
+    couple writer), so the loop closes well before the couple timeout (30 s here: no missed
+    deadline, no fallback), and the run is still the core loop's, bit for bit."""
     graph.start("rod_simulator", "--ros-args", "-p", "min_subscribers:=3", "-p", "couple_timeout:=30.0")
     assert graph.spin_until(lambda: graph.node.count_publishers(topics.ROD_STATE) > 0, timeout=120)
     graph.start("grasp_controller")
     graph.start("boundary_sensor")
     assert graph.spin_until(lambda: graph.last is not None and graph.last.step >= 300, timeout=240), graph.post_mortem()
-    killed = graph.procs.pop("boundary_sensor")
+    killed = graph.procs.pop(node)
     killed.kill()
     killed.communicate(timeout=30)
     t_kill = time.monotonic()
     graph.spin_until(lambda: False, timeout=2.0)
     assert graph.last is not None
     stalled = graph.last.step
-    graph.start("boundary_sensor")
+    graph.start(node)
     t_restart = time.monotonic()
     assert graph.spin_until(lambda: graph.last is not None and graph.last.step > stalled, timeout=60), graph.post_mortem()
     t_resume = time.monotonic()
-    print(f"stalled at step {stalled}: stepping again {t_resume - t_restart:.2f} s after the new sensor started "
+    print(f"stalled at step {stalled}: stepping again {t_resume - t_restart:.2f} s after the new {node} started "
           f"({t_resume - t_kill:.2f} s after the kill)")
     assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.post_mortem()
     assert graph.spin_until(lambda: graph.last is not None and graph.last.step == int(graph.status["step"]), timeout=60)
