@@ -21,12 +21,13 @@ _CONTROLLER: list[Any] = []  # threadpoolctl's controller, made once (finding th
 
 
 def single_thread_blas() -> contextlib.AbstractContextManager[Any]:
-    """A context limiting BLAS to one thread (:mod:`threadpoolctl`, a dependency; a no-op without it)."""
+    """A context limiting BLAS to one thread (:mod:`threadpoolctl`; a no-op without it: a ROS
+    install from rosdep lacks it, since rosdep has no key for it)."""
     try:
         if not _CONTROLLER:
             from threadpoolctl import ThreadpoolController
 
             _CONTROLLER.append(ThreadpoolController())
-    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+    except ImportError:
         return contextlib.nullcontext()
     return _CONTROLLER[0].limit(limits=1, user_api="blas")

@@ -26,6 +26,7 @@ from scipy.optimize import brentq, minimize
 
 from ._validate import MAX_NODES, instance, integer, real
 from .arm import Arm, BasePose
+from .blas import single_thread_blas
 from .boundary import Boundary
 from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
 from .objects import FIG2_SCALE, ObjectSpec
@@ -254,9 +255,7 @@ def solve_pose(spec: MapSpec, psi: float, d: float, warm: Any = None) -> PoseRes
 
 def _column(spec: MapSpec, psi: float) -> list[PoseResult]:
     """All distances at one polar angle, in increasing d, each warm-started from the previous."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(1):
+    with single_thread_blas():
         boundary = spec.boundary()
         out, warm = [], None
         for d in spec.d:

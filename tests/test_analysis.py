@@ -227,6 +227,28 @@ def test_streams_are_read_in_publish_order(recording: tuple[Path, dict], tmp_pat
     assert analyze(tmp_path / "late")["final_quality"] == analyze(bag)["final_quality"] == summary["final_quality"]
 
 
+def test_a_state_published_again_is_analysed_once(recording: tuple[Path, dict], tmp_path: Path) -> None:
+    """The simulator sends a state the loop waits on again (a peer joined after it went out) and
+    the sensor its answer: recorded twice in a row, analysed once, the recording still complete."""
+    bag, summary = recording
+    rec = open_recording(bag)
+    out = BagWriter(tmp_path / "again")
+    repeated = {ROD: 0, CONTACT: 0}
+    for m in sorted(iter_raw(rec), key=lambda m: m.publish_time_ns):
+        out.add_topic(m.topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""), m.channel.metadata.get("topic_type_hash", ""),
+                      definition=m.schema.data.decode())
+        out.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns, m.sequence)
+        if m.topic in repeated and repeated[m.topic] < 3:  # (steps 0, 1, 2, each once more)
+            out.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns + 1, m.sequence)
+            repeated[m.topic] += 1
+    out.records.update({k: v for k, v in rec.metadata_records().items() if k != "rosbag2"})
+    out.close()
+    r, full = analyze(tmp_path / "again"), analyze(bag)
+    assert r["step_gaps"] == {**full["step_gaps"], "repeated_states": 3} and r["step_gaps"]["contiguous"]
+    for key in ("settled_recomputed", "settle_time_recomputed_s", "recomputed_pairs", "max_recompute_error", "final"):
+        assert r[key] == full[key], key
+
+
 def test_recomputation_is_not_vacuous(recording: tuple[Path, dict]) -> None:
     """A perturbed rod state, a wrong sensor tolerance or a wrong quality tolerance shows up."""
     bag, _ = recording

@@ -261,6 +261,41 @@ def test_step_0_sent_before_the_controller_existed_still_closes_the_loop(graph: 
     assert all(code == 0 for code in graph.close().values())
 
 
+@pytest.mark.parametrize("node", ["boundary_sensor", "grasp_controller"])
+def test_a_node_killed_mid_run_and_restarted_closes_the_loop_again_without_the_timeout(graph: Graph, paper_core: Any,
+                                                                                       node: str) -> None:
+    """kill -9 of the sensor (or the controller) mid-run, a new one 2 s later: the simulator
+    sends the state the loop waits on again once the new node matches (its rod-state reader, its
+    couple writer), so the loop closes well before the couple timeout (30 s here: no missed
+    deadline, no fallback), and the run is still the core loop's, bit for bit."""
+    graph.start("rod_simulator", "--ros-args", "-p", "min_subscribers:=3", "-p", "couple_timeout:=30.0")
+    assert graph.spin_until(lambda: graph.node.count_publishers(topics.ROD_STATE) > 0, timeout=120)
+    graph.start("grasp_controller")
+    graph.start("boundary_sensor")
+    assert graph.spin_until(lambda: graph.last is not None and graph.last.step >= 300, timeout=240), graph.post_mortem()
+    killed = graph.procs.pop(node)
+    killed.kill()
+    killed.communicate(timeout=30)
+    t_kill = time.monotonic()
+    graph.spin_until(lambda: False, timeout=2.0)
+    assert graph.last is not None
+    stalled = graph.last.step
+    graph.start(node)
+    t_restart = time.monotonic()
+    assert graph.spin_until(lambda: graph.last is not None and graph.last.step > stalled, timeout=60), graph.post_mortem()
+    t_resume = time.monotonic()
+    print(f"stalled at step {stalled}: stepping again {t_resume - t_restart:.2f} s after the new {node} started "
+          f"({t_resume - t_kill:.2f} s after the kill)")
+    assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.post_mortem()
+    assert graph.spin_until(lambda: graph.last is not None and graph.last.step == int(graph.status["step"]), timeout=60)
+    assert graph.status["missed_deadlines"] == "0", graph.post_mortem()
+    assert graph.last is not None
+    same_as_core(graph.last, paper_core)
+    sim_log = graph.output("rod_simulator")
+    assert f"a peer joined while step {stalled}" in sim_log and "the loop closed again at step" in sim_log, sim_log[-3000:]
+    graph.close()
+
+
 def test_a_state_sent_again_is_answered_again_and_computed_once(make: Any, monkeypatch: pytest.MonkeyPatch) -> None:
     """The mechanism behind the shuffled starts, node by node (callbacks called directly): the
     simulator sends step 0 again while the loop is open; the sensor and the controller answer

@@ -8,9 +8,11 @@ where ``launch_ros`` imports and are skipped with that reason elsewhere (the pip
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -97,3 +99,49 @@ def test_plant_launch_waits_for_a_controller_started_later(launch_ros: None) -> 
     assert proc.returncode == 0, log[-3000:]
     assert "publishing step 0" in log and "couple publishers 1/1" in log, log[-3000:]
     assert "finished at t = 0.3" in log and "free-running without one" not in log, log[-3000:]
+
+
+def _end(pids: list[int]) -> None:
+    """End the node processes a launch started (by pid: a launch stopped with SIGTERM leaves them
+    running, launch's documented limit), SIGINT first, SIGKILL after 20 s."""
+    for sig in (signal.SIGINT, signal.SIGKILL):
+        for pid in pids:
+            try:
+                os.kill(pid, sig)
+            except ProcessLookupError:
+                pass
+        end = time.monotonic() + 20
+        while time.monotonic() < end and any(Path(f"/proc/{pid}").exists() for pid in pids):
+            time.sleep(0.1)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stopped_launch_leaves_no_temporary_files(launch_ros: None, tmp_path: Path, sig: signal.Signals) -> None:
+    """Stopped while the simulator waits for a controller, ros2 launch leaves nothing in the
+    temporary folder (launch's SIGTERM skips the shutdown event, so a clean-up on it never ran
+    there): the nodes' overrides are a file in the launch's log folder."""
+    tmp, logs = tmp_path / "tmp", tmp_path / "log"
+    tmp.mkdir()
+    env = dict(_env(), TMPDIR=str(tmp), ROS_LOG_DIR=str(logs))
+    proc = subprocess.Popen(_launch_cmd("plant.launch.py"), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env)
+    assert proc.stdout is not None
+    pids: list[int] = []
+    seen = []
+    try:
+        for line in proc.stdout:
+            seen.append(line)
+            pids += [int(pid) for pid in re.findall(r"process started with pid \[(\d+)\]", line)]
+            if "couple publishers 0/1" in line:  # every node started, the simulator waiting
+                break
+        proc.send_signal(sig)
+        proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        _end(pids)
+    assert len(pids) == 3, "".join(seen)[-3000:]
+    assert list(tmp.iterdir()) == []
+    overrides = list({path.resolve() for path in logs.glob("*/contgrasp_overrides_*.yaml")})  # (log/latest links)
+    assert len(overrides) == 1 and yaml.safe_load(overrides[0].read_text())["rod_simulator"]["ros__parameters"]["lockstep"] is False

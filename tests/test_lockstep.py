@@ -24,6 +24,44 @@ def test_step_0_waits_for_every_peer_of_the_loop_then_a_grace_period() -> None:
     assert go and line is not None and "waited 7.5 s" in line
 
 
+def test_the_waiting_line_names_only_the_nodes_still_missing() -> None:
+    def hint(peers: Peers) -> str:
+        go, line = StartGate(wait_for_peers=True, timeout=30.0).check(0.0, peers, 0)
+        assert not go and line is not None
+        return line
+
+    assert "(start boundary_sensor and grasp_controller; wait_for_peers:=false" in hint(Peers(0, 0, 0, 0))
+    # the plant alone (sensor and quality node up): only the controller is missing
+    line = hint(Peers(2, 0, 0, contact_publishers=1))
+    assert "(start grasp_controller; " in line and "boundary_sensor" not in line
+    # a controller and a recorder on the rod state, no sensor
+    line = hint(Peers(1, 1, 0, contact_publishers=0))
+    assert "(start boundary_sensor; " in line and "grasp_controller" not in line
+    # both there, their contact endpoints not matched yet: nothing to start
+    assert "(wait_for_peers:=false starts at once" in hint(Peers(1, 1, 0, contact_publishers=1))
+
+
+def test_after_a_peer_joins_a_closed_loop_an_unanswered_state_goes_out_again_until_its_couple() -> None:
+    rule = LockStep(resend=1.0, rejoin_resend=0.25)
+    rule.published(0.0)
+    rule.couple("u0", True)
+    rule.published(0.0)  # state 1, unanswered: the closed loop sends nothing again by itself
+    assert not rule.resend_due(5.0)
+    rule.joined()  # a sensor restarted after a crash matched
+    assert not rule.resend_due(0.2)  # (0.2 s after the state went out: its answer may be under way)
+    assert rule.resend_due(5.0) and rule.rejoin_resent == 1
+    assert not rule.resend_due(5.2) and rule.resend_due(5.25) and rule.rejoin_resent == 2
+    rule.couple("u1", True)  # the loop closed again
+    assert not rule.rejoined
+    rule.published(6.0)
+    assert not rule.resend_due(10.0) and rule.resent == 2
+    # a peer that joins while the loop runs (a recorder): the answer comes first, nothing is re-sent
+    rule.joined()
+    rule.couple("u2", True)
+    rule.published(11.0)
+    assert not rule.resend_due(11.5)
+
+
 def test_a_peer_that_leaves_during_the_grace_period_restarts_it() -> None:
     gate = StartGate(wait_for_peers=True, timeout=0.0, grace=0.5)
     assert not gate.check(0.0, Peers(0, 0, 0), 0)[0]

@@ -8,16 +8,16 @@ workspace").
 
 from __future__ import annotations
 
-import shutil
+import os
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from launch import LaunchContext, LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction, RegisterEventHandler
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.conditions import IfCondition
-from launch.event_handlers import OnShutdown
+from launch.logging import launch_config
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
@@ -32,7 +32,6 @@ from contgrasp_ros.launcher.graph import (
     PACKAGE,
     RECORDER,
     compose_groups,
-    default_params_file,
     launch_overrides,
     load_params,
     parameter_file,
@@ -45,8 +44,9 @@ __all__ = ["graph_description"]
 
 def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
     return [
-        DeclareLaunchArgument("params_file", default_value="",
-                              description="ROS 2 parameter file of the scenario (default: the package's config/default.yaml, the paper's)"),
+        DeclareLaunchArgument("params_file", default_value=PathJoinSubstitution([FindPackageShare(PACKAGE), "config", "default.yaml"]),
+                              description="ROS 2 parameter file of the scenario (default: the installed package's "
+                                          "share/contgrasp_ros/config/default.yaml, the paper's)"),
         DeclareLaunchArgument("object", default_value="",
                               description="built-in object NAME[:PARAMS] in metres: circle[:R], ellipse[:a,b], "
                                           "deformed[:R,amplitude,lobes,phase] (default: the parameter file's)"),
@@ -83,13 +83,13 @@ def _number(name: str, text: str) -> float | None:
         raise InvalidParameterError(f"{name}:={text!r} is not a number") from None
 
 
-def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node | RegisterEventHandler]:
-    """The graph's node processes with the launch arguments applied (the launcher's rules:
-    an override file beside the scenario's parameter file, removed when the launch ends)."""
+def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node]:
+    """The graph's node processes with the launch arguments applied (the launcher's rules: an
+    override file after the scenario's parameter file, kept in the launch's log folder)."""
     arg = {name: LaunchConfiguration(name).perform(context) for name in
            ("params_file", "object", "outline", "law", "object_mode", "max_muscle_stress", "lockstep", "duration", "compose",
             "record", "bag", "on_finish")}
-    params_file = Path(arg["params_file"]) if arg["params_file"] else default_params_file()
+    params_file = Path(arg["params_file"])
     params = load_params(params_file)
     record = arg["record"] == "true"
     overrides: dict[str, dict[str, Any]] = {name: {"use_sim_time": True, "on_finish": arg["on_finish"]} for name in nodes}
@@ -111,17 +111,25 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node | Register
 
         overrides[RECORDER] = {**recorder_params({"output": arg["bag"] or default_output()}), "on_finish": arg["on_finish"]}
     compose = compose_groups([",".join(n for n in COMPOSABLE if n in nodes)], nodes) if arg["compose"] == "true" else []
-    folder = Path(tempfile.mkdtemp(prefix="contgrasp_launch_"))
-    override_file = parameter_file(folder / "overrides.yaml", overrides)
-    remove = RegisterEventHandler(OnShutdown(on_shutdown=lambda *_: shutil.rmtree(folder, ignore_errors=True)))
-    return [remove, *(
+    override_file = parameter_file(_override_path(), overrides)
+    return [
         # (sigterm_timeout: a node's clean-up takes seconds on a busy machine, the recorder's
         # finalises the bag; launch's 5 s default then escalated to SIGTERM)
         Node(package=PACKAGE, executable=proc.executable, arguments=list(proc.arguments), output="screen",
              parameters=[str(override_file)] if proc.name == RECORDER else [str(params_file), str(override_file)],
              sigterm_timeout="20")
         for proc in processes(nodes, compose, record=record)
-    )]
+    ]
+
+
+def _override_path() -> Path:
+    """A new file for the launch's overrides in the launch's own log folder (beside its
+    ``launch.log``; ``ROS_LOG_DIR``, by default ``~/.ros/log/<date>-<host>-<pid>/``): a record of
+    what the nodes were given, and no temporary file to remove, since no way out of ``ros2
+    launch`` (SIGTERM skips the shutdown event) could leave one behind."""
+    fd, name = tempfile.mkstemp(prefix="contgrasp_overrides_", suffix=".yaml", dir=launch_config.log_dir)
+    os.close(fd)
+    return Path(name)
 
 
 def graph_description(nodes: Sequence[str], *, lockstep: bool) -> LaunchDescription:

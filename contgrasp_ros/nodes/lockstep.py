@@ -5,7 +5,8 @@ hand (``ros2 run`` per node, in any order) must not lose it to a sensor that has
 or the lock-step loop stalls for a whole couple timeout at step 0 and the run differs from the
 launcher's. :class:`LockStep` is the lock-step rule itself: state k out, wait for the couple
 answering step k; until the loop has closed once (the run's first couple) the awaited state is
-sent again every ``resend`` seconds, for a peer whose reader matched too late to get it; a couple
+sent again every ``resend`` seconds, for a peer whose reader matched too late to get it, and so
+it is after a peer (re)joined mid-run while it stays unanswered; a couple
 that arrives while paused is kept; after the couple timeout the configured fallback is applied
 and the miss counted, once per outage in the log. :class:`Answered` lets the sensor and the
 controller answer a state sent twice with the answer they gave it, and the simulator ignore a
@@ -29,17 +30,23 @@ __all__ = ["Peers", "StartGate", "LockStep", "Answered", "WallClock", "CoupleWai
 # closed (LockStep): far above the loop's first round trip (milliseconds; a re-send whose
 # original was only slow is a duplicate, harmless but recorded), far below the couple timeout.
 RESEND_S = 1.0
+# Wall seconds a state may stay unanswered after a peer of the loop (re)joined mid-run before it
+# goes out again (LockStep.joined; and again as often while unanswered): far above a step's round
+# trip (~2 ms), so a joining recorder or monitor costs no duplicate, and short against the stall.
+REJOIN_RESEND_S = 0.25
 
 
 @dataclass(frozen=True)
 class Peers:
     """What the simulator sees of the closed loop: subscribers of its rod state (the sensor, a
     recorder, a monitor), the contact topic's links (the fewer of its publishers and subscribers
-    in the graph: the sensor and the controller) and publishers of couples (the controller)."""
+    in the graph: the sensor and the controller), publishers of couples (the controller) and of
+    contact states (the sensor)."""
 
     rod_state_subscribers: int
     couple_publishers: int
     contact_links: int = 0
+    contact_publishers: int = 0
 
 
 class StartGate:
@@ -96,8 +103,16 @@ class StartGate:
             self._next_log = now + self.log_period
             limit = f"; publishing anyway after peer_timeout = {self.timeout:g} s" if self.timeout > 0 else ""
             return False, (f"waiting for the closed loop's peers before publishing step 0: {_have(peers, need)} "
-                           f"(start boundary_sensor and grasp_controller; wait_for_peers:=false starts at once{limit})")
+                           f"({_absent(peers, need)}wait_for_peers:=false starts at once{limit})")
         return False, None
+
+
+def _absent(peers: Peers, need: Peers) -> str:
+    """The hint naming the loop's nodes not seen yet ('' when each is there, still matching): the
+    sensor is the one contact publisher, the controller the one couple publisher."""
+    missing = [name for name, absent in (("boundary_sensor", need.contact_links > peers.contact_publishers),
+                                         ("grasp_controller", need.couple_publishers > peers.couple_publishers)) if absent]
+    return f"start {' and '.join(missing)}; " if missing else ""
 
 
 def _have(peers: Peers, need: Peers) -> str:
@@ -120,12 +135,15 @@ class LockStep:
     sensor's reader, but the sensor's reader may match the writer later, and a sample sent
     before that is lost to it (the same for the sensor's contact state on its way to the
     controller, and for the couple on its way back). The run's first couple proves every hop
-    matched both ways; from then on nothing is re-sent (a peer restarted mid-run is covered by
-    the timeout fallback, as before). ``resent`` counts the re-sends of the run.
+    matched both ways; from then on a state is re-sent only after ``joined()``: a peer of the
+    loop (re)joined mid-run (a sensor or controller restarted after a crash), which missed the
+    awaited state; it goes out again once it has been unanswered ``rejoin_resend`` seconds, and
+    as often until a couple answers. ``resent`` counts the re-sends of the run.
     """
 
-    def __init__(self, resend: float = RESEND_S) -> None:
+    def __init__(self, resend: float = RESEND_S, rejoin_resend: float = REJOIN_RESEND_S) -> None:
         self.resend = resend
+        self.rejoin_resend = rejoin_resend
         self.missed = 0  # deadlines missed in this run
         self.outage = 0  # consecutive missed deadlines (the current outage)
         self.reset()
@@ -135,6 +153,8 @@ class LockStep:
         over too)."""
         self.started = False
         self.closed = False  # a couple answered a state of this run
+        self.rejoined = False  # a peer joined since the last couple
+        self.rejoin_resent = 0  # re-sends since then
         self.waiting_since: float | None = None
         self.sent_at: float | None = None  # when the awaited state last went out
         self.pending: Any = None
@@ -147,12 +167,22 @@ class LockStep:
         self.started = True
         self.waiting_since = self.sent_at = now
 
+    def joined(self) -> None:
+        """A peer of the loop matched (a rod-state subscriber, a couple publisher): the awaited
+        state is re-sent when unanswered, until the next couple."""
+        if not self.rejoined:
+            self.rejoined, self.rejoin_resent = True, 0
+
     def resend_due(self, now: float) -> bool:
         """True when the awaited state goes out again (counted in ``resent``)."""
-        if self.closed or self.waiting_since is None or self.sent_at is None or now - self.sent_at < self.resend:
+        period = self.rejoin_resend if self.closed else self.resend
+        if ((self.closed and not self.rejoined) or self.waiting_since is None or self.sent_at is None
+                or now - self.sent_at < period):
             return False
         self.sent_at = now
         self.resent += 1
+        if self.closed:
+            self.rejoin_resent += 1
         return True
 
     def stop(self) -> None:
@@ -163,6 +193,7 @@ class LockStep:
         """A valid couple for the current step: (apply it now or None = kept, length of the outage
         it ends, 0 if none)."""
         self.closed = True
+        self.rejoined = False
         ended, self.outage = self.outage, 0
         if can_step:
             return u, ended

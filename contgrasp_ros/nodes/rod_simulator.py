@@ -12,7 +12,8 @@ after ``peer_timeout`` wall seconds it goes out anyway), so a graph started by h
 mode (default): state k is published and the rod advances only when the couple stamped with
 step k arrives; until the run's first couple the awaited state is published again every
 second (a peer whose reader matched after it went out never got it; a couple equal to the one
-taken, the answer to a repeat, is ignored); after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
+taken, the answer to a repeat, is ignored), and after a peer of the loop joined mid-run (a
+restarted sensor or controller) it goes out again while unanswered; after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
 couple or apply ``zero``) is used, the miss is counted and a warning logged. Free-running mode
 advances every ``control_period`` of wall time with the latest couple, from the run's first
 couple on (the loop closed: a controller's first answer can take a few milliseconds more than
@@ -65,6 +66,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import Header
@@ -193,11 +195,14 @@ class RodSimulator(Node):
         # message objects); a typed couple passed to on_couple directly works too
         self.state_codec, self.couple_codec = Codec(RodState), Codec(CoupleControl)
         self.pub_clock = self.create_publisher(ClockMsg, topics.CLOCK, qos.STREAM)
-        self.pub_state = self.create_publisher(RodState, topics.ROD_STATE, qos.STREAM)
+        # (a peer that matches mid-run may be a restarted sensor or controller: LockStep.joined)
+        self.pub_state = self.create_publisher(RodState, topics.ROD_STATE, qos.STREAM,
+                                               event_callbacks=PublisherEventCallbacks(matched=self.on_matched))
         self.pub_sampled = self.create_publisher(RodState, topics.ROD_STATE_SAMPLED, qos.STREAM)
         self.pub_object = self.create_publisher(ObjectBoundary, topics.OBJECT, qos.LATCHED)
         self.pub_markers = self.create_publisher(MarkerArray, topics.MARKERS, qos.STREAM)
-        self.sub_couple = self.create_subscription(CoupleControl, topics.COUPLE, self.on_couple, qos.STREAM, raw=True)
+        self.sub_couple = self.create_subscription(CoupleControl, topics.COUPLE, self.on_couple, qos.STREAM, raw=True,
+                                                   event_callbacks=SubscriptionEventCallbacks(matched=self.on_matched))
         if self.system.body is not None:
             self.pub_pose = self.create_publisher(PoseStamped, topics.OBJECT_POSE, qos.STREAM)
             self.pub_twist = self.create_publisher(TwistStamped, topics.OBJECT_TWIST, qos.STREAM)
@@ -386,9 +391,10 @@ class RodSimulator(Node):
 
     def _publish_first_observation(self) -> None:
         """The run's first state, once the peers are matched (:class:`~contgrasp_ros.nodes.lockstep.StartGate`)."""
-        contact = min(self.count_publishers(topics.CONTACT), self.count_subscribers(topics.CONTACT))
+        contact_publishers = self.count_publishers(topics.CONTACT)
+        contact = min(contact_publishers, self.count_subscribers(topics.CONTACT))
         subscribers = self.pub_state.get_subscription_count() + self.pub_sampled.get_subscription_count()
-        peers = Peers(subscribers, self.sub_couple.get_publisher_count(), contact)
+        peers = Peers(subscribers, self.sub_couple.get_publisher_count(), contact, contact_publishers)
         go, line = self.gate.check(time.monotonic(), peers, self.get_parameter("min_subscribers").value)
         if line and "anyway" in line:  # (rclpy: one severity per logging call site)
             self.get_logger().warn(line)
@@ -433,11 +439,25 @@ class RodSimulator(Node):
         self.taken.keep(data)
         if self.rule.resent and not self.rule.closed:
             self.get_logger().info(f"the loop closed at step {step} after {self.rule.resent} re-send(s) of its state")
+        elif self.rule.rejoined and self.rule.rejoin_resent:
+            self.get_logger().info(f"the loop closed again at step {step} after {self.rule.rejoin_resent} re-send(s) "
+                                   "of its state to the peer that joined")
         now, ended = self.rule.couple(u, self._can_step())
         if ended:
             self.get_logger().info(f"couples are back at step {step} after {ended} missed deadlines ({self.missed} in total)")
         if now is not None:
             self._advance(now)
+
+    @guarded("graph")
+    def on_matched(self, info: Any) -> None:
+        """A reader of the rod state or a writer of couples matched (or left): one that joins a
+        lock-step loop that has closed may be a sensor or controller restarted mid-run, which
+        missed the awaited state (sent again: :meth:`LockStep.joined`)."""
+        if self.lockstep and info.current_count_change > 0 and self.rule.closed and self.rule.waiting_since is not None:
+            if not self.rule.rejoined:
+                self.get_logger().info(f"a peer joined while step {self.session.k} waits for its couple: publishing it "
+                                       f"again if unanswered for {self.rule.rejoin_resend:g} s, until the loop closes")
+            self.rule.joined()
 
     @guarded("timer")
     def on_tick(self) -> None:
@@ -484,9 +504,10 @@ class RodSimulator(Node):
             self._advance(self.last_couple if fallback == "hold" else np.zeros(self.model.n_elements))
 
     def _resend_if_due(self, now: float) -> None:
-        """Until the loop's first couple, the awaited state again every ``LockStep.resend`` seconds."""
+        """Until the loop's first couple, the awaited state again every ``LockStep.resend``
+        seconds; after a peer joined, when unanswered (``LockStep.rejoin_resend``)."""
         if self.rule.resend_due(now):
-            if self.rule.resent == 1:  # (once per run; the couple that closes the loop says how many)
+            if self.rule.resent == 1 and not self.rule.closed:  # (once per run; the couple that closes the loop says how many)
                 self.get_logger().info(f"step {self.session.k} unanswered after {self.rule.resend:g} s: publishing it "
                                        f"again every {self.rule.resend:g} s until the loop closes (a peer's reader may "
                                        "have matched after it went out)")

@@ -190,6 +190,15 @@ class RunData:
     run_info: dict[str, Any]
     status: dict[str, str]
     recorder: dict[str, Any] | None = None
+    repeated_states: int = 0  # rod states published again (a re-send), each kept once
+
+
+def _repeat(last: Any, msg: Any) -> bool:
+    """Whether a rod or contact state is ``last`` published again: the simulator sends a state
+    the loop waits on again (a peer joined after it went out: docs/ros.md, "Why step 0 is never
+    lost") and the sensor its answer to it; same step, same stamp."""
+    return bool(last.step == msg.step and last.header.stamp.sec == msg.header.stamp.sec
+                and last.header.stamp.nanosec == msg.header.stamp.nanosec)
 
 
 def _stack(rows: list[Any], what: str) -> Array:
@@ -303,11 +312,17 @@ def load_run(path: str | Path) -> RunData:
 
     by_topic: dict[str, list[Any]] = {topics.ROD_STATE: [], topics.CONTACT: [], topics.QUALITY: [], topics.OBJECT: []}
     status: dict[str, str] = {}
+    repeated = 0
     # in the order they were published, not by log time: a simulated-time log time is the header
     # stamp, and a late message stamped t = 0 (unset) is logged at the recorder's clock instead
     for raw, msg in sorted(iter_decoded(rec, [*by_topic, topics.DIAGNOSTICS]), key=lambda rm: rm[0].publish_time_ns):
         if raw.topic != topics.DIAGNOSTICS:
-            by_topic[raw.topic].append(msg)
+            kept = by_topic[raw.topic]
+            if raw.topic in (topics.ROD_STATE, topics.CONTACT) and kept and _repeat(kept[-1], msg):
+                if raw.topic == topics.ROD_STATE:
+                    repeated += 1
+                continue
+            kept.append(msg)
             continue
         for st in msg.status:
             if st.name != SIMULATOR:
@@ -328,6 +343,7 @@ def load_run(path: str | Path) -> RunData:
         run_info=run_info,
         status=status,
         recorder=recorder,
+        repeated_states=repeated,
     )
 
 
@@ -504,6 +520,7 @@ def step_gaps(run: RunData) -> dict[str, Any]:
         "missing_steps": max(int(steps[-1] - steps[0] + 1) - len(np.unique(steps)), 0),
         "max_step_gap": int(d.max()) if len(d) else 0,
         "monotonic": bool(np.all(d > 0)),
+        "repeated_states": run.repeated_states,
     }
 
 
