@@ -404,3 +404,34 @@ def test_a_recording_without_run_parameters_still_replays_the_settle_rule(record
     r = analyze(copy)
     assert r["settled_recomputed"] is True
     assert r["settle_time_recomputed_s"] == pytest.approx(summary["settle_time_s"], rel=0, abs=1e-9)
+
+
+def test_a_recording_made_under_a_namespace_is_analysed_as_its_graph(recording: tuple[Path, dict], tmp_path: Path) -> None:
+    """The fixture's run as a graph under ``/r1`` would have recorded it (its topics and clock under
+    ``/r1``, the simulator's status named ``r1/rod_simulator`` on the global ``/diagnostics``):
+    analysed the same, the namespace found from the topic names."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    bag, _ = recording
+    rec = open_recording(bag)
+    moved = tmp_path / "r1.mcap"
+    out = BagWriter(moved)
+    for m in iter_raw(rec):
+        topic, data = ("/r1" + m.topic if m.topic.startswith(("/contgrasp/", "/clock")) else m.topic), m.data
+        if m.topic == "/diagnostics":
+            msg = deserialize_message(m.data, DiagnosticArray)
+            for st in msg.status:
+                st.name = "r1/" + st.name
+            data = serialize_message(msg)
+        out.add_topic(topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""),
+                      m.channel.metadata.get("topic_type_hash", ""), definition=m.schema.data.decode())
+        out.write(topic, data, m.log_time_ns, m.publish_time_ns, m.sequence)
+    out.records.update({k: v for k, v in rec.metadata_records().items() if k != "rosbag2"})
+    out.close()
+    r, full = analyze(moved), analyze(bag)
+    assert ROD not in {t["name"] for t in r["topics"]} and "/r1" + ROD in {t["name"] for t in r["topics"]}
+    for key in ("simulator_state", "settled", "steps", "missed_deadlines", "final", "final_quality", "max_recompute_error",
+                "recomputed_pairs", "step_gaps"):
+        assert r[key] == full[key], key
+    assert full["simulator_state"] == "finished"

@@ -346,7 +346,7 @@ def test_a_state_sent_again_is_answered_again_and_computed_once(make: Any, monke
         else:
             stale.u[0] += 1e-9
         sim.on_couple(stale)
-    assert sim.drops.counts == {f"{topics.COUPLE}: step mismatch": 2}
+    assert sim.drops.counts == {f"{topics.resolve(topics.COUPLE)}: step mismatch": 2}
     for node in (sensor, controller):
         assert node.drops.total == 0
 

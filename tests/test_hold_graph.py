@@ -96,7 +96,7 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
 
     rec = open_recording(tmp_path / "bag")
     couples = {int(m.step): (len(m.kappa_ref) > 0, bool(m.transition), float(m.hold_gain))
-               for _, m in iter_decoded(rec, [topics.COUPLE])}
+               for _, m in iter_decoded(rec, [topics.resolve(topics.COUPLE)])}
     assert [couples[k][:2] for k in range(obs.k)] == logged.log
     held = [k for k in range(obs.k) if couples[k][0]]
     assert held and held == list(range(held[0], obs.k)) and {couples[k][2] for k in held} == {3000.0}
@@ -104,8 +104,8 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     assert held[0] < complete < PUSH_START / 0.002  # (the hold is complete before the push)
     run = load_run(tmp_path / "bag")
     assert run.rod.object is not None
-    contact = {int(m.step): m for _, m in iter_decoded(rec, [topics.CONTACT])}
-    rods = {int(m.step): m for _, m in iter_decoded(rec, [topics.ROD_STATE])}
+    contact = {int(m.step): m for _, m in iter_decoded(rec, [topics.resolve(topics.CONTACT)])}
+    rods = {int(m.step): m for _, m in iter_decoded(rec, [topics.resolve(topics.ROD_STATE)])}
     for i in (0, complete, obs.k - 1):
         np.testing.assert_array_equal(contact[i].theta, rods[i].theta)
         np.testing.assert_array_equal(contact[i].kappa, rods[i].kappa)

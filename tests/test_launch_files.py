@@ -30,7 +30,7 @@ def test_the_rviz_configuration_shows_the_markers_in_their_frame() -> None:
     manager = cfg["Visualization Manager"]
     assert manager["Global Options"]["Fixed Frame"] == "world"  # the frame of every marker and state
     markers = [d for d in manager["Displays"] if d["Class"] == "rviz_default_plugins/MarkerArray"]
-    assert [d["Topic"]["Value"] for d in markers] == [topics.MARKERS]
+    assert [d["Topic"]["Value"] for d in markers] == [topics.resolve(topics.MARKERS)]
     assert set(markers[0]["Namespaces"]) == {"arm", "object", "contact"}  # contgrasp_ros.plumbing.markers' namespaces
     assert manager["Views"]["Current"]["Class"] == "rviz_default_plugins/TopDownOrtho"  # the grasp's plane
 

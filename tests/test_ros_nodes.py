@@ -99,7 +99,7 @@ def test_boundary_sensor_matches_core_and_survives_bad_messages(graph) -> None: 
     for m in (bad, short, empty):
         rod_pub.publish(m)
     assert spin_until(ex, lambda: sensor.drops.total == 3)
-    assert sensor.drops.counts == {f"{topics.ROD_STATE}: {r}": 1 for r in ("NaN/Inf", "length mismatch", "too few samples")}
+    assert sensor.drops.counts == {f"{topics.resolve(topics.ROD_STATE)}: {r}": 1 for r in ("NaN/Inf", "length mismatch", "too few samples")}
     rod_pub.publish(rod_msg(6, shape, radius, 1.75))  # still working
     assert spin_until(ex, lambda: len(got) == 2)
     assert got[1].step == 6
@@ -146,7 +146,7 @@ def test_grasp_quality_node_matches_core(graph) -> None:  # type: ignore[no-unty
     bad.in_contact = bad.in_contact[:3]
     c_pub.publish(bad)
     assert spin_until(ex, lambda: node.drops.total == 1)
-    assert node.drops.counts == {f"{topics.CONTACT_SAMPLED}: length mismatch": 1}
+    assert node.drops.counts == {f"{topics.resolve(topics.CONTACT_SAMPLED)}: length mismatch": 1}
 
 
 def _paper_model(n: int = 12):  # type: ignore[no-untyped-def]
@@ -192,7 +192,7 @@ def test_grasp_controller_matches_core_and_takes_new_gains(graph) -> None:  # ty
     wrong = sense(shape_from_curvature(np.linspace(0, 0.2, 5), np.zeros(5), BasePose()), obj, 0.01)
     c_pub.publish(contact_to_msg(wrong, Header(), 6))  # 5 nodes for a 12-element rod
     assert spin_until(ex, lambda: node.drops.total == 1)
-    assert node.drops.counts == {f"{topics.CONTACT}: wrong node count": 1}
+    assert node.drops.counts == {f"{topics.resolve(topics.CONTACT)}: wrong node count": 1}
 
 
 def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type: ignore[no-untyped-def]
@@ -240,7 +240,7 @@ def test_rod_simulator_lockstep_timeout_pause_and_reset(graph) -> None:  # type:
     # malformed couple: dropped and counted; then no couple at all: the zero fallback after the timeout
     u_pub.publish(couple_to_msg(model.joint_s[:3], u[:3], states[1].header, 1))
     assert spin_until(ex, lambda: len(states) == 3, timeout=10)
-    assert sim.missed == 1 and sim.drops.counts == {f"{topics.COUPLE}: wrong joints": 1}
+    assert sim.missed == 1 and sim.drops.counts == {f"{topics.resolve(topics.COUPLE)}: wrong joints": 1}
     ref.advance(np.zeros(model.n_elements))
     np.testing.assert_array_equal(states[2].y, ref.observe().x[:, 1])
     assert spin_until(ex, lambda: status and status[-1]["missed_deadlines"] == str(sim.missed))

@@ -149,7 +149,7 @@ def test_wrench_inputs_are_validated_and_refused_for_a_fixed_object(ros_context:
     fixed = sim()
     try:
         fixed.on_wrench(wrench(1.0))
-        assert fixed.drops.counts == {f"{topics.OBJECT_WRENCH}: object is fixed": 1}
+        assert fixed.drops.counts == {f"{topics.resolve(topics.OBJECT_WRENCH)}: object is fixed": 1}
         resp = fixed.on_apply_wrench(ApplyWrench.Request(kind="step", wrench=[1.0, 0.0, 0.0]), ApplyWrench.Response())
         assert not resp.success and "fixed" in resp.message
     finally:
@@ -158,7 +158,7 @@ def test_wrench_inputs_are_validated_and_refused_for_a_fixed_object(ros_context:
     try:
         spring.on_wrench(wrench(float("nan")))
         spring.on_wrench(wrench(1.0, fz=2.0))
-        assert spring.drops.counts == {f"{topics.OBJECT_WRENCH}: NaN/Inf": 1, f"{topics.OBJECT_WRENCH}: out of plane": 1}
+        assert spring.drops.counts == {f"{topics.resolve(topics.OBJECT_WRENCH)}: NaN/Inf": 1, f"{topics.resolve(topics.OBJECT_WRENCH)}: out of plane": 1}
         bad = spring.on_apply_wrench(ApplyWrench.Request(kind="pulse", wrench=[0.0, 1.0, 0.0], duration=-1.0),
                                      ApplyWrench.Response())
         assert not bad.success and "duration" in bad.message
@@ -236,7 +236,7 @@ def test_a_movable_object_with_a_scripted_disturbance_runs_through_the_graph_as_
     np.testing.assert_array_equal(run.rod.object.v[-1], obs.body.v)
     np.testing.assert_array_equal(run.rod.object.wrench, [scenario.disturbance.wrench_at(t) for t in run.rod.t])
     names = {t["name"]: t["count"] for t in run.topics}
-    assert names[topics.OBJECT_POSE] == names[topics.OBJECT_TWIST] == names[topics.ROD_STATE] == obs.k + 1
+    assert names[topics.resolve(topics.OBJECT_POSE)] == names[topics.resolve(topics.OBJECT_TWIST)] == names[topics.resolve(topics.ROD_STATE)] == obs.k + 1
     result = analyze(tmp_path / "bag", csv_dir=tmp_path / "csv")
     assert result["max_recompute_error"] == 0.0  # sensed in the object's frame, as the sensor did
     assert result["object_motion"]["mode"] == mode and result["object_motion"]["final_q"] == obs.body.q.tolist()
@@ -331,7 +331,7 @@ def test_a_push_on_the_wrench_topic_and_a_pulse_from_the_service_are_in_the_reco
     run = load_run(tmp_path / "bag")
     o = run.rod.object
     assert o is not None and np.all(np.diff(run.rod.step) == 1)
-    assert {t["name"]: t["count"] for t in run.topics}.get(topics.OBJECT_WRENCH, 0) > 0  # the push itself
+    assert {t["name"]: t["count"] for t in run.topics}.get(topics.resolve(topics.OBJECT_WRENCH), 0) > 0  # the push itself
     pushed = np.flatnonzero(o.wrench[:, 1] != 0.0)
     first = int(run.rod.step[pushed[0]])
     assert first > 20  # the period after the first push received (published once step 20 was seen)

@@ -49,8 +49,9 @@ from contgrasp_ros.plumbing.runtime import (
 
 __all__ = ["FoxgloveBridge", "SCENE", "STATUS"]
 
-SCENE = "/contgrasp/scene"
-STATUS = "/contgrasp/status"
+SCENE = "contgrasp/scene"
+STATUS = "contgrasp/status"
+"""(Foxglove channels, named like the graph's topics: under the bridge's namespace.)"""
 _ARM = Color(r=0.85, g=0.33, b=0.10, a=1.0)
 _OBJECT = Color(r=0.2, g=0.2, b=0.2, a=1.0)
 _CONTACT = Color(r=0.0, g=0.45, b=0.74, a=1.0)
@@ -83,8 +84,9 @@ class FoxgloveBridge(Node):
         self.object = ObjectTracker(self, self.drops, self.stamps, on_change=self._sample_object)
         self.server = foxglove.start_server(name="contgrasp", host=host, port=port)
         self.port = self.server.port
-        self.scene = SceneUpdateChannel(SCENE)
-        self.json = {name: foxglove.Channel(name, message_encoding="json") for name in
+        ns = self.get_namespace()
+        self.scene = SceneUpdateChannel(topics.resolve(SCENE, ns))
+        self.json = {name: foxglove.Channel(topics.resolve(name, ns), message_encoding="json") for name in
                      (topics.ROD_STATE, topics.CONTACT, topics.QUALITY, STATUS)}
         self.next_scene_t = 0.0
         self.contact: ContactArrays | None = None
@@ -162,7 +164,7 @@ class FoxgloveBridge(Node):
     @guarded(topics.DIAGNOSTICS)
     def on_status(self, msg: DiagnosticArray) -> None:
         for st in msg.status:
-            if st.name == "rod_simulator":
+            if st.name == topics.status_name("rod_simulator", self.get_namespace()):
                 self.json[STATUS].log({kv.key: kv.value for kv in st.values}, log_time=_ns(msg.header))
 
 

@@ -151,12 +151,14 @@ class McapRecorder(Node):
         self.decimate_period = declare(self, "decimate_period", 0.0, "keep one message per this many stamp seconds [s]",
                                        lo=0.0, hi=1e6, read_only=True)
         self._decimate: dict[str, list[Any]] = {}  # topic -> [last kept stamp, held (data, info) or None]
-        self._decimate_wanted = set(decimate) if self.decimate_period > 0 else set()
+        self._decimate_wanted = {self.resolve_topic_name(t) for t in decimate} if self.decimate_period > 0 else set()
         self.decimated = 0
         self._last_seq: dict[str, int | None] = {}
         self._single_publisher: dict[str, bool] = {}
         self.lost_in_transport: dict[str, int] = {}
-        self.topics = [t for t in self.topics if t]
+        self.topics = [self.resolve_topic_name(t) for t in self.topics if t]
+        ns = self.get_namespace()
+        self.namespace_prefix = "" if ns == "/" else ns + "/"  # (namespaced: only its graph's topics)
         try:
             self.regex = re.compile(regex) if regex else None
             self.exclude = re.compile(exclude) if exclude else None
@@ -199,6 +201,10 @@ class McapRecorder(Node):
 
     # ------------------------------------------------------------------ topics
     def selected(self, topic: str) -> bool:
+        """Record ``topic``: in the recorder's namespace or global (another graph's are not), not
+        excluded, and chosen by ``topics``/``regex`` when given."""
+        if not topic.startswith(self.namespace_prefix) and topic not in topics.GLOBAL:
+            return False
         if self.exclude is not None and self.exclude.fullmatch(topic):
             return False
         if not self.topics and self.regex is None:
@@ -343,7 +349,7 @@ class McapRecorder(Node):
         unwritten = c["received"] - c["written"] - c["decimated"] - c["held"]
         ok = unwritten == 0 and c["lost_in_transport"] == 0 and self.drops.total == 0
         level = DiagnosticStatus.OK if ok else DiagnosticStatus.WARN
-        st = DiagnosticStatus(level=level, name="mcap_recorder", message="recording", hardware_id="contgrasp",
+        st = DiagnosticStatus(level=level, name=topics.status_name(self.get_name(), self.get_namespace()), message="recording", hardware_id="contgrasp",
                               values=[KeyValue(key=k, value=v) for k, v in values.items()])
         self._pub_diag.publish(DiagnosticArray(status=[st]))
 

@@ -212,8 +212,13 @@ class DropCounter:
     def total(self) -> int:
         return sum(self.counts.values())
 
+    def _absolute(self, where: str) -> str:
+        """``where`` as counted and logged: a graph topic (``contgrasp/...``) by its absolute name."""
+        return topics.resolve(where, self._node.get_namespace()) if where.startswith("contgrasp/") else where
+
     def drop(self, topic: str, reason: str, detail: str = "") -> None:
         """Count a dropped message on ``topic`` under the short ``reason``; log ``detail`` (throttled)."""
+        topic = self._absolute(topic)
         key = f"{topic}: {reason}"
         self._count(key)
         self._log(key, f"dropped message on {topic}: {detail or reason}")
@@ -225,6 +230,7 @@ class DropCounter:
 
     def internal_error(self, where: str, exc: BaseException) -> None:
         """Count an unexpected exception of a callback; log it, with the traceback the first time."""
+        where = self._absolute(where)
         key = f"{where}: internal error: {type(exc).__name__}"
         first = key not in self.counts
         self._count(key)
@@ -417,7 +423,7 @@ class Diagnostics:
         """The current DiagnosticStatus (of ``values`` when given: a :meth:`_values` result)."""
         level, message, kv = values if values is not None else self._values()
         kv = {**kv, **self._drops.key_values()}
-        return DiagnosticStatus(level=level, name=self._node.get_name(), message=message, hardware_id="contgrasp",
+        return DiagnosticStatus(level=level, name=topics.status_name(self._node.get_name(), self._node.get_namespace()), message=message, hardware_id="contgrasp",
                                 values=[KeyValue(key=k, value=v) for k, v in kv.items()])
 
     def publish(self, stamp: Time | None = None, values: Status | None = None) -> None:
@@ -485,6 +491,7 @@ class FinishPolicy:
         declare(node, "finish_ack_timeout", 10.0, "on_finish exit: wall seconds to wait at most for the subscribers to "
                 "acknowledge the node's last messages before it exits", lo=0.0, hi=3600.0)
         node.stop_requested = False  # type: ignore[attr-defined]
+        self._simulator = topics.status_name("rod_simulator", node.get_namespace())  # (its status name)
         if watch_simulator:
             from contgrasp_ros.plumbing import qos
 
@@ -492,7 +499,7 @@ class FinishPolicy:
 
     def _on_status(self, msg: DiagnosticArray) -> None:
         for st in msg.status:
-            if st.name != "rod_simulator":
+            if st.name != self._simulator:
                 continue
             values = {kv.key: kv.value for kv in st.values}
             state = values.get("state")

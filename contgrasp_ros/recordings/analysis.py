@@ -298,11 +298,14 @@ def load_run(path: str | Path) -> RunData:
     meta = info(rec)
     recorded = [{"name": t["name"], "type": t["type"], "count": t["count"]} for t in meta["topics"]]
     counts = {t["name"]: t["count"] for t in recorded}
-    if not counts.get(topics.ROD_STATE):
+    ns = topics.recorded_namespace(counts)  # (a graph run under a namespace: its topics)
+    name = {t: topics.resolve(t, ns) for t in (topics.ROD_STATE, topics.CONTACT, topics.QUALITY, topics.OBJECT)}
+    if not counts.get(name[topics.ROD_STATE]):
         have = ", ".join(f"{n} ({c})" for n, c in counts.items()) or "none"
-        raise BagInputError(f"{path}: no {topics.ROD_STATE} messages to analyse (recorded topics: {have})")
-    if not counts.get(topics.OBJECT):
-        raise BagInputError(f"{path}: no {topics.OBJECT} message (the object boundary is needed to recompute contact and quality)")
+        raise BagInputError(f"{path}: no {name[topics.ROD_STATE]} messages to analyse (recorded topics: {have})")
+    if not counts.get(name[topics.OBJECT]):
+        raise BagInputError(f"{path}: no {name[topics.OBJECT]} message (the object boundary is needed to recompute contact "
+                            "and quality)")
     records = rec.metadata_records()
     run_info = _json_values(records.get(RUN_RECORD, {}))
     params = run_info.pop("params", None)
@@ -315,17 +318,20 @@ def load_run(path: str | Path) -> RunData:
     repeated = 0
     # in the order they were published, not by log time: a simulated-time log time is the header
     # stamp, and a late message stamped t = 0 (unset) is logged at the recorder's clock instead
-    for raw, msg in sorted(iter_decoded(rec, [*by_topic, topics.DIAGNOSTICS]), key=lambda rm: rm[0].publish_time_ns):
+    relative = {v: k for k, v in name.items()}
+    simulator = topics.status_name(SIMULATOR, ns)
+    for raw, msg in sorted(iter_decoded(rec, [*relative, topics.DIAGNOSTICS]), key=lambda rm: rm[0].publish_time_ns):
         if raw.topic != topics.DIAGNOSTICS:
-            kept = by_topic[raw.topic]
-            if raw.topic in (topics.ROD_STATE, topics.CONTACT) and kept and _repeat(kept[-1], msg):
-                if raw.topic == topics.ROD_STATE:
+            topic = relative[raw.topic]
+            kept = by_topic[topic]
+            if topic in (topics.ROD_STATE, topics.CONTACT) and kept and _repeat(kept[-1], msg):
+                if topic == topics.ROD_STATE:
                     repeated += 1
                 continue
             kept.append(msg)
             continue
         for st in msg.status:
-            if st.name != SIMULATOR:
+            if st.name != simulator:
                 continue
             status = {kv.key: kv.value for kv in st.values}
     try:
