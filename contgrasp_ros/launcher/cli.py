@@ -19,6 +19,7 @@ import argparse
 import json
 import os
 import random
+import re
 import sys
 import tempfile
 import traceback
@@ -39,6 +40,7 @@ from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
 from contgrasp_ros.launcher.events import EventWriter, open_events
 from contgrasp_ros.launcher.graph import compose_groups, default_params_file, launch_overrides, load_params, parameter_file
+from contgrasp_ros.plumbing import topics
 
 
 __all__ = ["main", "default_params_file", "load_params"]
@@ -75,6 +77,13 @@ def _port(text: str) -> int:
     return port
 
 
+def _namespace(text: str) -> str:
+    """``--namespace NAME``: a ROS namespace (``r1``, ``/lab/r1``; ``/``, the default, is the root), made absolute."""
+    if not re.fullmatch(r"/?([A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*)?", text):
+        raise argparse.ArgumentTypeError(f"not a ROS namespace: {text!r} (letters, digits and _, parts separated by /)")
+    return "/" + text.lstrip("/")
+
+
 def _compose_groups(values: list[str], in_process: bool) -> list[tuple[str, ...]]:
     """The ``--compose`` groups (:func:`contgrasp_ros.launcher.graph.compose_groups`), separate processes only."""
     if values and in_process:
@@ -91,6 +100,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--domain-id", type=int, default=None,
                    help="ROS_DOMAIN_ID for the graph (default: $ROS_DOMAIN_ID when set, else a random id 1..101); "
                         "printed on stderr at start")
+    p.add_argument("--namespace", type=_namespace, default="/", metavar="NAME",
+                   help="run the graph under this ROS namespace (its topics /NAME/contgrasp/..., its clock /NAME/clock), "
+                        "e.g. two arms in one domain (default: none)")
     add_object_arguments(p, ROD_SCALE)
     p.add_argument("--law", choices=LAWS, default=None,
                    help="the controller's law: paper (eq. (19)) or hold (docs/holding.md) (default: the parameter file's)")
@@ -254,11 +266,13 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
     # (after the checks of the command line: bad usage stays one line)
     # (ros2cli is part of a ROS 2 install, not of this venv: say so instead of assuming it)
     print(f"[launcher] ROS_DOMAIN_ID={domain} (another terminal joins the graph with ROS_DOMAIN_ID={domain} "
-          "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; with a ROS 2 install: ros2 topic echo /contgrasp/quality)",
+          "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; with a ROS 2 install: ros2 topic echo "
+          f"{topics.resolve(topics.QUALITY, args.namespace)})",
           file=sys.stderr, flush=True)
     summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
                               respawn=args.respawn, keep_history=args.plot is not None, events=events,
-                              foxglove=args.foxglove, allow_unrecorded=args.allow_unrecorded, compose=compose)
+                              foxglove=args.foxglove, allow_unrecorded=args.allow_unrecorded, compose=compose,
+                              namespace=args.namespace)
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
     if args.plot is not None and summary.get("history"):

@@ -213,7 +213,10 @@ def recorder_params(record: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def parameter_file(path: Path, params: dict[str, dict[str, Any]]) -> Path:
-    """Write ``params`` (per node) to ``path`` as a ROS 2 parameter file; returns ``path``."""
-    path.write_text(yaml.safe_dump({node: {"ros__parameters": values} for node, values in params.items()}))
+def parameter_file(path: Path, params: dict[str, dict[str, Any]], namespace: str = "/") -> Path:
+    """Write ``params`` (per node) to ``path`` as a ROS 2 parameter file for nodes in ``namespace``
+    (a section is keyed by the node's name at the root, else by its fully qualified name: a plain
+    ``node:`` key names ``/node`` only); returns ``path``."""
+    path.write_text(yaml.safe_dump({topics.resolve(node, namespace) if namespace.strip("/") else node: {"ros__parameters": values}
+                                    for node, values in params.items()}))
     return path

@@ -25,7 +25,6 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import Executor, ExternalShutdownException
 from rclpy.node import Node
@@ -42,7 +41,7 @@ from contgrasp_ros.launcher.discovery import discovery_profile_set, use_discover
 from contgrasp_ros.launcher.events import EventSink
 from contgrasp_ros.launcher.graph import LOOP as NODES
 from contgrasp_ros.launcher.graph import processes as graph_processes
-from contgrasp_ros.launcher.graph import recorder_params
+from contgrasp_ros.launcher.graph import parameter_file, recorder_params
 from contgrasp_ros.plumbing.runtime import DropCounter, GuardedSpin, make_executor
 from contgrasp_ros.launcher.supervision import (
     RECORDER,
@@ -89,8 +88,9 @@ class Monitor(Node):
         self.create_subscription(ContactState, topics.CONTACT_SAMPLED, self._on_contact, qos.STREAM)
         self.create_subscription(GraspQuality, topics.QUALITY, self._on_quality, qos.STREAM)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diag, qos.STREAM)
-        self.pause = self.create_client(SetBool, "/rod_simulator/pause")
-        self.sim_params = AsyncParameterClient(self, "/rod_simulator")
+        self.pause = self.create_client(SetBool, "rod_simulator/pause")
+        self.sim_params = AsyncParameterClient(self, "rod_simulator")
+        self._simulator = topics.status_name("rod_simulator", self.get_namespace())
         self.drops = DropCounter(self)  # (only rclpy take failures: see GuardedSpin)
 
     def _on_rod(self, msg: RodState) -> None:
@@ -123,18 +123,19 @@ class Monitor(Node):
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for st in msg.status:
-            if st.name == "rod_simulator":
+            if st.name == self._simulator:
                 state = self.status.get("state")
                 self.status = {kv.key: kv.value for kv in st.values}
                 self.state_changed = self.state_changed or self.status.get("state") != state
 
     def connected(self) -> bool:
-        """Every node is up and each stream has its publisher and subscribers matched."""
-        names = set(self.get_node_names())
+        """Every node of the monitor's namespace is up and each stream has its publisher and subscribers matched."""
+        ns = self.get_namespace()
+        names = {name for name, node_ns in self.get_node_names_and_namespaces() if node_ns == ns}
         if not set(NODES) <= names or not self.pause.service_is_ready():
             return False
         if self.recording and not all(
-            any(i.node_name == RECORDER for i in self.get_subscriptions_info_by_topic(t)) for t in self.recorded_streams
+            any(i.node_name == RECORDER and i.node_namespace == ns for i in self.get_subscriptions_info_by_topic(t)) for t in self.recorded_streams
         ):
             return False
         return (
@@ -287,6 +288,7 @@ def run_graph(
     foxglove: int | None = None,
     allow_unrecorded: bool = False,
     compose: Sequence[tuple[str, ...]] = (),
+    namespace: str = "/",
 ) -> tuple[dict[str, Any], int]:
     """Run the graph once (recording it when ``record`` gives an ``output``, restarting crashed
     node processes up to ``respawn`` times each); returns (summary, exit code). SIGINT/SIGTERM
@@ -296,10 +298,13 @@ def run_graph(
     port (:mod:`contgrasp_ros.nodes.foxglove_bridge`, in the launcher's process; 0 = any). A
     recording lost mid-run (the recorder died) fails the run (exit 1) unless ``allow_unrecorded``.
     ``compose``: groups of nodes each hosted by one process (:mod:`contgrasp_ros.nodes.container`, named
-    ``a+b``), the simulator not among them; the other nodes run one per process."""
+    ``a+b``), the simulator not among them; the other nodes run one per process. ``namespace``: the
+    graph's, given to every node process and to this process's nodes (the monitor's, the in-process
+    nodes') with the namespace's own clock (:func:`contgrasp_ros.plumbing.topics.namespace_arguments`)."""
     wall0 = time.perf_counter()
     sim_params = {**params["rod_simulator"], "start_paused": True}
-    rclpy.init(args=[])
+    moved = topics.namespace_arguments(namespace)
+    rclpy.init(args=["--ros-args", *moved] if moved else [])  # (global rules: every node of this process)
     executor = make_executor()
     nodes: list[Node] = []
     group = None
@@ -350,28 +355,29 @@ def run_graph(
             group = ProcessGroup(env, events=events)
             # Launcher overrides go in a second parameter file: a node's own section in the user's
             # file would beat a plain ``-p name:=value`` (rcl gives node-specific entries priority).
-            overrides: dict[str, Any] = {name: {"ros__parameters": dict(SUPERVISED)} for name in NODES}
+            # It holds each node's whole scenario too: the user's ``node:`` sections name the node
+            # at the root namespace only (parameter_file keys them for the graph's namespace).
+            overrides: dict[str, dict[str, Any]] = {name: {**params[name], **SUPERVISED} for name in NODES}
             # the sensor, the launcher's monitor and the recorder must hear the first state, also
             # from a restarted simulator; once the recorder has died it no longer counts
             # (``_drive`` rewrites this file before restarting the simulator)
-            overrides["rod_simulator"]["ros__parameters"].update(
+            overrides["rod_simulator"].update(
                 start_paused=True, duration=float(sim_params["duration"]),
                 min_subscribers=UNRECORDED_MIN_SUBSCRIBERS + (record is not None))
             if record is not None:
-                overrides[RECORDER] = {"ros__parameters": {**recorder_params(record), "on_finish": "supervised"}}
+                overrides[RECORDER] = {**recorder_params(record), "on_finish": "supervised"}
             tmp = Path(tempfile.mkdtemp(prefix="contgrasp_launch_"))
-            override_file = tmp / "overrides.yaml"
-            override_file.write_text(yaml.safe_dump(overrides))
+            override_file = parameter_file(tmp / "overrides.yaml", overrides, namespace)
 
             def unrecorded() -> None:  # for a restarted simulator, and the running one (_drive)
-                overrides["rod_simulator"]["ros__parameters"]["min_subscribers"] = UNRECORDED_MIN_SUBSCRIBERS
-                override_file.write_text(yaml.safe_dump(overrides))
+                overrides["rod_simulator"]["min_subscribers"] = UNRECORDED_MIN_SUBSCRIBERS
+                parameter_file(override_file, overrides, namespace)
 
             on_recorder_lost = unrecorded if record is not None else None
             for proc in graph_processes(NODES, compose, record=record is not None):
                 # (the recorder reads only the overrides: its own section holds all it needs)
                 files = [override_file] if proc.name == RECORDER else [params_file, override_file]
-                ros_args = ["--ros-args", *(a for f in files for a in ("--params-file", str(f)))]
+                ros_args = ["--ros-args", *(a for f in files for a in ("--params-file", str(f))), *moved]
                 if proc.name != RECORDER:
                     processes.append(proc.name)
                 group.start(proc.name, [sys.executable, "-m", proc.module, *proc.arguments, *ros_args])

@@ -15,11 +15,11 @@ from pathlib import Path
 from typing import Any
 
 from launch import LaunchContext, LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import DeclareLaunchArgument, GroupAction, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.logging import launch_config
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-from launch_ros.actions import Node
+from launch_ros.actions import Node, PushRosNamespace, SetRemap
 from launch_ros.substitutions import FindPackageShare
 
 from contgrasp_core.control.hold_law import LAWS
@@ -38,6 +38,7 @@ from contgrasp_ros.launcher.graph import (
     processes,
     recorder_params,
 )
+from contgrasp_ros.plumbing import topics
 
 __all__ = ["graph_description"]
 
@@ -68,6 +69,9 @@ def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
         DeclareLaunchArgument("bag", default_value="", description="record: the bag folder (default bags/run_<date>_<time>)"),
         DeclareLaunchArgument("on_finish", default_value="idle", choices=["idle", "exit"],
                               description="when the run is over: every node stays up (idle) or exits (exit), ending the launch"),
+        DeclareLaunchArgument("namespace", default_value="",
+                              description="run the graph under this ROS namespace, with its own clock <namespace>/clock "
+                                          "(e.g. two arms in one domain; default: none)"),
         DeclareLaunchArgument("rviz", default_value="false", choices=["true", "false"],
                               description="open RViz with the package's rviz/contgrasp.rviz"),
     ]
@@ -83,16 +87,20 @@ def _number(name: str, text: str) -> float | None:
         raise InvalidParameterError(f"{name}:={text!r} is not a number") from None
 
 
-def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node]:
+def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[GroupAction | Node]:
     """The graph's node processes with the launch arguments applied (the launcher's rules: an
-    override file after the scenario's parameter file, kept in the launch's log folder)."""
+    override file after the scenario's parameter file, kept in the launch's log folder), in a
+    group under ``namespace`` when given (``PushRosNamespace``, and ``/clock`` remapped to the
+    namespace's clock on every node of the group)."""
     arg = {name: LaunchConfiguration(name).perform(context) for name in
            ("params_file", "object", "outline", "law", "object_mode", "max_muscle_stress", "lockstep", "duration", "compose",
-            "record", "bag", "on_finish")}
+            "record", "bag", "on_finish", "namespace")}
     params_file = Path(arg["params_file"])
     params = load_params(params_file)
     record = arg["record"] == "true"
-    overrides: dict[str, dict[str, Any]] = {name: {"use_sim_time": True, "on_finish": arg["on_finish"]} for name in nodes}
+    # (each node's whole scenario too: the parameter file's ``node:`` sections name the node at the root only)
+    overrides: dict[str, dict[str, Any]] = {name: {**params[name], "use_sim_time": True, "on_finish": arg["on_finish"]}
+                                            for name in nodes}
     obj = ObjectSpec.from_cli(arg["object"] or None, arg["outline"] or None, ROD_SCALE) if arg["object"] or arg["outline"] else None
     for name, values in launch_overrides(params, obj, arg["law"] or None, arg["object_mode"] or None,
                                          _number("max_muscle_stress", arg["max_muscle_stress"])).items():
@@ -111,8 +119,8 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node]:
 
         overrides[RECORDER] = {**recorder_params({"output": arg["bag"] or default_output()}), "on_finish": arg["on_finish"]}
     compose = compose_groups([",".join(n for n in COMPOSABLE if n in nodes)], nodes) if arg["compose"] == "true" else []
-    override_file = parameter_file(_override_path(), overrides)
-    return [
+    override_file = parameter_file(_override_path(), overrides, arg["namespace"])
+    graph: list[GroupAction | Node] = [
         # (sigterm_timeout: a node's clean-up takes seconds on a busy machine, the recorder's
         # finalises the bag; launch's 5 s default then escalated to SIGTERM)
         Node(package=PACKAGE, executable=proc.executable, arguments=list(proc.arguments), output="screen",
@@ -120,6 +128,9 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[Node]:
              sigterm_timeout="20")
         for proc in processes(nodes, compose, record=record)
     ]
+    if not arg["namespace"].strip("/"):
+        return graph
+    return [GroupAction([PushRosNamespace(arg["namespace"]), SetRemap(topics.CLOCK, topics.namespace_clock(arg["namespace"])), *graph])]
 
 
 def _override_path() -> Path:
