@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -137,7 +137,8 @@ class Capacity:
 class HoldResult:
     """A grasp's measured holding (module docstring): ``held`` whether the released object stayed
     (``release_reason`` why not, '' if it did; then ``stiffness`` and ``stiffness_eigenvalues``
-    are None and every capacity is 0)."""
+    are None and every capacity is 0); ``grasp`` the grasp's validity and the muscles' effort
+    (:meth:`~contgrasp_core.rod.validity.RunHealth.validity` and ``effort``)."""
 
     stiffness: Array | None
     support: Array
@@ -154,6 +155,7 @@ class HoldResult:
     release_reason: str = ""
     pressure_max: float = float("nan")
     friction_bound: tuple[float, ...] = ()
+    grasp: dict[str, Any] = field(default_factory=dict)
 
     @property
     def capacity_min(self) -> float:
@@ -180,6 +182,7 @@ class HoldResult:
             "scale_m": self.scale,
             "released_displacement": self.released_displacement.tolist(),
             "settle_time_s": self.settle_time,
+            **self.grasp,
         }
 
 
@@ -396,6 +399,7 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
     p_max, bound = friction_bound(scenario.rod, exp.boundary, exp.grasped.state.theta, settings.mu,
                                   wrench_directions(settings.directions), scenario.reference, exp.scale)
     bounds = tuple(float(b) for b in bound)
+    health = {"validity": exp.grasped.health.validity(), **exp.grasped.health.effort()}
     if exp.release_reason:
         return HoldResult(stiffness=None, support=np.diag(exp.dynamics.stiffness), stiffness_eigenvalues=None,
                           capacity=[Capacity(direction=tuple(float(x) for x in d),  # type: ignore[arg-type]
@@ -404,7 +408,7 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
                                     for d in wrench_directions(settings.directions)],
                           Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, force_weighted=forced, scale=exp.scale,
                           released_displacement=q0, settle_time=exp.grasped.settle_time, held=False,
-                          release_reason=exp.release_reason, pressure_max=p_max, friction_bound=bounds)
+                          release_reason=exp.release_reason, pressure_max=p_max, friction_bound=bounds, grasp=health)
     say("stiffness")
     stiffness, _ = exp.stiffness()
     d = np.diag([1.0, 1.0, 1.0 / exp.scale])
@@ -418,4 +422,4 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
                       capacity=capacity, Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, force_weighted=forced,
                       scale=exp.scale,
                       released_displacement=q0, settle_time=exp.grasped.settle_time,
-                      pressure_max=p_max, friction_bound=bounds)
+                      pressure_max=p_max, friction_bound=bounds, grasp=health)

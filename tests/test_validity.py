@@ -72,3 +72,12 @@ def test_a_negative_muscle_stress_is_refused_in_one_line() -> None:
     for cmd in (["simulate"], ["hold"]):
         proc = subprocess.run([*CLI, *cmd, "--max-muscle-stress", "-1"], capture_output=True, text=True, timeout=120)
         assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "max_muscle_stress" in proc.stderr
+
+
+def test_hold_reports_the_grasp_s_effort_and_validity() -> None:
+    proc = subprocess.run([*CLI, "hold", "--directions", "1", "--ramp-time", "0.3", "--max-muscle-stress", "50000", "--json"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["validity"]["valid"] is True and 0 < out["peak_couple_ratio"] <= 1.0
+    assert out["peak_couple"] == pytest.approx(2.0 / 3.0 * 50000 * 0.01**3) and out["peak_couple_arclength"] == 0.0
