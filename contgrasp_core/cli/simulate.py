@@ -38,7 +38,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
                               description=__doc__.splitlines()[0], parents=parents or [])
     add_object_arguments(p, ROD_SCALE)
     p.add_argument("--duration", type=float, default=None,
-                   help=f"max simulated time, s (stops earlier when settled; default: the scenario's, {PAPER.loop.duration} s)")
+                   help="max simulated time, s (a fixed object: stops earlier when settled; a movable one is watched "
+                   f"for the whole duration, settled if quiet at the end; default: the scenario's, {PAPER.loop.duration} s)")
     p.add_argument("--control-period", type=float, default=None,
                    help="sample-and-hold period of the feedback, s (default: continuous implicit feedback)")
     p.add_argument("--hold", choices=HOLDS, default="zero-order",

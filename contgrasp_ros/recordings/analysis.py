@@ -16,7 +16,7 @@ and :func:`write_plots` export the run.
 Recordings may be decimated (the recorder keeps rod state/contact/couple only every so many
 seconds of sim time, plus the last message of each topic): messages are paired by their
 ``step``, never by position, and the settle time is recomputed (with the simulator's
-:class:`~contgrasp_core.rod.session.SettleDetector`) only when the rod states are complete.
+:class:`~contgrasp_core.rod.closed_loop.SettleDetector`) only when the rod states are complete.
 
 Nothing here imports rclpy or generated message packages.
 """
@@ -37,7 +37,7 @@ from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError, InvalidParameterError, RunFailure, WriteError, output_error
 from contgrasp_core.objects import OUTLINE, ROD_SCALE, SHAPES, ObjectSpec, outline_text
-from contgrasp_core.rod.session import SettleDetector
+from contgrasp_core.rod.closed_loop import SettleDetector
 from contgrasp_ros.plumbing import topics
 from contgrasp_ros.bag import BagInputError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
