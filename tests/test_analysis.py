@@ -284,18 +284,22 @@ def test_contact_stats() -> None:
 
 
 def test_summary_builder_reads_the_simulator_status() -> None:
-    """One builder for the launcher and analyze: the simulator's /diagnostics values parsed,
-    missing or garbled ones None/0, the JSON keys the field names."""
+    """One builder for the launcher and analyze: the simulator's and the controller's /diagnostics
+    values parsed, missing or garbled ones None/0, a movable object's motion as simulate's keys,
+    the JSON keys the field names."""
     status = {"state": "finished", "settled": "true", "settle_time_s": "1.5", "sim_time_s": "2.0", "step": "1000",
               "missed_deadlines": "3", "max_penetration": "nan?"}
     final = FinalState.of(1000, 2.0, np.array([0.0, 0.1]), [0.0, 0.1], (0.0, 0.0), np.zeros(2))
     s = build_summary(status, final=final, final_quality=FinalQuality.of(np.float64(1.0), 2.0, 0.5, np.bool_(True), 0.1, np.int64(950)),
-                      contact=contact_stats(None), wall_time_s=4.0)
+                      contact=contact_stats(None), controller={"law": "hold", "law_phase": "close"},
+                      object_q=np.array([1e-3, -2e-3, 0.01]), object_v=(0.0, 0.5, -1.0), wall_time_s=4.0)
     d = s.to_dict()
     assert d["simulator_state"] == "finished" and d["settled"] is True and d["settle_time_s"] == 1.5
     assert d["steps"] == 1000 and d["missed_deadlines"] == 3 and d["max_penetration"] is None
-    assert d["final"] == {"step": 1000, "t": 2.0, "s": [0.0, 0.1], "x": [0.0, 0.1], "y": [0.0, 0.0], "theta": [0.0, 0.0],
-                          "object_q": None, "object_v": None}  # (a fixed object)
+    assert d["final"] == {"step": 1000, "t": 2.0, "s": [0.0, 0.1], "x": [0.0, 0.1], "y": [0.0, 0.0], "theta": [0.0, 0.0]}
+    assert d["law"] == "hold" and d["law_phase"] == "close"
+    assert d["object_displacement"] == {"x": 1e-3, "y": -2e-3, "angle": 0.01}
+    assert d["object_velocity"] == {"x": 0.0, "y": 0.5, "angle": -1.0}
     assert d["final_quality"] == {"Q1": 1.0, "Q2": 2.0, "Q3": 0.5, "valid": True, "contact_length": 0.1, "step": 950}
     assert d["wall_time_s"] == 4.0 and d["loop_wall_time_s"] is None and d["contact_nodes"] is None
     assert list(d) == [f.name for f in fields(RunSummary)]
@@ -303,6 +307,11 @@ def test_summary_builder_reads_the_simulator_status() -> None:
     empty = build_summary({}, final=None, final_quality=None, contact=ContactStats()).to_dict()
     assert empty["simulator_state"] == "unknown" and empty["settled"] is False and empty["steps"] == 0
     assert empty["final"] is None and empty["sim_time_s"] is None
+    assert empty["law"] is None and empty["law_phase"] is None  # (no controller status)
+    assert empty["object_displacement"] is None and empty["object_velocity"] is None  # (a fixed object)
+    paper = build_summary({}, final=None, final_quality=None, contact=ContactStats(), controller={"law": "paper", "law_phase": ""},
+                          object_q=[], object_v=[]).to_dict()
+    assert paper["law"] == "paper" and paper["law_phase"] is None and paper["object_displacement"] is None
 
 
 def test_an_interrupted_runs_steps_are_its_last_states() -> None:

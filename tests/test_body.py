@@ -230,7 +230,7 @@ def test_simulate_object_mode_reports_the_object_and_rejects_bad_input() -> None
     cmd = [sys.executable, "-m", "contgrasp_core.cli", "simulate", "--nodes", "21", "--duration", "1.2", "--json"]
     fixed = json.loads(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)
     free = json.loads(subprocess.run(cmd + ["--object-mode", "free"], capture_output=True, text=True, check=True).stdout)
-    assert fixed["object_mode"] == "fixed" and "object_displacement" not in fixed
+    assert fixed["object_mode"] == "fixed" and fixed["object_displacement"] is None and fixed["object_velocity"] is None
     assert free["object_mode"] == "free" and np.hypot(free["object_displacement"]["x"], free["object_displacement"]["y"]) > 1e-5
     for bad in (["--object-mode", "free", "--object-mass", "-1"], ["--object-mode", "spring", "--object-stiffness", "1", "2"],
                 ["--object-mode", "spring", "--object-damping", "1", "nan", "1"], ["--object-stiffness", "1", "1", "1"]):

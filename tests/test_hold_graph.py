@@ -18,6 +18,7 @@ import pytest
 import yaml
 
 from contgrasp_core.control.hold_law import HoldController, ShapeHold
+from contgrasp_core.rod.body import motion_summary
 from contgrasp_core.scenario import Scenario
 
 pytest.importorskip("contgrasp_msgs.msg")
@@ -92,7 +93,8 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     assert law.depth_offset != 0.0  # (the regulation acted)
     np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
     np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
-    assert summary["final"]["object_q"] == obs.body.q.tolist() and summary["final"]["object_v"] == obs.body.v.tolist()
+    assert {k: summary[k] for k in ("object_displacement", "object_velocity")} == motion_summary(obs.body.q, obs.body.v)
+    assert summary["law"] == "hold" and summary["law_phase"] == law.phase == "hold"  # (the controller's status)
 
     rec = open_recording(tmp_path / "bag")
     couples = {int(m.step): (len(m.kappa_ref) > 0, bool(m.transition), float(m.hold_gain))
@@ -198,10 +200,43 @@ def test_bounded_muscles_through_the_graph_equal_the_core_loop_bit_for_bit() -> 
     assert obs.body is not None and summary["steps"] == obs.k
     np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
     np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
-    assert summary["final"]["object_q"] == obs.body.q.tolist()
+    assert summary["object_displacement"] == motion_summary(obs.body.q, obs.body.v)["object_displacement"]
     effort = session.health.effort()
     assert summary["peak_couple"] == effort["peak_couple"] and summary["peak_couple_arclength"] == effort["peak_couple_arclength"]
     assert summary["peak_couple_ratio"] == effort["peak_couple_ratio"] and 0.99 < effort["peak_couple_ratio"] <= 1.0
     assert summary["validity"] == json.loads(json.dumps(session.health.validity()))
     bound = scenario.rod.muscle_bound
     assert bound is not None and effort["peak_couple"] <= bound[0]
+
+
+SHARED_FACTS = ("law", "law_phase", "object_displacement", "object_velocity", "settled", "settle_time_s", "sim_time_s",
+                "steps", "validity", "peak_couple", "peak_couple_arclength", "peak_couple_sim_time_s", "peak_couple_ratio",
+                "mean_abs_rho_ratio_minus_1_contact", "max_abs_rho_ratio_minus_1_contact",
+                "mean_abs_alpha_minus_half_pi_contact", "max_abs_alpha_minus_half_pi_contact", "contact_nodes",
+                "contact_length")
+"""The facts ``contgrasp simulate --json`` and the launcher's summary (and ``analyze``) both report."""
+
+
+def test_simulate_and_the_launcher_give_the_same_facts_the_same_keys() -> None:
+    """``contgrasp simulate`` and ``contgrasp-launch`` on 0.4 s of the holding law with a free
+    object, simulate stepping the sampled loop as the graph does (first-order hold at 2 ms):
+    every fact both report is under the same key, with the same law, phase, steps and settling;
+    the object's motion (``{x, y, angle}``) agrees to rounding (the two sense the object in
+    different frames), and nothing else names it."""
+    sim = json.loads(subprocess.run([str(BIN / "contgrasp"), "simulate", "--object-mode", "free", "--law", "hold",
+                                     "--duration", "0.4", "--control-period", "0.002", "--hold", "first-order", "--json"],
+                                    capture_output=True, text=True, check=True, timeout=600).stdout)
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--law", "hold",
+                           "--object-mode", "free", "--duration", "0.4", "--no-record", "--json"],
+                          capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    graph = json.loads(proc.stdout)
+    assert set(SHARED_FACTS) <= set(sim) & set(graph)
+    assert sim["law"] == graph["law"] == "hold" and sim["law_phase"] == graph["law_phase"] in ("cage", "close", "hold")
+    for key in ("steps", "settled", "settle_time_s"):
+        assert sim[key] == graph[key], key
+    for key in ("object_displacement", "object_velocity"):
+        assert sim[key].keys() == graph[key].keys() == {"x", "y", "angle"}
+        np.testing.assert_allclose(list(graph[key].values()), list(sim[key].values()), rtol=1e-6, atol=1e-12)
+    assert not {"object_q", "object_v"} & (set(graph) | set(graph["final"]) | set(sim) | set(sim["final"]))

@@ -164,7 +164,7 @@ FREE = replace(PAPER.rod, n_elements=50)  # the paper's arm, coarse, frictionles
 @pytest.fixture(scope="module")
 def held() -> tuple[ClosedLoopResult, ClosedLoopResult, HoldController]:
     """The holding law on the paper's scenario with the circle free from the start (the continuous
-    loop of ``contgrasp simulate``), to settlement; then 5 s more from there."""
+    loop of ``contgrasp simulate``), watched for 6 s (settled by then); then 5 s more from there."""
     system = RodSystem(FREE, Obstacle(CIRCLE), body=ObjectDynamics(mode="free").body(CIRCLE))
     law = HoldController(FREE, R)
     gains = paper_gains(FREE, R)
@@ -280,7 +280,7 @@ def test_the_depth_regulation_closes_when_the_contact_is_shallow_and_opens_when_
 def test_with_depth_regulation_the_free_object_rests_pressed_squeeze_deep() -> None:
     """(H7) closed: the free circle caged, closed on and held with the depth regulation (gain
     10/s, stick-slip friction mu = 0.5: without friction a deeper squeeze pushes the circle out
-    through the opening, docs/holding.md); 5 s after settling the mean sensed depth over the
+    through the opening, docs/holding.md); 5 s after the settled 8 s the mean sensed depth over the
     arm's touching band nodes is the squeeze (0.5 mm) within 1 % (the integral's rest), the
     offset strictly inside its limits, and the object has drifted less than 1 mm."""
     settings = HoldLawSettings(depth_gain=10.0)

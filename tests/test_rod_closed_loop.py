@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 
 from dataclasses import replace
 
@@ -198,3 +199,46 @@ def test_preload_leaves_the_system_as_it_was() -> None:
     assert fresh.k == preloaded.k == 10
     np.testing.assert_array_equal(preloaded.x, fresh.x)
     np.testing.assert_array_equal(preloaded.v, fresh.v)
+
+
+def test_the_settle_detector_judges_the_latest_state() -> None:
+    """Settled means quiet for ``settle_hold`` at the latest state: a rod that moves again is no
+    longer settled, and ``settle_time`` is the start of the quiet stretch it is in."""
+    from contgrasp_core.rod.closed_loop import SettleDetector
+
+    det = SettleDetector(settle_speed=1e-3, settle_hold=0.3, min_time=1.0)
+    for t in np.arange(0.0, 1.25, 0.05):
+        det.update(float(t), 0.0)
+    assert det.settled and det.settle_time == 0.0
+    assert not det.update(1.25, 1.0) and det.settle_time is None  # (moved again)
+    assert not det.update(1.3, 0.0) and not det.update(1.55, 0.0)  # (quiet, not yet for 0.3 s)
+    assert det.update(1.6, 0.0) and det.settle_time == 1.3
+    assert not det.update(1.65, 0.0, ready=False)  # (a law in transition is never quiet)
+
+
+@pytest.mark.parametrize("mode", ["fixed", "free"])
+def test_a_movable_object_is_watched_for_the_whole_duration(mode: str) -> None:
+    """Under a settle rule that holds at once, the core loop and the graph's LoopSession
+    (run_sampled) both stop a fixed object's run once settled, but take a movable object's run
+    to its duration, settled at its end since it came to rest."""
+    from contgrasp_core.rod.body import ObjectDynamics
+    from contgrasp_core.rod.session import run_sampled
+
+    loop = replace(PAPER.loop, duration=0.02, settle_speed=1e3, settle_hold=0.004, min_time=0.0)
+    scenario = replace(PAPER, rod=replace(PAPER.rod, n_elements=20), dynamics=ObjectDynamics(mode), loop=loop)
+    session = run_sampled(scenario)
+    core = run_closed_loop(scenario.system(), scenario.feedback_gains, loop)
+    expected = 2 if mode == "fixed" else 10  # (control periods of 2 ms: quiet from 0 for 4 ms, or all 20 ms)
+    assert session.k == core.steps == expected
+    assert session.settled and core.settled and session.settle_time == core.settle_time == 0.0
+
+
+def test_simulate_watches_a_held_free_object_until_the_duration(capsys: pytest.CaptureFixture[str]) -> None:
+    """``contgrasp simulate --object-mode free --law hold --duration 4``: the hold comes to rest
+    before 3.5 s and the run goes on to 4 s (it once stopped there), settled at the end."""
+    from contgrasp_core.cli import main
+
+    main(["simulate", "--json", "--nodes", "51", "--object-mode", "free", "--law", "hold", "--duration", "4"])
+    out = json.loads(capsys.readouterr().out)
+    assert out["steps"] == 400 and out["sim_time_s"] == pytest.approx(4.0)
+    assert out["settled"] and out["settle_time_s"] < 3.5 and out["law_phase"] == "hold"

@@ -19,7 +19,7 @@ from contgrasp_core.control import FeedbackGains, paper_gains
 from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold, check_law_settings
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.rod import RodModel, RodSystem
-from contgrasp_core.rod.body import MODES, ObjectDynamics
+from contgrasp_core.rod.body import MODES, ObjectDynamics, motion_summary
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, object_motion, run_closed_loop
 from contgrasp_core.rod.self_contact import self_gap
 from contgrasp_core.objects import ROD_SCALE
@@ -38,7 +38,8 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
                               description=__doc__.splitlines()[0], parents=parents or [])
     add_object_arguments(p, ROD_SCALE)
     p.add_argument("--duration", type=float, default=None,
-                   help=f"max simulated time, s (stops earlier when settled; default: the scenario's, {PAPER.loop.duration} s)")
+                   help="max simulated time, s (a fixed object: stops earlier when settled; a movable one is watched "
+                   f"for the whole duration, settled if quiet at the end; default: the scenario's, {PAPER.loop.duration} s)")
     p.add_argument("--control-period", type=float, default=None,
                    help="sample-and-hold period of the feedback, s (default: continuous implicit feedback)")
     p.add_argument("--hold", choices=HOLDS, default="zero-order",
@@ -157,12 +158,9 @@ def validity_warning(out: dict[str, Any]) -> str | None:
 
 
 def _object_motion(res: ClosedLoopResult) -> dict[str, Any]:
-    """A movable object's final displacement from its start pose and velocity (empty when fixed)."""
+    """A movable object's final displacement from its start pose and velocity (None when fixed)."""
     body = res.final_state.body
-    if body is None:
-        return {}
-    return {"object_displacement": {"x": float(body.q[0]), "y": float(body.q[1]), "angle": float(body.q[2])},
-            "object_velocity": {"x": float(body.v[0]), "y": float(body.v[1]), "angle": float(body.v[2])}}
+    return motion_summary(None, None) if body is None else motion_summary(body.q, body.v)
 
 
 def loop_config(args: argparse.Namespace, record_period: float | None = 0.01) -> ClosedLoopConfig:
@@ -334,9 +332,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     else:
         res = run_closed_loop(system, gains, cfg, law=law)
     out = summarize(res, args.contact_tol, "zoh" if args.hold == "zero-order" else "first-order hold")
-    out.update(object=obj.text(), object_mode=args.object_mode, law=args.law, friction=model.friction)
-    if law is not None:
-        out["law_phase"] = law.phase
+    out.update(object=obj.text(), object_mode=args.object_mode, law=args.law, law_phase=None if law is None else law.phase,
+               friction=model.friction)
     warning = validity_warning(out)
     if warning:
         print(f"contgrasp simulate: {warning}", file=sys.stderr)

@@ -32,7 +32,7 @@ from contgrasp_core.boundary import Boundary
 from contgrasp_core.errors import InvalidParameterError
 
 __all__ = ["MODES", "ObjectDynamics", "RigidBody", "BodyState", "mass_properties", "rotation", "to_world",
-           "to_object_frame", "shape_in_object_frame"]
+           "to_object_frame", "shape_in_object_frame", "motion_summary"]
 
 Array = NDArray[np.float64]
 
@@ -158,6 +158,17 @@ class BodyState:
     @classmethod
     def rest(cls) -> BodyState:
         return cls(q=np.zeros(3), v=np.zeros(3))
+
+
+def motion_summary(q: ArrayLike | None, v: ArrayLike | None) -> dict[str, dict[str, float] | None]:
+    """A run summary's ``object_displacement`` (from ``q``) and ``object_velocity`` (from ``v``),
+    each ``{x, y, angle}`` (m, rad; m/s, rad/s), or ``None`` for a fixed object (``q`` None or
+    empty): the keys ``contgrasp simulate`` and the launcher's summary share."""
+    def triple(a: ArrayLike | None) -> dict[str, float] | None:
+        x = np.asarray(a if a is not None else (), dtype=float)
+        return None if x.size == 0 else dict(zip(("x", "y", "angle"), x.tolist(), strict=True))
+
+    return {"object_displacement": triple(q), "object_velocity": triple(v)}
 
 
 def rotation(angle: float) -> Array:

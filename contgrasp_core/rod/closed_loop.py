@@ -12,9 +12,10 @@ Two ways to close the loop:
   with steps ``dt`` dividing ``T``. This is what a lock-step ROS loop does; it needs ``T`` well
   below the fastest bending period of the tip (see docs/rod.md) or the loop flutters.
 
-The runner records the state every ``record_period`` and stops when the rod has settled (maximum
-node speed below ``settle_speed`` for ``settle_hold`` seconds after ``min_time``) or at
-``duration``.
+The runner records the state every ``record_period`` and stops at ``duration``, or earlier when
+the rod has settled (maximum node speed below ``settle_speed`` for ``settle_hold`` seconds after
+``min_time``) against a fixed object; a movable object is watched for the whole duration
+(:func:`stops_at_settle`), and the run is settled if it is quiet at its end.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ if TYPE_CHECKING:  # (imported by the runner: the scenario's ClosedLoopConfig co
     from contgrasp_core.rod.integrator import RodState, RodSystem
     from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "run_closed_loop", "object_motion"]
+__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "SettleDetector", "stops_at_settle", "run_closed_loop", "object_motion"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,42 @@ class ClosedLoopConfig:
         if self.control_period is None or self.dt is None:
             return 1
         return int(round(self.control_period / self.dt))
+
+
+@dataclass
+class SettleDetector:
+    """Settled: every node slower than ``settle_speed`` for the last ``settle_hold`` seconds, not
+    before ``min_time``. Fed the observed states in time order (the closed loop, or a recording),
+    it judges the latest: a rod that moves again is no longer settled, and ``settle_time`` is the
+    start of the quiet stretch it is in."""
+
+    settle_speed: float
+    settle_hold: float
+    min_time: float
+    quiet_since: float | None = None
+    settled: bool = False
+
+    def update(self, t: float, max_speed: float, ready: bool = True) -> bool:
+        """Account for the state at time ``t`` with the given largest node speed; returns settled.
+        A state that is not ``ready`` (a law still in transition) does not count as quiet."""
+        if ready and max_speed < self.settle_speed:
+            self.quiet_since = t if self.quiet_since is None else self.quiet_since
+            self.settled = t >= self.min_time and t - self.quiet_since >= self.settle_hold
+        else:
+            self.quiet_since = None
+            self.settled = False
+        return self.settled
+
+    @property
+    def settle_time(self) -> float | None:
+        return self.quiet_since if self.settled else None
+
+
+def stops_at_settle(system: RodSystem) -> bool:
+    """Whether a closed loop on ``system`` ends once settled: against a fixed object (the
+    paper's runs), yes; a movable object is watched until the duration, since it may be let go
+    after the arm came to rest."""
+    return system.body is None
 
 
 @dataclass(frozen=True)
@@ -154,7 +191,8 @@ def _speeds(system: RodSystem, st: RodState) -> float:
 def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig = ClosedLoopConfig(),
                     state: RodState | None = None, law: Law | None = None) -> ClosedLoopResult:
     """Run the feedback loop (eq. (19) on the rod of eq. (17)) from ``state``
-    (default: straight at rest) until settled or ``config.duration``. With a ``law``
+    (default: straight at rest) until ``config.duration``, or until settled when the object is
+    fixed (:func:`stops_at_settle`). With a ``law``
     (:mod:`contgrasp_core.control.hold_law`) its command is asked once per period (``gains``
     then only names the run's paper gains in the result)."""
     if system.obstacle is None:
@@ -182,8 +220,8 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     iters = 0
     steps = substeps = 0
     dt_next = dt
-    quiet_since: float | None = None
-    settled = False
+    settle = SettleDetector(config.settle_speed, config.settle_hold, config.min_time)
+    stop_at_settle = stops_at_settle(system)
     max_pen = max_ratio = 0.0
     wall0 = time.perf_counter()
     for k in range(n_ctrl + 1):
@@ -200,12 +238,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
                                 length_unit=command.length_unit)
         u = saturate(m, u)
         speed = _speeds(system, st)
-        done = False
-        if speed < config.settle_speed and (law is None or law.holding):
-            quiet_since = st.t if quiet_since is None else quiet_since
-            done = st.t >= config.min_time and st.t - quiet_since >= config.settle_hold
-        else:
-            quiet_since = None
+        done = settle.update(st.t, speed, law is None or law.holding) and stop_at_settle
         pen_c = m.r_centres - obstacle.project(chain.centres(m, st.theta)).signed_distance
         pen = max(float(sn.delta.max()), float(pen_c.max()), 0.0)
         ratios = np.concatenate((sn.delta / r_nodes, pen_c / m.r_centres))
@@ -217,10 +250,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
                              ("rho", sn.rho), ("alpha", sn.alpha), ("couple", u), ("pen", pen), ("ratio", ratio),
                              ("speed", speed), ("q", None if st.body is None else st.body.q)):
                 rec[key].append(val)
-        if done:
-            settled = health.valid
-            break
-        if k == n_ctrl:
+        if done or k == n_ctrl:
             break
         health.applied(st.t, u)
         if isinstance(command, ShapeHold):
@@ -236,8 +266,8 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     arr = {k: np.asarray(v) for k, v in rec.items()}
     return ClosedLoopResult(
         t=arr["t"], x=arr["x"], theta=arr["theta"], rho=arr["rho"], alpha=arr["alpha"], couple=arr["couple"],
-        penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=settled,
-        settle_time=(quiet_since if settled else None), wall_time=wall, newton_iterations=iters,
+        penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=settle.settled and health.valid,
+        settle_time=settle.settle_time if health.valid else None, wall_time=wall, newton_iterations=iters,
         final_state=st, model=m, gains=gains, config=config, steps=steps, integrator_steps=substeps,
         max_penetration=max_pen, max_penetration_ratio=max_ratio, health=health, **object_motion(system, rec["q"], law))
 

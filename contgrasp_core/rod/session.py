@@ -36,7 +36,7 @@ from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.scenario import Scenario
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.body import BodyState, shape_in_object_frame
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, SettleDetector, stops_at_settle
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
 from contgrasp_core.rod.muscle import saturate
 from contgrasp_core.rod.obstacle import Obstacle
@@ -103,39 +103,14 @@ class DivergenceLimits:
             raise InvalidParameterError("divergence limits must be > 0")
 
 
-@dataclass
-class SettleDetector:
-    """Settled: every node slower than ``settle_speed`` for ``settle_hold`` seconds, not before
-    ``min_time``. Fed the observed states in time order (the closed loop, or a recording)."""
-
-    settle_speed: float
-    settle_hold: float
-    min_time: float
-    quiet_since: float | None = None
-    settled: bool = False
-
-    def update(self, t: float, max_speed: float, ready: bool = True) -> bool:
-        """Account for the state at time ``t`` with the given largest node speed; returns settled.
-        A state that is not ``ready`` (a law still in transition) does not count as quiet."""
-        if ready and max_speed < self.settle_speed:
-            self.quiet_since = t if self.quiet_since is None else self.quiet_since
-            if t >= self.min_time and t - self.quiet_since >= self.settle_hold:
-                self.settled = True
-        else:
-            self.quiet_since = None
-        return self.settled
-
-    @property
-    def settle_time(self) -> float | None:
-        return self.quiet_since if self.settled else None
-
-
 class LoopSession:
     """Steps a :class:`RodSystem` in control periods and decides when the run is over.
 
-    The run finishes when the rod is quiet (every node slower than ``settle_speed`` for
-    ``settle_hold`` seconds, not before ``min_time``) or after ``duration``; both are judged on
-    the observed state, before the couple for it is applied. It is settled when quiet and still
+    The run finishes after ``duration``, or once the rod is quiet (every node slower than
+    ``settle_speed`` for ``settle_hold`` seconds, not before ``min_time``) when the object is
+    fixed (:func:`~contgrasp_core.rod.closed_loop.stops_at_settle`: a movable object is watched
+    for the whole duration); both are judged on the observed state, before the couple for it is
+    applied. It is settled when quiet at its last state (:class:`SettleDetector`) and still
     within the model's validity (``health``, :class:`~contgrasp_core.rod.validity.RunHealth`).
     """
 
@@ -152,6 +127,7 @@ class LoopSession:
         self.n_control = int(np.ceil(config.duration / config.control_period - 1e-9))
         self.dt = config.control_period / config.substeps
         self.settle = SettleDetector(config.settle_speed, config.settle_hold, config.min_time)
+        self._stop_at_settle = stops_at_settle(system)
         self.finished = False
         self.iterations = 0
         self.max_penetration = 0.0
@@ -206,7 +182,7 @@ class LoopSession:
             body=st.body,
         )
         self.settle.update(float(st.t), speed, ready)
-        self.finished = self.settle.settled or self.k >= self.n_control
+        self.finished = (self.settle.settled and self._stop_at_settle) or self.k >= self.n_control
         self._observed = obs
         return obs
 

@@ -78,6 +78,7 @@ class Monitor(Node):
         self.contact: ContactState | None = None
         self.quality: GraspQuality | None = None
         self.status: dict[str, str] = {}
+        self.controller_status: dict[str, str] = {}
         self.state_changed = False  # the simulator's state changed since the driver looked (see _drive)
         self.history: list[dict[str, Any]] = []
         self._period = history_period
@@ -91,6 +92,7 @@ class Monitor(Node):
         self.pause = self.create_client(SetBool, "rod_simulator/pause")
         self.sim_params = AsyncParameterClient(self, "rod_simulator")
         self._simulator = topics.status_name("rod_simulator", self.get_namespace())
+        self._controller = topics.status_name("grasp_controller", self.get_namespace())
         self.drops = DropCounter(self)  # (only rclpy take failures: see GuardedSpin)
 
     def _on_rod(self, msg: RodState) -> None:
@@ -127,6 +129,8 @@ class Monitor(Node):
                 state = self.status.get("state")
                 self.status = {kv.key: kv.value for kv in st.values}
                 self.state_changed = self.state_changed or self.status.get("state") != state
+            elif st.name == self._controller:
+                self.controller_status = {kv.key: kv.value for kv in st.values}
 
     def connected(self) -> bool:
         """Every node of the monitor's namespace is up and each stream has its publisher and subscribers matched."""
@@ -165,10 +169,12 @@ def _summary(mon: Monitor, loop_wall_time_s: float | None = None, wall_time_s: f
     rod, q, c = mon.rod, mon.quality, mon.contact
     return build_summary(
         mon.status,
-        final=None if rod is None else FinalState.of(rod.step, stamp_seconds(rod.header), rod.s, rod.x, rod.y, rod.theta,
-                                                     rod.object_q, rod.object_v),
+        final=None if rod is None else FinalState.of(rod.step, stamp_seconds(rod.header), rod.s, rod.x, rod.y, rod.theta),
         final_quality=None if q is None else FinalQuality.of(q.q1, q.q2, q.q3, q.valid, q.contact_length, q.step),
         contact=contact_stats(None) if c is None else contact_stats(c.s, c.rho, c.delta, c.alpha, c.in_contact, c.contact_tolerance),
+        controller=mon.controller_status,
+        object_q=None if rod is None else rod.object_q,
+        object_v=None if rod is None else rod.object_v,
         wall_time_s=wall_time_s,
         loop_wall_time_s=loop_wall_time_s,
     )

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from contgrasp_core.rod.body import motion_summary
 from contgrasp_core.tracking import ContactStats, contact_stats
 
 __all__ = ["FinalState", "FinalQuality", "ContactStats", "RunSummary", "contact_stats", "build_summary"]
@@ -30,9 +31,7 @@ FloatSeq = Sequence[float] | np.ndarray
 
 @dataclass(frozen=True)
 class FinalState:
-    """The last rod state: its ``step``, stamp ``t`` (sim time, s) and per-node arrays, and a
-    movable object's displacement ``object_q`` (dx, dy m, dpsi rad, from its start pose) and
-    velocity ``object_v`` (``None`` while the object is fixed)."""
+    """The last rod state: its ``step``, stamp ``t`` (sim time, s) and per-node arrays."""
 
     step: int
     t: float
@@ -40,22 +39,15 @@ class FinalState:
     x: list[float]
     y: list[float]
     theta: list[float]
-    object_q: list[float] | None = None
-    object_v: list[float] | None = None
 
     @classmethod
-    def of(cls, step: int, t: float, s: FloatSeq, x: FloatSeq, y: FloatSeq, theta: FloatSeq,
-           object_q: FloatSeq | None = None, object_v: FloatSeq | None = None) -> FinalState:
-        """From per-node arrays (numpy or message sequences), as plain floats (an empty or
-        missing object state: ``None``)."""
+    def of(cls, step: int, t: float, s: FloatSeq, x: FloatSeq, y: FloatSeq, theta: FloatSeq) -> FinalState:
+        """From per-node arrays (numpy or message sequences), as plain floats."""
         def floats(v: FloatSeq) -> list[float]:
             out: list[float] = np.asarray(v, dtype=float).tolist()
             return out
 
-        def body(v: FloatSeq | None) -> list[float] | None:
-            return None if v is None or len(v) == 0 else floats(v)
-
-        return cls(int(step), float(t), floats(s), floats(x), floats(y), floats(theta), body(object_q), body(object_v))
+        return cls(int(step), float(t), floats(s), floats(x), floats(y), floats(theta))
 
 
 @dataclass(frozen=True)
@@ -82,7 +74,9 @@ class FinalQuality:
 class RunSummary:
     """What a graph run did. The JSON keys (:meth:`to_dict`) are the field names.
 
-    ``simulator_state``, ``settled``, ``settle_time_s`` (sim time, ``None`` if not settled),
+    ``simulator_state``, ``law`` and ``law_phase`` (the controller's last ``/diagnostics`` status:
+    the law that ran and, under the holding law, its phase, ``None`` under the paper's law or when
+    the controller never reported), ``settled``, ``settle_time_s`` (sim time, ``None`` if not settled),
     ``sim_time_s``, ``steps``, ``missed_deadlines`` (lock-step timeouts that applied the
     fallback couple; free-running: control periods lost behind the wall clock),
     ``late_couples`` (free-running steps that went on without the couple answering their state,
@@ -93,7 +87,9 @@ class RunSummary:
     the simulator's last ``/diagnostics`` status, except that ``sim_time_s`` and ``steps`` are the
     last rod state's when it is newer (the status goes out at most every 0.2 s of wall time and at
     a change of state, so a run stopped by Ctrl-C ends with a status some steps old); ``final``,
-    ``final_quality`` and the contact statistics
+    ``final_quality``, a movable object's ``object_displacement`` and ``object_velocity`` (``{x, y,
+    angle}``, ``None`` while it is fixed: :func:`~contgrasp_core.rod.body.motion_summary`, the keys
+    of ``contgrasp simulate``) and the contact statistics
     (:class:`~contgrasp_core.tracking.ContactStats`: mean and max tracking errors over the
     ``contact_nodes`` nodes in contact, ``contact_length`` m) the last rod state, grasp
     quality and contact state; ``wall_time_s`` (the whole launcher run) and ``loop_wall_time_s``
@@ -103,6 +99,8 @@ class RunSummary:
     """
 
     simulator_state: str
+    law: str | None
+    law_phase: str | None
     settled: bool
     settle_time_s: float | None
     sim_time_s: float | None
@@ -116,6 +114,8 @@ class RunSummary:
     peak_couple_sim_time_s: float | None
     peak_couple_ratio: float | None
     final: FinalState | None
+    object_displacement: dict[str, float] | None
+    object_velocity: dict[str, float] | None
     final_quality: FinalQuality | None
     mean_abs_rho_ratio_minus_1_contact: float | None
     max_abs_rho_ratio_minus_1_contact: float | None
@@ -154,20 +154,28 @@ def build_summary(
     final: FinalState | None,
     final_quality: FinalQuality | None,
     contact: ContactStats,
+    controller: Mapping[str, str] | None = None,
+    object_q: FloatSeq | None = None,
+    object_v: FloatSeq | None = None,
     wall_time_s: float | None = None,
     loop_wall_time_s: float | None = None,
 ) -> RunSummary:
     """The :class:`RunSummary` of a run from the simulator's last ``/diagnostics`` key/values
     (``state``, ``settled``, ``settle_time_s``, ``sim_time_s``, ``step``, ``missed_deadlines``,
     ``late_couples``, ``max_penetration``; missing or unparsable ones give ``None``/0; the step and
-    time of ``final`` when it is newer), the last rod state and quality, and the contact statistics
-    of the last contact state (:func:`contact_stats`)."""
+    time of ``final`` when it is newer), the controller's last key/values (``law``, ``law_phase``;
+    ``None``: none received), the last rod state, a movable object's displacement ``object_q`` and
+    velocity ``object_v`` (None or empty: fixed) and quality, and the contact statistics of the
+    last contact state (:func:`contact_stats`)."""
     sim_time, steps = _num(status, "sim_time_s"), int(_num(status, "step") or 0)
     if final is not None and final.step > steps:  # (a run stopped between two statuses: its last state is newer)
         sim_time, steps = final.t, final.step
+    motion = motion_summary(object_q, object_v)
     loop = loop_wall_time_s if loop_wall_time_s is not None and loop_wall_time_s > 0 else None
     return RunSummary(
         simulator_state=status.get("state", "unknown"),
+        law=(controller or {}).get("law") or None,
+        law_phase=(controller or {}).get("law_phase") or None,
         settled=status.get("settled") == "true",
         settle_time_s=_num(status, "settle_time_s"),
         sim_time_s=sim_time,
@@ -181,6 +189,8 @@ def build_summary(
         peak_couple_sim_time_s=_num(status, "peak_couple_sim_time_s"),
         peak_couple_ratio=_num(status, "peak_couple_ratio"),
         final=final,
+        object_displacement=motion["object_displacement"],
+        object_velocity=motion["object_velocity"],
         final_quality=final_quality,
         mean_abs_rho_ratio_minus_1_contact=contact.mean_abs_rho_ratio_minus_1_contact,
         max_abs_rho_ratio_minus_1_contact=contact.max_abs_rho_ratio_minus_1_contact,

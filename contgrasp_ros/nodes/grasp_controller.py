@@ -11,7 +11,8 @@ simulator's), and starts afresh with a new run (step 0, or a step below the last
 simulator was reset); it senses the arm's own shape (``theta``, ``kappa`` of the contact state)
 and a contact state without it is dropped. Its hold goes out as the rest curvature
 ``kappa_ref`` and ``hold_gain`` (the simulator applies it in the state), and every couple says
-whether the law is still in ``transition``. The paper law's gains (mu1, mu2 or the adaptive mu2
+whether the law is still in ``transition``; the ``/diagnostics`` status names the law and its
+phase (``law``, ``law_phase``), at once when the phase changes. The paper law's gains (mu1, mu2 or the adaptive mu2
 of Appendix IV, the law's length unit) are parameters; a change takes effect at the next contact
 message (a set that gives unusable gains is refused). The rod geometry parameters (read-only)
 must match the simulator's. Malformed contact states, bad stamps and
@@ -26,6 +27,7 @@ from dataclasses import fields
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.node import Node
 
 from contgrasp_core.control import FeedbackGains, feedback_at_joints, paper_gains
@@ -79,7 +81,7 @@ class GraspController(Node):
         self.hold_step = -1  # (the step it answered last)
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
-        self.diagnostics = Diagnostics(self, self.drops)
+        self.diagnostics = Diagnostics(self, self.drops, self._status_values, summary=self._status_summary)
         self.finish = FinishPolicy(self, watch_simulator=True)
         self.gains = self._gains({n: self.get_parameter(n).value for n in GAIN_PARAMETERS})
         add_parameter_check(self, self._check_gains)
@@ -137,9 +139,25 @@ class GraspController(Node):
         except ContgraspError as exc:
             self.drops.drop_error(topics.CONTACT, exc)
             return
+        self.diagnostics.update()  # (at once when the law's phase changed: before the couple it gave)
         out = self.couple_codec.encode(couple_fields(self.model.joint_s, u, msg.header, c.step, transition))
         self.pub.publish(out)
         self.answered.keep(data, out)
+
+    @property
+    def law_phase(self) -> str:
+        """The holding law's phase in this run ('' under the paper's law and before the first state)."""
+        return "" if self.hold is None else self.hold.phase
+
+    def _status_values(self) -> tuple[int, str, dict[str, str]]:
+        """The status with the law and its phase (``law``, ``law_phase``), what the run summaries report."""
+        return *self._status_summary(), {"law": self.law_name, "law_phase": self.law_phase}
+
+    def _status_summary(self) -> tuple[int, str]:
+        """OK (WARN once messages were dropped: :class:`Diagnostics`) and the law, its phase and the drops."""
+        phase = f", phase {self.law_phase}" if self.law_phase else ""
+        dropped = f"; {self.drops.total} messages dropped" if self.drops.total else ""
+        return DiagnosticStatus.OK, f"law {self.law_name}{phase}{dropped}"
 
     def _hold_command(self, c: ContactArrays) -> tuple[FeedbackGains | ShapeHold, bool]:
         """The holding law's command for the contact state ``c`` and whether the law is still in

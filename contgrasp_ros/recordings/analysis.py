@@ -16,7 +16,7 @@ and :func:`write_plots` export the run.
 Recordings may be decimated (the recorder keeps rod state/contact/couple only every so many
 seconds of sim time, plus the last message of each topic): messages are paired by their
 ``step``, never by position, and the settle time is recomputed (with the simulator's
-:class:`~contgrasp_core.rod.session.SettleDetector`) only when the rod states are complete.
+:class:`~contgrasp_core.rod.closed_loop.SettleDetector`) only when the rod states are complete.
 
 Nothing here imports rclpy or generated message packages.
 """
@@ -37,7 +37,7 @@ from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError, InvalidParameterError, RunFailure, WriteError, output_error
 from contgrasp_core.objects import OUTLINE, ROD_SCALE, SHAPES, ObjectSpec, outline_text
-from contgrasp_core.rod.session import SettleDetector
+from contgrasp_core.rod.closed_loop import SettleDetector
 from contgrasp_ros.plumbing import topics
 from contgrasp_ros.bag import BagInputError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
@@ -95,6 +95,7 @@ IntArray = NDArray[np.int64]
 RUN_RECORD = "contgrasp_run"  # = contgrasp_ros.bag.writer.RUN_RECORD
 RECORDER_RECORD = "contgrasp_recorder"  # = contgrasp_ros.bag.writer.RECORDER_RECORD
 SIMULATOR = "rod_simulator"
+CONTROLLER = "grasp_controller"
 
 
 
@@ -189,6 +190,7 @@ class RunData:
     params: dict[str, dict[str, Any]] | None
     run_info: dict[str, Any]
     status: dict[str, str]
+    controller_status: dict[str, str]  # (the controller's last /diagnostics values: law, law_phase)
     recorder: dict[str, Any] | None = None
     repeated_states: int = 0  # rod states published again (a re-send), each kept once
 
@@ -315,6 +317,7 @@ def load_run(path: str | Path) -> RunData:
 
     by_topic: dict[str, list[Any]] = {topics.ROD_STATE: [], topics.CONTACT: [], topics.QUALITY: [], topics.OBJECT: []}
     status: dict[str, str] = {}
+    controller: dict[str, str] = {}
     repeated = 0
     # in the order they were published, not by log time: a simulated-time log time is the header
     # stamp, and a late message stamped t = 0 (unset) is logged at the recorder's clock instead
@@ -331,9 +334,10 @@ def load_run(path: str | Path) -> RunData:
             kept.append(msg)
             continue
         for st in msg.status:
-            if st.name != simulator:
-                continue
-            status = {kv.key: kv.value for kv in st.values}
+            if st.name == simulator:
+                status = {kv.key: kv.value for kv in st.values}
+            elif st.name == topics.status_name(CONTROLLER, ns):
+                controller = {kv.key: kv.value for kv in st.values}
     try:
         boundary = boundary_from_msg(by_topic[topics.OBJECT][-1])
     except ContgraspError as exc:
@@ -348,6 +352,7 @@ def load_run(path: str | Path) -> RunData:
         params=params,
         run_info=run_info,
         status=status,
+        controller_status=controller,
         recorder=recorder,
         repeated_states=repeated,
     )
@@ -664,11 +669,13 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
     gaps = step_gaps(run)
     summary = build_summary(
         run.status,
-        final=FinalState.of(int(rod.step[-1]), float(rod.t[-1]), rod.s[-1], rod.x[-1], rod.y[-1], rod.theta[-1],
-                            *((None, None) if rod.object is None else (rod.object.q[-1], rod.object.v[-1]))),
+        final=FinalState.of(int(rod.step[-1]), float(rod.t[-1]), rod.s[-1], rod.x[-1], rod.y[-1], rod.theta[-1]),
         final_quality=None if q is None else FinalQuality.of(q.q1[-1], q.q2[-1], q.q3[-1], q.valid[-1], q.contact_length[-1],
                                                                      q.step[-1]),
         contact=contact_stats(None) if c is None else contact_stats(c.s[-1], c.rho[-1], c.delta[-1], c.alpha[-1], c.in_contact[-1], float(c.tol[-1])),
+        controller=run.controller_status,
+        object_q=None if rod.object is None else rod.object.q[-1],
+        object_v=None if rod.object is None else rod.object.v[-1],
     )
     return {
         "path": str(run.path),
