@@ -578,6 +578,8 @@ def self_contact_pairs(c: np.ndarray, s: np.ndarray, r: np.ndarray, h: float,
     for i in range(n):
         reach = r[i] + r_max + margin + h  # (a foot on the segment is within h of its first centre)
         for seg in range(n - 1):
+            if abs(s[i] - s[seg]) + h < 0.5 * np.pi * (r[i] + min(r[seg], r[seg + 1])):
+                continue  # (every foot on this segment is a neighbour along the arm)
             dx = c[i, 0] - c[seg, 0]
             dy = c[i, 1] - c[seg, 1]
             if dx * dx + dy * dy > reach * reach:

@@ -519,13 +519,20 @@ class RodSystem:
     def self_contact_frame(self, state: RodState, dt: float) -> SelfContactFrame | None:
         """The pairs of the arm near itself, frozen over a step of ``dt`` from ``state``
         (:mod:`.self_contact`; None when no two parts are within the contact margin)."""
+        return self._self_contact_search(state, dt)[0]
+
+    def _self_contact_search(self, state: RodState,
+                             dt: float) -> tuple[SelfContactFrame | None, np.ndarray | None, float]:
+        """:meth:`self_contact_frame`, the centres it searched (the step's predicted midpoint)
+        and its margin (m); (None, None, 0) with self-contact off."""
         if not self.options.self_contact:
-            return None
+            return None, None, 0.0
         m, w0 = self.model, state.omega
         _, b, x = chain.frames_and_nodes(m, state.theta + 0.5 * dt * w0)
         speed = np.hypot(*np.cumsum(m.h * b * w0[:, None], axis=0).T).max()  # the fastest node (m/s)
         margin = self.options.contact_margin + 2.0 * dt * speed  # (two parts close at most twice as fast)
-        return self_contact_frame(m, 0.5 * (x[:-1] + x[1:]), margin)
+        c = 0.5 * (x[:-1] + x[1:])
+        return self_contact_frame(m, c, margin), c, margin
 
     def obstacle_at(self, state: RodState) -> Obstacle:
         """The object where it is in ``state`` (the obstacle itself while it is fixed)."""
@@ -586,7 +593,8 @@ class RodSystem:
         step (module docstring). ``rate_change`` extrapolates the first Newton iterate. A step
         that ends with parts of the arm overlapping that its self-contact frame did not foresee is
         solved again with them (:func:`.self_contact.missed_pairs`, at most twice)."""
-        frame, self_frame = self.contact_frame(state, dt), self.self_contact_frame(state, dt)
+        frame = self.contact_frame(state, dt)
+        self_frame, searched, margin = self._self_contact_search(state, dt)
         w0 = self.rates(state)
         first = w0.copy() if rate_change is None else w0 + dt * rate_change
         for _ in range(3):
@@ -595,7 +603,7 @@ class RodSystem:
             if w1 is None or ev is None:
                 return None, 0.5
             new = self._new_state(state, w1, dt, ev.anchors)
-            missed = self._missed(state, new, self_frame)
+            missed = None if searched is None else self._missed(state, new, self_frame, searched, margin)
             if missed is None:
                 break
             self_frame = missed
@@ -633,12 +641,22 @@ class RodSystem:
                 return w1, ev, it
         return None, None, opt.max_iter
 
-    def _missed(self, state: RodState, new: RodState, self_frame: SelfContactFrame | None) -> SelfContactFrame | None:
-        """The step's self-contact frame with the pairs that overlap at its end unforeseen (None: none)."""
-        if not self.options.self_contact:
-            return None
+    def _missed(self, state: RodState, new: RodState, self_frame: SelfContactFrame | None, searched: np.ndarray,
+                margin: float) -> SelfContactFrame | None:
+        """The step's self-contact frame with the pairs that overlap at its end unforeseen (None:
+        none). No pair can have closed a gap wider than the search's ``margin`` if no centre moved
+        half of it from where the search saw it (``searched``): then nothing is searched again."""
         m = self.model
-        return missed_pairs(m, self_frame, chain.centres(m, state.theta), chain.centres(m, new.theta))
+        end = _centres(m, new.theta)
+        if 2.0 * float(np.hypot(*(end - searched).T).max()) < margin:
+            return None
+        return missed_pairs(m, self_frame, _centres(m, state.theta), end)
+
+
+def _centres(model: RodModel, theta: np.ndarray) -> np.ndarray:
+    """The element centres (:func:`.chain.centres`) from the compiled nodes where enabled."""
+    x = chain.frames_and_nodes(model, theta)[2]
+    return 0.5 * (x[:-1] + x[1:])
 
 
 def _account(info: dict, ev: _StepEval) -> None:
