@@ -14,7 +14,10 @@ Reports, from the same process: contgrasp's wall seconds per simulated second wi
 self-contact (its cost), PyElastica's with its self-contact, the smallest surface gap between
 non-neighbouring parts of each engine's final shape (without self-contact contgrasp's arm
 passes through itself) and the largest distance between the two engines' final centrelines at
-equal arclength. Needs the optional extra ``bench`` (pyelastica).
+equal arclength. Then what the search (and the loop's validity checks) cost where the arm never
+meets itself: the paper's continuous run and its sampled loop (``run_sampled``, the graph's), with
+and without self-contact, interleaved (paired medians). Needs the optional extra ``bench``
+(pyelastica).
 
     python benchmarks/self_contact.py --duration 3 --repeats 3
 """
@@ -30,6 +33,8 @@ from dataclasses import replace
 import numpy as np
 
 from contgrasp_core.rod import RodLoads, RodSystem, StepOptions, chain
+from contgrasp_core.rod.closed_loop import run_closed_loop
+from contgrasp_core.rod.session import run_sampled
 from contgrasp_core.rod.self_contact import self_gap
 from contgrasp_core.scenario import PAPER
 
@@ -51,6 +56,31 @@ def contgrasp_run(model, couple: np.ndarray, duration: float, dt: float, self_co
         st, info = system.advance(st, dt, RodLoads(couple=couple), dt_try=dt_next)
         dt_next, iterations = info["dt_next"], iterations + info["iterations"]
     return chain.nodes(model, st.theta), time.perf_counter() - t0, iterations
+
+
+def paper_overhead(repeats: int) -> dict[str, float]:
+    """Wall seconds of the paper's runs with self-contact over without (paired medians)."""
+    def continuous(on: bool) -> float:
+        system = replace(PAPER.system(), options=StepOptions(self_contact=on))
+        loop = replace(PAPER.loop, control_period=None, dt=0.05, duration=3.0, settle_speed=1e-12)
+        t0 = time.perf_counter()
+        run_closed_loop(system, PAPER.feedback_gains, loop)
+        return time.perf_counter() - t0
+
+    def sampled(on: bool) -> float:
+        system = replace(PAPER.system(), options=StepOptions(self_contact=on))
+        t0 = time.perf_counter()
+        run_sampled(PAPER, system)
+        return time.perf_counter() - t0
+
+    out = {}
+    for run in (continuous, sampled):
+        run(True), run(False)  # (warm-up)
+        pairs = [(run(False), run(True)) for _ in range(repeats)]
+        out[f"paper_{run.__name__}_without_s"] = float(np.median([p[0] for p in pairs]))
+        out[f"paper_{run.__name__}_with_s"] = float(np.median([p[1] for p in pairs]))
+        out[f"paper_{run.__name__}_cost_ratio"] = float(np.median([p[1] / p[0] for p in pairs]))
+    return out
 
 
 def main() -> None:
@@ -92,6 +122,7 @@ def main() -> None:
                     "pyelastica_final_self_gap_m": self_gap(model, _theta(pe_x)).gap,
                     "speedup_with_self_contact": pe_wall / args.duration / out["contgrasp_with_self_contact_wall_per_sim_s"],
                     "centreline_max_diff_m": dmax, "centreline_max_diff_at_s_m": s_at})
+    out.update(paper_overhead(max(args.repeats, 5)))
     out["load_average_end"] = os.getloadavg()[0]
     print(json.dumps(out, indent=2) if args.json else "\n".join(f"{k}: {v}" for k, v in out.items()))
 
