@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from contgrasp_core.rod.integrator import RodSystem
 
 __all__ = ["GainSettings", "SensingSettings", "Scenario", "PAPER", "ROD_PARAMETERS", "NODES", "SIMULATOR", "SENSOR",
-           "CONTROLLER", "QUALITY", "object_from_parameters", "motion_from_parameters", "motion_parameters", "rod_system",
+           "CONTROLLER", "QUALITY", "object_from_parameters", "rod_from_parameters", "motion_from_parameters", "motion_parameters", "rod_system",
            "check_start", "HOLD_PREFIX"]
 
 SIMULATOR, SENSOR, CONTROLLER, QUALITY = "rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"
@@ -200,8 +200,7 @@ class Scenario:
         ctl = {**default[CONTROLLER], **params.get(CONTROLLER, {})}
         sen = {**default[SENSOR], **params.get(SENSOR, {})}
         qual = {**default[QUALITY], **params.get(QUALITY, {})}
-        rod = RodModel(base_position=(float(sim["base_x"]), float(sim["base_y"])),
-                       **{k: sim[k] for k in ROD_PARAMETERS if k not in ("base_x", "base_y")})
+        rod = rod_from_parameters(sim)
         obj = object_from_parameters(sim["object"], sim["object_outline"], sim["object_center"], sim["object_angle"])
         loop = ClosedLoopConfig(duration=float(sim["duration"]), control_period=float(sim["control_period"]) or None,
                                 dt=float(sim["dt"]) or None, settle_speed=float(sim["settle_speed"]),
@@ -221,6 +220,12 @@ class Scenario:
         with the other ``changes`` (fields, e.g. ``rod``) made at once: the start is checked
         (:func:`check_start`) on the new object with the new rod, not on a mix of old and new."""
         return replace(self, object=obj, gains=replace(self.gains, object_radius=None), **changes)
+
+
+def rod_from_parameters(p: dict[str, Any]) -> RodModel:
+    """The rod of a node's parameters (:data:`ROD_PARAMETERS`, all present)."""
+    return RodModel(base_position=(float(p["base_x"]), float(p["base_y"])),
+                    **{k: p[k] for k in ROD_PARAMETERS if k not in ("base_x", "base_y")})
 
 
 def object_from_parameters(text: str, outline: str, center: Any, angle: float) -> ObjectSpec:

@@ -80,6 +80,8 @@ def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -
     assert r["settled_recomputed"] is True  # (at the stamps, simulated time rounded to ns)
     assert r["settle_time_recomputed_s"] == pytest.approx(summary["settle_time_s"], rel=0, abs=1e-9)
     assert r["max_penetration_recomputed"] == summary["max_penetration"]
+    # the recorded couples applied the muscles' effort the simulator reported
+    assert r["peak_couple_recomputed"] == summary["peak_couple"] > 0 and r["peak_couple_ratio"] is None
     # recomputation from the rod states matches the recorded contact and quality topics
     assert r["max_recompute_error"] is not None and r["max_recompute_error"] <= 1e-9
     assert r["recompute_errors"]["Q2_relative"] <= 1e-9

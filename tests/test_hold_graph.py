@@ -106,6 +106,10 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     assert held[0] < complete < PUSH_START / 0.002  # (the hold is complete before the push)
     run = load_run(tmp_path / "bag")
     assert run.rod.object is not None
+    # the recorded holds, each applied at the recorded state it answers, made the effort the simulator reported
+    from contgrasp_ros.recordings.analysis import peak_couple_recomputed
+
+    assert peak_couple_recomputed(run) == pytest.approx(summary["peak_couple"], rel=1e-9)
     contact = {int(m.step): m for _, m in iter_decoded(rec, [topics.resolve(topics.CONTACT)])}
     rods = {int(m.step): m for _, m in iter_decoded(rec, [topics.resolve(topics.ROD_STATE)])}
     for i in (0, complete, obs.k - 1):

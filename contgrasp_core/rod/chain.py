@@ -24,6 +24,7 @@ __all__ = [
     "frames_and_nodes",
     "centres",
     "node_angles",
+    "element_angles",
     "arm_shape",
     "centre_velocities",
     "centripetal_accelerations",
@@ -77,6 +78,16 @@ def node_angles(model: RodModel, theta: np.ndarray) -> np.ndarray:
     out[0] = model.base_angle
     out[1:-1] = 0.5 * (theta[:-1] + theta[1:])
     out[-1] = theta[-1]
+    return out
+
+
+def element_angles(node_theta: np.ndarray) -> np.ndarray:
+    """The element angles (N,) whose :func:`node_angles` are ``node_theta`` (N+1,): the last
+    element's is the tip's, and each node inside is the mean of its two elements."""
+    out = np.empty(len(node_theta) - 1)
+    out[-1] = node_theta[-1]
+    for k in range(len(out) - 1, 0, -1):
+        out[k - 1] = 2.0 * node_theta[k] - out[k]
     return out
 
 

@@ -41,13 +41,15 @@ from contgrasp_core.rod.closed_loop import SettleDetector
 from contgrasp_ros.plumbing import topics
 from contgrasp_ros.bag import BagInputError
 from contgrasp_ros.bag.reader import info, iter_decoded, open_recording
-from contgrasp_core.scenario import PAPER
+from contgrasp_core.scenario import PAPER, rod_from_parameters
 from contgrasp_ros.plumbing.convert import (
     ContactArrays,
+    HeldShape,
     ObjectArrays,
     RodArrays,
     boundary_from_msg,
     contact_arrays,
+    couple_arrays,
     rod_state_arrays,
     stamp_seconds,
 )
@@ -191,6 +193,7 @@ class RunData:
     run_info: dict[str, Any]
     status: dict[str, str]
     controller_status: dict[str, str]  # (the controller's last /diagnostics values: law, law_phase)
+    couples: dict[int, Any] | None = None  # the recorded couple answering each step (convert.couple_arrays)
     recorder: dict[str, Any] | None = None
     repeated_states: int = 0  # rod states published again (a re-send), each kept once
 
@@ -301,7 +304,7 @@ def load_run(path: str | Path) -> RunData:
     recorded = [{"name": t["name"], "type": t["type"], "count": t["count"]} for t in meta["topics"]]
     counts = {t["name"]: t["count"] for t in recorded}
     ns = topics.recorded_namespace(counts)  # (a graph run under a namespace: its topics)
-    name = {t: topics.resolve(t, ns) for t in (topics.ROD_STATE, topics.CONTACT, topics.QUALITY, topics.OBJECT)}
+    name = {t: topics.resolve(t, ns) for t in (topics.ROD_STATE, topics.CONTACT, topics.QUALITY, topics.OBJECT, topics.COUPLE)}
     if not counts.get(name[topics.ROD_STATE]):
         have = ", ".join(f"{n} ({c})" for n, c in counts.items()) or "none"
         raise BagInputError(f"{path}: no {name[topics.ROD_STATE]} messages to analyse (recorded topics: {have})")
@@ -315,7 +318,8 @@ def load_run(path: str | Path) -> RunData:
         raise BagInputError(f"{path}: the {RUN_RECORD!r} metadata record's params are not per-node parameter mappings")
     recorder = _json_values(records[RECORDER_RECORD]) if RECORDER_RECORD in records else None
 
-    by_topic: dict[str, list[Any]] = {topics.ROD_STATE: [], topics.CONTACT: [], topics.QUALITY: [], topics.OBJECT: []}
+    by_topic: dict[str, list[Any]] = {topics.ROD_STATE: [], topics.CONTACT: [], topics.QUALITY: [], topics.OBJECT: [],
+                                      topics.COUPLE: []}
     status: dict[str, str] = {}
     controller: dict[str, str] = {}
     repeated = 0
@@ -353,9 +357,48 @@ def load_run(path: str | Path) -> RunData:
         run_info=run_info,
         status=status,
         controller_status=controller,
+        couples=_couples(by_topic[topics.COUPLE]) if counts.get(name[topics.COUPLE]) else None,
         recorder=recorder,
         repeated_states=repeated,
     )
+
+
+def _couples(msgs: list[Any]) -> dict[int, Any]:
+    """The first usable couple answering each step (a re-sent state is answered twice; a
+    malformed message is left out, as the simulator leaves it out)."""
+    out: dict[int, Any] = {}
+    for msg in msgs:
+        try:
+            step, _, couple, _ = couple_arrays(msg)
+        except ContgraspError:
+            continue
+        out.setdefault(step, couple)
+    return out
+
+
+def peak_couple_recomputed(run: RunData) -> float | None:
+    """The largest |u| the recorded couples applied (N m), each at the state it answers, after
+    the muscles' bound (:func:`contgrasp_core.rod.muscle.saturate`): the couple itself, or a
+    hold's at the recorded state's angles. None without recorded couples, or when a hold
+    answers a state that was not recorded (decimated)."""
+    from contgrasp_core.rod.chain import element_angles
+    from contgrasp_core.rod.muscle import saturate
+
+    if not run.couples:
+        return None
+    model = rod_from_parameters({**PAPER.node_parameters(SIMULATOR), **(run.params or {}).get(SIMULATOR, {})})
+    row = {int(k): i for i, k in enumerate(run.rod.step)}
+    peak = 0.0
+    for step, couple in run.couples.items():
+        if isinstance(couple, HeldShape):
+            if step not in row:
+                return None
+            hold = couple.hold(model)
+            u = hold.couple + hold.couple_and_jacobian(element_angles(run.rod.theta[row[step]]), jacobian=False)[0]
+        else:
+            u = np.asarray(getattr(couple, "u", couple), dtype=float)
+        peak = max(peak, float(np.abs(saturate(model, u)).max()))
+    return peak
 
 
 @dataclass
@@ -687,6 +730,7 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
         "settled_recomputed": settled_re,
         "settle_time_recomputed_s": settle_re,
         "max_penetration_recomputed": float(rod.max_penetration.max()) if gaps["contiguous"] and gaps["first_step"] == 0 else None,
+        "peak_couple_recomputed": peak_couple_recomputed(run),
         "max_recompute_error": rc.max_error,
         "recompute_errors": rc.errors,
         "recomputed_pairs": {"contact": rc.contact_pairs, "quality": rc.quality_pairs},
