@@ -153,8 +153,9 @@ def missed_pairs(model: RodModel, frame: SelfContactFrame | None, c_start: Array
         return None
     i, seg, t = found[:3]
     n = model.n_elements
-    if frame is not None:
-        new = ~np.isin(i * n + seg, frame.centre * n + frame.segment)
+    if frame is not None:  # (a framed pair whose foot moved on to the next segment is the same meeting)
+        framed = frame.centre * n + frame.segment
+        new = ~(np.isin(i * n + seg, framed) | np.isin(i * n + seg - 1, framed) | np.isin(i * n + seg + 1, framed))
         i, seg, t = i[new], seg[new], t[new]
     if i.size == 0:
         return None
