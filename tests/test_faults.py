@@ -63,6 +63,16 @@ def recorded_steps(bag: Path) -> list[int]:
     return [m.step for _, m in iter_decoded(open_recording(bag), ["/contgrasp/rod_state"])]
 
 
+def killed_mid_run(launch: LaunchHandle, node: str) -> tuple[int, dict]:
+    """Kill ``node`` once the loop runs (:func:`running`); the launcher's exit code and summary."""
+    try:
+        running(launch)
+        launch.signal(node, signal.SIGKILL)
+        return launch.result()
+    finally:
+        launch.close()
+
+
 def running(launch: Launch) -> int:
     """Wait until the loop runs (the launcher resumed the simulator), then a little longer.
 
@@ -184,12 +194,7 @@ def test_killed_simulator_stops_the_run_and_the_recording_is_complete(tmp_path: 
     bag = tmp_path / "bag"
     zombies_before = zombie_shm_segments()
     launch = Launch("--params", str(fault_params(tmp_path, duration=100.0)), "--bag", str(bag))
-    try:
-        running(launch)
-        launch.signal("rod_simulator", signal.SIGKILL)
-        code, out = launch.result()
-    finally:
-        launch.close()
+    code, out = killed_mid_run(launch, "rod_simulator")
     assert code == 1 and out["error"] == "node 'rod_simulator' exited with code -9"
     assert not zombie_shm_segments() - zombies_before
     ended = [e for e in launch.events if e["event"] in ("exited", "finished")]
@@ -320,12 +325,7 @@ def test_a_recorder_lost_mid_run_leaves_the_run_unrecorded_and_the_launcher_says
     reports the recorder's failure (exit 1: the run is not recorded; --allow-unrecorded would
     accept that)."""
     launch = Launch("--params", str(fault_params(tmp_path)), "--bag", str(tmp_path / "bag"))
-    try:
-        running(launch)
-        launch.signal("mcap_recorder", signal.SIGKILL)
-        code, out = launch.result()
-    finally:
-        launch.close()
+    code, out = killed_mid_run(launch, "mcap_recorder")
     assert code == 1 and out["exit_codes"]["mcap_recorder"] == -9, "".join(launch.lines[-40:])
     assert out["simulator_state"] == "finished" and out["steps"] > 0
     assert out["error"] == "the recorder exited with code -9: the run is not recorded (--allow-unrecorded accepts that)"

@@ -66,8 +66,8 @@ def frames_and_nodes(model: RodModel, theta: np.ndarray) -> tuple[np.ndarray, np
 
 
 def centres(model: RodModel, theta: np.ndarray) -> np.ndarray:
-    """Element centres, the midpoints of consecutive nodes (N, 2)."""
-    x = nodes(model, theta)
+    """Element centres, the midpoints of consecutive nodes (N, 2) (:func:`frames_and_nodes`'s)."""
+    x = frames_and_nodes(model, theta)[2]
     return 0.5 * (x[:-1] + x[1:])
 
 

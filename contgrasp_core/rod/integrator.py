@@ -647,16 +647,10 @@ class RodSystem:
         none). No pair can have closed a gap wider than the search's ``margin`` if no centre moved
         half of it from where the search saw it (``searched``): then nothing is searched again."""
         m = self.model
-        end = _centres(m, new.theta)
+        end = chain.centres(m, new.theta)
         if 2.0 * float(np.hypot(*(end - searched).T).max()) < margin:
             return None
-        return missed_pairs(m, self_frame, _centres(m, state.theta), end)
-
-
-def _centres(model: RodModel, theta: np.ndarray) -> np.ndarray:
-    """The element centres (:func:`.chain.centres`) from the compiled nodes where enabled."""
-    x = chain.frames_and_nodes(model, theta)[2]
-    return 0.5 * (x[:-1] + x[1:])
+        return missed_pairs(m, self_frame, chain.centres(m, state.theta), end)
 
 
 def _account(info: dict, ev: _StepEval) -> None:

@@ -217,8 +217,7 @@ def self_gap(model: RodModel, theta: Array, margin: float | None = None) -> Self
     """The smallest surface gap between non-neighbouring parts of the arm at angles ``theta``
     (the measure of "passed through itself"; :class:`SelfGap`), searched up to ``margin`` (m;
     default twice the largest radius; 0: overlaps only)."""
-    x = chain.frames_and_nodes(model, theta)[2]
-    found = _pairs(model, 0.5 * (x[:-1] + x[1:]), 2.0 * float(model.r_centres.max()) if margin is None else margin)
+    found = _pairs(model, chain.centres(model, theta), 2.0 * float(model.r_centres.max()) if margin is None else margin)
     if found is None or found[0].size == 0:
         return SelfGap(gap=np.inf, ratio=0.0, s=np.nan, s_other=np.nan)
     i, seg, t, _, dist, r_foot = found
