@@ -1,4 +1,4 @@
-"""The cost of one hop between two node processes, by executor (issue 16, the graph's floor).
+"""The cost of one hop between two node processes, by executor (the graph's floor).
 
 A pinger publishes a RodState of the paper's size (N = 100 elements) on ``/hop/ping``; an echo
 process (this script with ``--echo``) republishes every message it takes on ``/hop/pong``; the

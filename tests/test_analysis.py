@@ -389,7 +389,7 @@ def test_a_recording_without_run_parameters_still_replays_the_settle_rule(record
                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
     """A run started by hand records no run parameters (no launcher): with every rod state from
     step 0 the settle rule is still replayed, with the node defaults, and the report says so
-    (issue 31, item 10: ``settled_recomputed: None`` beside ``step_gaps.contiguous: true``).
+    (not ``settled_recomputed: None`` beside ``step_gaps.contiguous: true``).
     Truth: the simulator's own verdict, once the fixture's looser rule stands in as the defaults."""
     from contgrasp_ros.bag.writer import RUN_RECORD
     from contgrasp_ros.recordings import analysis

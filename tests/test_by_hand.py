@@ -207,7 +207,7 @@ MAX_GAP_S = 1.5
 
 @pytest.mark.parametrize("run", range(BY_HAND_RUNS))
 def test_four_nodes_by_hand_in_any_order_with_any_gaps_never_lose_step_0(graph: Graph, paper_core: Any, run: int) -> None:
-    """Issue 30: the four executables, no parameter file, started in a shuffled order 0-1.5 s
+    """The four executables, no parameter file, started in a shuffled order 0-1.5 s
     apart: step 0 reaches the loop every time (no couple timeout, no fallback), so the run is
     the core loop's bit for bit with zero missed deadlines, whichever node comes last; every
     node then exits by itself with status 0. (Whole runs: a short one can end before the last

@@ -117,7 +117,7 @@ def test_argparse_usage_error_is_exit_2() -> None:
 
 @pytest.mark.parametrize("header", ["", "s,kappa\n", "# the profile\ns,kappa\n"])
 def test_a_curvature_file_may_have_a_header_as_an_outline_may(tmp_path, header: str) -> None:  # type: ignore[no-untyped-def]
-    """(issue 31: an ``s,kappa`` header was refused while outline files take one)"""
+    """An ``s,kappa`` header is taken, as outline files take one (it was refused)."""
     from contgrasp_core.boundary import circle
     from contgrasp_core.cli.kinematics import curvature_profile
     from contgrasp_core.errors import InvalidParameterError

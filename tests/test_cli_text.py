@@ -1,4 +1,4 @@
-"""What the command line prints is short and true (issue 19 C): usage errors are one line with
+"""What the command line prints is short and true: usage errors are one line with
 one ``error:`` and a ``--help`` hint on every command; text summaries print scalars and short
 values (arrays only with --json); quality-map's text shows the optimum; simulate warns about a
 zero-order hold known to be unstable and offers the graph's first-order hold; bag info prints
@@ -233,7 +233,7 @@ def test_bag_info_prints_qos_readably(capsys: pytest.CaptureFixture[str]) -> Non
 
 @pytest.mark.parametrize("hold", ["first-order", "zero-order"])
 def test_max_penetration_is_over_every_control_step_recorded_or_not(hold: str) -> None:
-    """One definition of ``max_penetration`` (issue 31, item 3): the largest rod-surface
+    """One definition of ``max_penetration``: the largest rod-surface
     penetration over every control step, as the ROS simulator's session reports it, whatever the
     record period. Truth: the same run recorded at every step (record_period None)."""
     from contgrasp_core.cli.simulate import run_first_order

@@ -15,8 +15,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 TEXT_SUFFIXES = (".py", ".md", ".toml", ".yaml", ".xml", ".sh", ".cfg", ".txt")
-# "issue 16", "Issue 30:", "issues 29", "issue #7", 'issue "Reliability"' (built in two parts so
-# that this file does not match itself)
+# the word, optionally plural, then a number (optionally after '#') or a quoted name; built in two
+# parts so that this file does not match itself
 TRACKER = re.compile("[Ii]ssue" + r"""s?\s*(#?\d+|")""")
 DOCSTRING_DIRS = ("contgrasp_core", "contgrasp_ros", "benchmarks")
 MAX_DOCSTRING_LINES = 15

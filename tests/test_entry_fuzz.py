@@ -1,4 +1,4 @@
-"""Property-based fuzz tests of every public library and CLI entry point (issue "Reliability").
+"""Property-based fuzz tests of every public library and CLI entry point (docs/RELIABILITY.md).
 
 Library property: called with random inputs - valid ones mixed with NaN, +-Inf, zero/negative
 sizes, huge values (1e300, 10**12), wrong shapes, empty arrays and wrong Python types (strings,

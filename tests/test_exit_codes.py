@@ -301,7 +301,7 @@ def test_core_main_maps_the_family_to_the_exit_code(monkeypatch: pytest.MonkeyPa
     err = capsys.readouterr().err
     prefix = "" if isinstance(exc, ContgraspError) else f"{type(exc).__name__}: "
     assert err == f"contgrasp kinematics: error: {prefix}{exc}\n"
-    assert cli.main(["kinematics", "--debug"]) == code  # (issue 31: an input error exited 1 with --debug)
+    assert cli.main(["kinematics", "--debug"]) == code  # (an input error once exited 1 with --debug)
     err = capsys.readouterr().err
     assert err.startswith("Traceback (most recent call last):") and f"{type(exc).__name__}: {exc}" in err
 

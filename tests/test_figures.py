@@ -25,7 +25,7 @@ print(matplotlib.get_backend())
     assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-# --- what a reviewer checks on every figure (issue 19): labelled axes with units, a legend, and
+# --- what a reviewer checks on every figure: labelled axes with units, a legend, and
 # every curve inside the axes (no clipped data)
 
 import re  # noqa: E402
@@ -228,7 +228,7 @@ def test_fig3_labels_legend_colour_bar_and_title() -> None:
     assert fig.get_suptitle() == "grasp quality maps: circle:5"  # the object's text, not its repr
 
 
-# --- readable figures (issue 31 item 10) and figures the code reproduces (issue 31 item 7)
+# --- readable figures and figures the code reproduces
 
 FIGURES_DIR = Path(__file__).resolve().parents[1] / "docs" / "figures"
 MIN_RGB_STEP = 0.35

@@ -1,6 +1,6 @@
 """Holding (contgrasp_core.holding, ``contgrasp hold``): the measured grasp stiffness predicts
 the response to another small load, the capacity ramps end in a stated escape, and the command
-reports what the issue asks for."""
+reports stiffness, capacity and quality."""
 
 from __future__ import annotations
 

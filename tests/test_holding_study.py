@@ -250,7 +250,7 @@ def _children(pid: int) -> list[int]:
 def test_ctrl_c_stops_a_study_with_two_workers_at_once(tmp_path: Path) -> None:
     """SIGINT to the study's process group (a terminal's Ctrl-C) while two workers compute:
     the command ends within 10 s with one line and exit code 130, and no process of it is left
-    (issue 31: it printed two tracebacks and hung in the pool's shutdown for minutes)."""
+    (it once printed two tracebacks and hung in the pool's shutdown for minutes)."""
     import os
     import signal
     import subprocess

@@ -1,4 +1,4 @@
-"""One object, one name (issue 31, items 8 and 9).
+"""One object, one name.
 
 Every command prints the object by :meth:`contgrasp_core.objects.ObjectSpec.text`
 (``circle:4``, ``ellipse:8,4``, ``outline:FILE`` with the file name as given), and what it

@@ -1,6 +1,6 @@
 """A user's outline may start anywhere and run either way round: the seam s_o = 0 sits at its
 first point (after orienting it counter-clockwise), and every comparison of arclengths is taken
-modulo the perimeter L_o (issue 19). Rotating the CSV rows moves the seam; reversing them flips
+modulo the perimeter L_o. Rotating the CSV rows moves the seam; reversing them flips
 the orientation the file gives (the curve is re-oriented). Neither may change what is computed
 about the same physical arm, and an arm across the seam must not look one perimeter off."""
 

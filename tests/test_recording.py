@@ -45,10 +45,10 @@ def graph_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
         capture_output=True, text=True, timeout=600, env=ros_env(0),
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
-    # the recorder's last log lines come after SIGINT shut its context down (issue 31: rcl printed
+    # the recorder's last log lines come after SIGINT shut its context down (rcl once printed
     # "Failed to publish log message to rosout: publisher's context is invalid" on every run)
     assert "Failed to publish log message to rosout" not in proc.stderr, proc.stderr[-3000:]
-    # nor a hint to reset or Ctrl-C nodes the launcher stops itself (issue 31, item 6)
+    # nor a hint to reset or Ctrl-C nodes the launcher stops itself
     assert "staying up" not in proc.stderr and "~/reset" not in proc.stderr, proc.stderr[-3000:]
     return out, json.loads(proc.stdout)
 

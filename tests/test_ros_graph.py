@@ -245,7 +245,7 @@ def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
         assert proc.returncode == 2 and "--compose" in proc.stderr and "Traceback" not in proc.stderr, compose
     proc = launch("--in-process", "--compose", "boundary_sensor,grasp_controller")
     assert proc.returncode == 2 and "--in-process" in proc.stderr
-    for timeout in ("0", "-5", "nan", "inf"):  # (issue 31: --timeout 0 ran and failed with 68 lines; -5, nan accepted)
+    for timeout in ("0", "-5", "nan", "inf"):  # (--timeout 0 once ran and failed with 68 lines; -5, nan were accepted)
         proc = launch("--timeout", timeout)
         lines = proc.stderr.strip().splitlines()
         assert proc.returncode == 2 and len(lines) == 1 and "--timeout" in lines[0], (timeout, proc.stderr[-2000:])
@@ -257,7 +257,7 @@ def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
 
 def test_text_summary_reads_like_the_contgrasp_subcommands(tmp_path: Path) -> None:
     """Without --json the launcher prints ``key.sub: value`` lines, floats to 6 significant digits,
-    as every ``contgrasp`` subcommand does: no Python dict, no 15-digit float (issue 31, item 6)."""
+    as every ``contgrasp`` subcommand does: no Python dict, no 15-digit float."""
     proc = launch("--in-process", "--no-record", "--params", str(small_params(tmp_path)))
     assert proc.returncode == 0, proc.stderr[-3000:]
     lines = proc.stdout.strip().splitlines()

@@ -1,4 +1,4 @@
-"""A movable object through the ROS graph (issue 17, section 4): its dynamics and a scripted
+"""A movable object through the ROS graph: its dynamics and a scripted
 disturbance as simulator parameters, its motion in the rod states and on the pose/twist
 topics, the live wrench input (topic and service), the recording and ``contgrasp analyze``."""
 

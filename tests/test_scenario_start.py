@@ -1,4 +1,4 @@
-"""One check of a scenario's start before any run (issue 31): the straight arm must start
+"""One check of a scenario's start before any run: the straight arm must start
 outside the object and the object must be within its reach
 (:func:`contgrasp_core.scenario.check_start`). ``contgrasp simulate``, ``contgrasp hold``,
 the scenario model (the holding study, the launcher) and the simulator node (its start-up test

@@ -10,7 +10,7 @@ from contgrasp_core.cli import main
 
 
 @pytest.mark.parametrize("extra,periods", [(["--dt", "0.01"], 10), (["--control-period", "0.005"], 20),
-                                           # the sampled loop held to first order, as the ROS graph steps it (issue 31: 0 steps)
+                                           # the sampled loop held to first order, as the ROS graph steps it (it once reported 0 steps)
                                            (["--control-period", "0.005", "--hold", "first-order"], 20)])
 def test_simulate_json_reports_steps_and_wall_time(capsys: pytest.CaptureFixture[str], extra: list[str],
                                                    periods: int) -> None:

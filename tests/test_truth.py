@@ -1,4 +1,4 @@
-"""What a run reports is true and means one thing (issue 19): one contact set per run, one settle
+"""What a run reports is true and means one thing: one contact set per run, one settle
 criterion, checked on the paper's run stepped with the core functions as the nodes step it."""
 
 from __future__ import annotations
@@ -162,7 +162,7 @@ def test_the_shipped_sample_matches_the_code(paper_run: dict[str, Any]) -> None:
 
 def test_the_recipe_reproduces_the_shipped_sample(tmp_path: Path) -> None:
     """bags/README.md's command, run as written (its bash block, into a temporary folder), makes
-    the shipped sample again: the same topics and message counts (issue 31, item 7). /diagnostics
+    the shipped sample again: the same topics and message counts. /diagnostics
     is compared by presence only: the nodes' status timers run on the wall clock, so its count
     varies from run to run."""
     import os
@@ -192,7 +192,7 @@ def test_the_recipe_reproduces_the_shipped_sample(tmp_path: Path) -> None:
 
 def test_no_shipped_data_file_holds_a_path_of_the_machine_that_made_it() -> None:
     """The recordings, figures and test data carry no absolute path (the first sample's metadata
-    named a worktree folder of the machine that recorded it; issue 31, item 7)."""
+    named a worktree folder of the machine that recorded it)."""
     import re
 
     root = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""What a launcher run reports is true, means one thing and survives a crash (issue 19), with
+"""What a launcher run reports is true, means one thing and survives a crash, with
 real node processes: every time key says its clock, the domain comes from the environment and
 is announced, a lock-step recording is stamped with simulated time, a recording cut short by a
 killed recorder recovers and analyses with its own scenario, a lost recording fails the run
@@ -163,7 +163,7 @@ def test_a_lost_recording_fails_the_run_and_the_recovered_bag_analyses_with_its_
     fixed = tmp_path / "recovered.mcap"
     rec = contgrasp("bag", "recover", str(bag), str(fixed))[1]
     assert rec["chunks_kept"] > 0 and rec["messages"] > 0  # (the cut may fall between records)
-    # the copy's own chunk count is the one `bag info` shows (issue 31, item 10: 45 reported, 42 there)
+    # the copy's own chunk count is the one `bag info` shows (it once reported 45 where 42 were)
     assert rec["output_chunks"] == contgrasp("bag", "info", str(fixed))[1]["chunk_count"] > 0
     meta = open_recording(fixed).metadata_records()
     assert json.loads(meta[RUN_RECORD]["params"])["boundary_sensor"]["contact_tolerance"] == 0.0012

@@ -50,7 +50,7 @@ def lockstep_paper_run() -> dict[str, Any]:
 
 def closed_loop_continuous() -> dict[str, Any]:
     """Continuous implicit feedback, dt 10 ms, ``ClosedLoopConfig``'s default settle rule (what
-    ``contgrasp simulate`` ran before it took the scenario's settle criterion, issue 19)."""
+    ``contgrasp simulate`` ran before it took the scenario's settle criterion)."""
     from contgrasp_core.boundary import circle
     from contgrasp_core.rod import Obstacle, RodSystem
     from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
