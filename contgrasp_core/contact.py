@@ -1,22 +1,11 @@
 """Contact kinematics between the arm and the object boundary (paper Sec. II-C).
 
-Three views of the same relative geometry:
-
-* :func:`sense` - geometric sensing: from an arm shape, the shadow point s_o(s) (closest
-  boundary point), contact distance rho, contact angle alpha (eq. (4)),
-  contact depth delta (eq. (5)) and the contact set (Definition 1). It is the one sensing
-  function of the project: the library, the rod's closed loops, the feedback law's Jacobian
-  and the ROS boundary sensor all call it.
-* :func:`integrate_contact` - the contact kinematics ODE (eqs. (7), (8))
-  in s with state (rho, alpha, s_o), driven by a curvature profile kappa(s).
-* :func:`shape_from_contact` - the reverse map from (rho, alpha, s_o)(s) to the arm shape.
-
-Sign conventions: the object is on the LEFT of the arm; ``n(s_o)`` is the boundary's inward
-normal; ``rho`` is the signed distance from the centreline to the boundary (positive outside
-the object; equal to ``|gamma - r|`` there) and ``alpha`` is the angle from the arm tangent
-``a`` to ``n(s_o)``, which equals the angle from ``a`` to ``rho_vec = gamma - r`` whenever
-``rho > 0``. Valid contact states satisfy ``rho > 0``, ``0 < alpha < pi`` and
-``1 + rho kappa_o > 0``.
+Three views of the same relative geometry: :func:`sense`, geometric sensing of the shadow point
+s_o(s), rho and alpha (eq. (4)), delta (eq. (5)) and the contact set (Definition 1), the project's
+one sensing function; :func:`integrate_contact`, the contact kinematics ODE (eqs. (7), (8))
+driven by a curvature profile; :func:`shape_from_contact`, the reverse map to the arm shape.
+The object is on the arm's LEFT; ``rho`` is signed (positive outside the object); valid states
+have ``rho > 0``, ``0 < alpha < pi``, ``1 + rho kappa_o > 0``. docs/kinematics.md, "Contact".
 """
 
 from __future__ import annotations

@@ -1,24 +1,10 @@
 """Exceptions raised at the library boundary, in two families.
 
-* :class:`InputError` (also a ``ValueError``): the caller's input is wrong - a parameter out
-  of range, a boundary that cannot be built, a contact state outside the admissible region, a
-  malformed or corrupt file given to read, an output path that cannot name a file. The same
-  call with the same input fails again; the message says what was wrong and the valid range.
-  The command-line tools exit with code 2.
-* :class:`RunFailure` (also a ``RuntimeError``): a computation on valid input did not succeed -
-  Newton did not converge, a simulation diverged, a linear system was singular, writing an
-  output failed (disk full, file size limit, I/O error), a node cannot go on. The command-line
-  tools exit with code 1.
-
-Both derive from :class:`ContgraspError`, so ``except ContgraspError`` still catches every
-error the library raises on purpose. As in python-control and mcap, an input error subclasses
-the matching builtin, so generic callers that catch ``ValueError`` keep working.
-
-Contact validity (:class:`ContactValidityError`) is an input error wherever it is raised: the
-contact kinematics are a deterministic function of the initial state and the curvature profile
-the caller chose, so leaving the admissible region mid-integration means that profile admits
-no grasp from that state (the message names the arclength and the violated inequality). A
-numerical failure of the integrator itself is a :class:`RunFailure`.
+:class:`InputError` (also a ``ValueError``): the caller's input is wrong, and the same call fails
+again; the command-line tools exit 2. :class:`RunFailure` (also a ``RuntimeError``): a computation
+on valid input did not succeed (no convergence, divergence, a failed write); they exit 1. Both
+derive from :class:`ContgraspError`. :class:`ContactValidityError` is an input error: the contact
+kinematics are a deterministic function of the caller's initial state and curvature profile.
 """
 
 from __future__ import annotations

@@ -1,45 +1,13 @@
 """What a grasp resists (beyond the paper): the stiffness and the holding capacity of a settled grasp.
 
-The paper rates a grasp by the eigenvalues of the continuum grasp map's Gramian W (Sec. IV,
-Q1-Q3) and never loads the object. :func:`measure_holding` loads it, on the rod engine with the
-object as a rigid body (:mod:`contgrasp_core.rod.body`) and friction that holds (stick-slip,
-:mod:`contgrasp_core.rod.coupling`), the feedback law running throughout (the ROS graph's
-sampled loop, :func:`contgrasp_core.rod.session.drive`):
-
-1. **Grasp.** The scenario's closed loop with the object fixed, until settled; Q1-Q3 of that
-   contact state. A grasp that does not settle is a :class:`GraspFailure` with its ``outcome``:
-   ``no contact`` when no node has touched the object for ``contact_wait`` seconds (from the
-   start or since the last touch: the arm could not reach it or let go of it; the run stops
-   there), ``not settled`` when the arm still moved in contact at the scenario's duration (:func:`contgrasp_core.quality.quality_of_state`, about the scenario's
-   reference point), and a variant weighted by the contact forces: ``W_f = sum_i f_i G_i G_i^T``
-   over the element centres with the penalty force ``f_i = h k max(pen_i, 0)`` in place of the
-   arclength weights (:func:`force_weighted_quality`).
-2. **Release.** The object becomes a rigid body on a soft support (:class:`HoldSettings`
-   ``support``: a spring-damper to its pose in the grasp, mass and inertia from ``areal_density``;
-   ``support = 0``: entirely free), friction ``mu`` turns stick-slip, and the loop runs on for
-   ``release_time``: the object comes to rest where grasp and support hold it
-   (``released_displacement``). The support stands for what keeps a real object in place while
-   it is grasped (a table, a fixture): released entirely free, the paper's settled grasp pushes
-   the object out (the law presses the arm onto it and nothing balances the net force;
-   docs/holding.md). The grasp holds when, at the end of the release, the object has not
-   escaped (step 4's thresholds: in contact, moved less than ``escape_distance``, turned less
-   than ``escape_angle``); a grasp that does not hold is a result (``held`` False, no
-   stiffness, capacity 0 in every direction).
-3. **Stiffness.** From the released state, wrench steps of ``+-probe`` along each axis (force x,
-   force y, torque), each held ``hold_time``: the compliance ``C[:, j] = (q+ - q-) / (2 probe_j)``
-   (the half difference cancels the released grasp's slow drift, ~1e-3 rad/s without load),
-   the stiffness ``C^-1`` and the grasp's own stiffness ``K = C^-1 - K_support`` (3 x 3; N/m,
-   N/rad, N m/m, N m/rad). Its symmetric part's eigenvalues are reported in the scaled form
-   ``D K D``, ``D = diag(1, 1, 1/a)`` with ``a`` the object's nominal radius (torques as forces
-   at ``a``, rotations as arcs at ``a``: one unit, N/m).
-4. **Holding capacity.** Per direction ``d`` of the scaled wrench space (``directions`` unit
-   vectors: force directions evenly around the circle, and pure torques both ways), the wrench
-   ``W(t) = d rate t`` (torque component times ``a``) rises until the object escapes: its
-   centroid moved more than ``escape_distance`` or it turned more than ``escape_angle`` from the
-   released pose, no node is in contact, or the simulation fails (a tear-out is a result, not an
-   error). The capacity is ``|W|`` at that moment (the support's share included: the same for
-   every grasp); a direction still held at ``ramp_time`` is reported as held (its capacity a
-   lower bound).
+The paper rates a grasp by its Gramian's eigenvalues (Sec. IV, Q1-Q3) and never loads the
+object. :func:`measure_holding` loads it on the rod engine (the object a rigid body,
+:mod:`contgrasp_core.rod.body`; stick-slip friction, :mod:`contgrasp_core.rod.coupling`), the
+feedback law running throughout: 1. grasp the fixed object until settled (Q1-Q3, and
+:func:`force_weighted_quality`); 2. release it onto a soft support (``support = 0``: free) and
+see whether it stays held; 3. the stiffness ``K`` from wrench steps of ``+-probe``; 4. the
+holding capacity per direction of a rising wrench, up to escape. A grasp that does not settle is
+a :class:`GraspFailure`; one that does not hold is a result. docs/holding.md, "What is measured".
 """
 
 from __future__ import annotations

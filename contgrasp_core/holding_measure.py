@@ -1,37 +1,12 @@
 """Which grasps hold, before simulating: the wrench capacity of a continuum contact (beyond the
-paper; docs/holding.md, "A measure that predicts holding", eqs. (M1)-(M3)).
+paper; docs/holding.md, "A measure that predicts holding", eqs. (M1)-(M4)).
 
-Q1-Q3 (Sec. IV) measure how well the contact set spans the wrench space, not what it can
-resist: a contact that can only push cannot hold an object pulled away from it, however well
-its grasp map is conditioned. Discrete grasping answers with friction-cone wrench spaces; this
-is their continuum analogue. The arm presses the object along its contact set ``S``
-(Definition 1) with a line pressure ``0 <= p(s) <= p_max`` (N per metre of arm) and Coulomb
-friction ``|q(s)| <= mu p(s)`` along the boundary, so the wrenches it can exert form
-
-    K = { int_S (f, (gamma - c) x f / a) ds : f = p n + q t, 0 <= p <= p_max, |q| <= mu p }   (M1)
-
-(``n`` the boundary's inward normal and ``t`` its tangent at the contact point ``gamma(s)``,
-``c`` the wrench reference, ``a`` the length that scales torque to force). ``K`` is the
-integral of per-point triangles with a vertex at the origin, so its support function is
-
-    h(d) = p_max int_S max(0, d . g+(s), d . g-(s)) ds,   g+- = (n +- mu t, (gamma - c) x (n +- mu t) / a)   (M2)
-
-and the measure is the radius of the largest ball about the origin inside ``K``,
-
-    Q_H = min_{|d| = 1} h(d)   (M3)
-
-the largest wrench (``|(f_x, f_y, tau / a)|``) resisted in every direction. Per unit pressure
-bound (``p_max = 1`` N/m) it is a length, in metres. ``Q_H = 0`` when some direction cannot be
-resisted at all (no force closure: a frictionless wrap under half a turn, a torque without
-friction). Closed forms (tested): a full wrap of a circle of radius ``R`` about its centre with
-``a = R`` has ``h = 2 R (sqrt(1 + mu^2) + mu)`` for any pure force and ``2 pi R mu`` for the pure
-torque. The integral is the arm-grid quadrature of Q1-Q3 (:func:`contgrasp_core.quality.contact_weights`).
-
-Of which contact set? :func:`static_capacity` takes the paper's optimal grasp of Sec. III (the
-static map's); :func:`cage_capacity` takes the contact set the holding law will press
-(docs/holding.md (M4)): its cage (H1) at rest at the close gap, the rod's static closed loop
-(at rest with no load ``EI kappa + u = 0`` at every joint: the feedback curvature of eq. (20),
-swept from the arm's base), and the enclosing band (H3) on it.
+Q1-Q3 (Sec. IV) measure how well the contact set spans the wrench space, not what it can resist.
+The arm presses the object along its contact set (Definition 1) with a bounded line pressure and
+Coulomb friction; the wrenches it can exert form a convex set ``K`` (M1) with support function
+``h`` (M2), and ``Q_H = min_{|d| = 1} h(d)`` (M3) is the largest wrench resisted in every
+direction (per unit pressure bound: metres). :func:`static_capacity` rates the paper's optimal
+grasp of Sec. III, :func:`cage_capacity` the contact set the holding law will press (M4).
 """
 
 from __future__ import annotations

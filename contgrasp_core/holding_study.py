@@ -1,26 +1,12 @@
 """Do the paper's quality measures predict how firmly a grasp holds? (beyond the paper)
 
-For every base pose of a quality map (paper Sec. IV-C: polar angle ``psi`` and boundary
-distance ``d`` of the disc region D, heading tangent to it), and for the Nelder-Mead optimum of
-each metric, :func:`run_study`
-
-1. takes the static map's Q1-Q3 (the paper's optimal grasp of eq. (9) from that base,
-   :func:`contgrasp_core.quality_map.quality_map`, in the paper's dimensionless units);
-2. places the rod at the same pose scaled to metres (``scale`` m per paper unit about the
-   object frame's origin: the paper's R = 5 circle becomes the rod scenario's 2.5 cm one), runs
-   its closed loop to settlement and measures Q1-Q3 of the settled contact, the grasp stiffness K
-   and the holding capacity (:func:`contgrasp_core.holding.measure_holding`), and records the
-   settled grasp's largest line pressure (``pressure_max``, N/m) and its settle time.
-
-The arm (``arm``) is the map's, uniform with a length a fraction of the object's perimeter
-(``map``, the paper's Sec. IV-C), or the rod scenario's own tapered arm for both the map and the
-rod (``rod``: its length and base and tip radii in the paper's units, rho_d = r(s)).
-
-Poses run as independent tasks (serial, processes or Dask, :mod:`contgrasp_core.executors`);
-each result is appended to a JSON-lines file as it arrives, so an interrupted study resumes
-where it stopped. :func:`correlations` gives Spearman's rank correlation of each quality
-measure with each holding measure over the poses that grasped, with bootstrap confidence
-intervals.
+For every base pose of a quality map (paper Sec. IV-C) and the map's optima, :func:`run_study`
+takes the static map's Q1-Q3 (eq. (9)'s optimal grasp), then places the rod at the same pose in
+metres, runs its closed loop to settlement and measures Q1-Q3 of the settled contact, the grasp
+stiffness and the holding capacity (:func:`contgrasp_core.holding.measure_holding`). Poses run as
+independent tasks (:mod:`contgrasp_core.executors`), each result appended to a JSON-lines file
+(an interrupted study resumes); :func:`correlations` gives Spearman's rank correlations with
+bootstrap intervals. docs/holding.md, "The study".
 """
 
 from __future__ import annotations

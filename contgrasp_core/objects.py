@@ -1,26 +1,13 @@
 """How an object is named: one syntax for the built-in shapes and a user's outline.
 
-Every entry point that takes an object (``contgrasp kinematics|grasp|quality-map|simulate|hold|holding-study``,
-``contgrasp-launch``, the simulator node, the scenario model) names it with an :class:`ObjectSpec`, written as text ``NAME[:P1,P2,...]``
-or given as an outline file:
-
-=============  ==========================================  =======================================
-``NAME``       parameters (in the caller's units)          paper defaults (Fig. 2 / Fig. 4 scale)
-=============  ==========================================  =======================================
-``circle``     ``R``                                       5 / 0.025 m
-``ellipse``    ``a, b`` (semi-axes)                        8, 4 / 0.03, 0.02 m
-``deformed``   ``R, amplitude, lobes, phase``              5, 0.15, 3, 0 / 0.025 m, 0.15, 3, 0
-``outline``    ``FILE`` (a CSV file of rows ``x, y``)      -
-=============  ==========================================  =======================================
-
-Omitted trailing parameters take the defaults of the caller's :class:`ObjectScale`:
-:data:`FIG2_SCALE` (the paper's dimensionless Sec. III-IV examples, centred at the origin) or
-:data:`ROD_SCALE` (the rod scenario of Sec. V-C, metres, centred at (0.08, 0.08) m). A user's
-outline (``outline:FILE.csv``, or ``--outline FILE.csv``) is used as given (absolute coordinates
-in the caller's units); it is closed implicitly when its last row does not repeat the first.
-:meth:`ObjectSpec.text` is the one name of an object: every command prints it, and ``--object``
-takes it back. Paper Sec. III-A names the three
-built-in objects (:func:`contgrasp_core.boundary.deformed_circle` gives the third's formula).
+Every entry point that takes an object (the ``contgrasp`` commands, ``contgrasp-launch``, the
+simulator node, the scenario model) names it with an :class:`ObjectSpec`, written
+``NAME[:P1,P2,...]`` (``circle``, ``ellipse``, ``deformed``: paper Sec. III-A) or
+``outline:FILE.csv``. Omitted parameters take the caller's :class:`ObjectScale`
+(:data:`FIG2_SCALE`, the paper's dimensionless examples, or :data:`ROD_SCALE`, the rod scenario
+of Sec. V-C in metres); :meth:`ObjectSpec.text` is the one name every command prints and
+``--object`` takes back. The table of names, parameters and defaults: docs/cli.md, "Objects: one
+syntax everywhere".
 """
 
 from __future__ import annotations

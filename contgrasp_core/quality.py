@@ -1,20 +1,11 @@
 """Grasp maps, the continuum grasp Gramian and grasp quality metrics (paper Sec. IV).
 
-* Point grasp map ``G_i = [I2; (gamma_i^perp)^T] R(phi_i)``, ``gamma^perp = R(pi/2) gamma``,
-  with ``gamma`` measured from an explicit wrench reference point (the object frame origin by
-  default), and the discrete grasp map ``G~ = [G_1 ... G_n]`` (Definition 2).
-* Continuum grasp map (eq. (14)) over the contact set ``S = {s : delta(s) >= -tol}``
-  (Definition 1) and its Gramian ``W = int_S G G^T ds`` (Prop. 4.1), integrated in ARM arclength s.
-* Metrics: ``Q1 = lambda_min(W)``, ``Q2 = det W``, ``Q3 = lambda_min / lambda_max``; the discrete
-  analogues ``sigma_min``, ``prod sigma_i``, ``sigma_min / sigma_max``.
-
-Quadrature: trapezoidal weights on the arm grid; a cell where ``delta + tol`` changes sign is
-cut at the linearly interpolated crossing and only its in-contact part is integrated (the
-integrand is interpolated linearly to the cut), so contact-set boundaries move continuously
-with the configuration instead of dropping or keeping whole cells. The rule is second order in
-the grid spacing. Because ``W = sum_i w_i G_i G_i^T`` the discretised continuum operator is
-``[sqrt(w_1) G_1 ... sqrt(w_n) G_n]`` and its singular values are exactly ``sqrt(eig W)``
-(Prop. 4.1 made concrete: :func:`continuum_operator`).
+Point grasp maps and the discrete grasp map (Definition 2); the continuum grasp map (eq. (14))
+over the contact set (Definition 1) and its Gramian ``W = int_S G G^T ds`` (Prop. 4.1), in arm
+arclength; ``Q1 = lambda_min(W)``, ``Q2 = det W``, ``Q3 = lambda_min / lambda_max`` and their
+discrete analogues. Trapezoidal quadrature whose cells are cut where the contact set ends
+(second order); :func:`continuum_operator` makes Prop. 4.1 concrete. docs/quality.md, "Grasp
+maps and metrics".
 """
 
 from __future__ import annotations

@@ -1,44 +1,13 @@
 """A holding law next to the paper's (beyond the paper; docs/holding.md, "A law that holds",
-eqs. (H1)-(H6)).
+eqs. (H1)-(H8)).
 
-The paper's law (eq. (19)) places the arm relative to the object: it drives ``rho`` to the
-arm's radius wherever the object is. Released free, the object is pushed and the arm follows
-it (docs/holding.md). This law wraps the object without touching it, then holds a shape
-anchored at the arm's base:
-
-1. **Cage** (H1): eq. (19) with the desired distance ``rho_d(s) = r(s) + g``, a clearance
-   ``g`` over the arm's surface (``mu2`` from eq. (A-2) with ``rho_d``, as Appendix IV does for
-   ``rho_d = r``). Equilibrium (Prop. 5.1, unchanged: ``mu2 > -kbar``): ``rho = rho_d``,
-   ``alpha = pi/2``: the arm at the gap ``g`` from the object, no contact force (the shape
-   along the arm; in time the rod flutters about it, docs/holding.md "The cage flutters",
-   :func:`~contgrasp_core.control.rod_feedback.rest_stability`).
-2. **Close** (H2): once the wrap angle (H3) sensed on the enclosing band reaches
-   ``wrap_angle`` (pi: the arm then surrounds more than half of the object), ``g`` decreases at
-   ``close_rate`` from ``clearance`` to ``close_gap``; the law stays eq. (19) with (H1).
-3. **Hold** (H4)-(H6): at ``g = close_gap`` the arm's own curvature ``kappa*`` (its shape,
-   proprioception) is latched, and the couple becomes
-   ``u = -EI kappa_ref + G EI (kappa - kappa_ref)``: the total couple ``EI kappa + u =
-   (1 + G) EI (kappa - kappa_ref)`` is an elastic rod's of stiffness ``(1 + G) EI`` and rest
-   curvature ``kappa_ref``. ``kappa_ref`` moves from ``kappa*`` to the parallel curve (H5)
-   offset by ``close_gap + squeeze`` towards the object on the enclosing band, over
-   ``squeeze_time``: the wrapped part closes onto the object and presses it ``squeeze`` deep.
-   The hold is a potential: with the rod's damping, drag and the contact's damping and
-   friction the rod + object energy (H6) cannot increase, and a rest state has a zero net
-   contact wrench on the object.
-4. **Dwell** (H8, off unless ``dwell`` > 0): at ``g = close_gap`` the cage stays at that gap
-   for ``dwell`` seconds and the latched ``kappa*`` is the mean of the sensed curvature over
-   the dwell (the band of (H5): the joints in the enclosing band for more than half of it), so
-   the held shape is the cage's mean shape, not its shape at one instant of its motion; with
-   ``dwell`` 0 the latch takes the one sample at which the gap is reached.
-5. **Depth regulation** (H7, off unless ``depth_gain`` > 0): after the squeeze, the offset of
-   the parallel curve becomes ``close_gap + squeeze + z`` with
-   ``dz/dt = depth_gain (squeeze - depth)``, ``depth`` the mean sensed contact depth
-   ``r - rho`` over the band's nodes that touch (the closest band node's, negative, when none
-   touches), ``z`` kept in ``[-(close_gap + squeeze), clearance]``: at rest the mean contact
-   depth is ``squeeze`` whatever the latch caught (a tactile skin's reading; docs/holding.md).
-
-What it senses: ``(rho, alpha)`` at the arm's nodes (eq. (4), as the paper's law) for the cage
-and the wrap angle, and the arm's own curvature for the hold; never the object's pose.
+The paper's law (eq. (19)) places the arm relative to the object, wherever the object is; this
+law wraps the object without touching it, then holds a shape anchored at the arm's base:
+**cage** (H1, eq. (19) with ``rho_d = r + g``), **close** (H2, the gap ``g`` shrinks once the
+wrap angle (H3) reaches ``wrap_angle``), **hold** (H4)-(H6: the latched curvature as an elastic
+rod's rest curvature, moved to the parallel curve (H5) pressing ``squeeze`` deep; a potential,
+energy (H6)), optionally **dwell** (H8) and **depth regulation** (H7). It senses ``(rho, alpha)``
+(eq. (4)) and the arm's own curvature, never the object's pose.
 """
 
 from __future__ import annotations

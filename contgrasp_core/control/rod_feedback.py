@@ -1,32 +1,13 @@
 """The feedback law applied to the rod engine (paper Sec. V-B on the rod of Sec. V, Appendix IV).
 
-Two ways the couple of eq. (19) reaches the rod:
-
-* :class:`StateFeedback` - continuous feedback, the law evaluated on the rod's own state inside
-  every implicit step;
-* :func:`feedback_at_joints` + :class:`HeldExpansion` - the sampled law (what the ROS controller
-  sends once per control period), held to first order in the state between samples.
-
-:func:`static_solution` is the static closed loop (eq. (8) with eq. (20))
-the dynamic loop is compared with in Fig. 4; :func:`rest_shape` is the rod's own static closed
-loop, joint by joint, sensed as the rod senses (any object, convex or not);
-:func:`rest_stability` linearises the rod's closed loop about such a rest (docs/holding.md,
-"The cage flutters").
-
-With a zero-order hold the couple of eq. (19) is sampled every control period and
-held; the loop then inherits a sampling-rate stability limit (the law acts at the element scale,
-where the tapered tip has bending frequencies of thousands of rad/s). :class:`StateFeedback`
-instead evaluates the law inside every Newton iteration of the implicit step, at the new state,
-and supplies its derivative ``du/dtheta`` to the Newton matrix, so the continuous-time loop of
-paper Prop. 5.2 is integrated with the same unconditional stability as the elastic forces.
-
-Sensing is :func:`contgrasp_core.contact.shadow_geometry` (the fields of
-:func:`contgrasp_core.contact.sense` the law reads, computed as it does, without its input checks)
-at the N+1 rod nodes (:func:`contgrasp_core.rod.chain.nodes`, the fast :class:`Obstacle`
-projection); the law reads
-it at the joints ``s_k = k h``, k = 0..N-1 (the clamp and the internal nodes; the tip carries no
-couple): ``rho_k`` the signed distance of node ``k`` to the boundary, ``alpha_k = phi + pi/2 -
-theta_k`` with ``theta_k`` the mean angle of the adjacent elements (eq. (4)).
+Two ways the couple of eq. (19) reaches the rod: :class:`StateFeedback`, the law evaluated on the
+rod's own state inside every implicit step (the continuous-time loop of Prop. 5.2, with
+``du/dtheta`` in the Newton matrix), and :func:`feedback_at_joints` + :class:`HeldExpansion`, the
+sampled law held to first order in the state (what the ROS controller sends). The law reads
+eq. (4) at the joints ``s_k = k h``. :func:`static_solution` is the static closed loop (eq. (8)
+with eq. (20)) of Fig. 4; :func:`rest_shape` the rod's own static closed loop;
+:func:`rest_stability` its linearisation (docs/holding.md, "The cage flutters"). docs/rod.md,
+"Closing the loop".
 """
 
 from __future__ import annotations

@@ -1,30 +1,11 @@
 """The discretised optimal-grasp problem (eq. (9)): dynamics, cost, exact adjoint.
 
-Discretisation (shared by every solver, so "the same discretised problem" is literal):
-
-* ``N`` equally spaced nodes ``s_i = i h`` on ``[0, L]``; control ``u_i = kappa(s_i)``;
-  state ``x_i = (rho_i, alpha_i, sigma_i)`` with ``sigma = s_o`` the shadow-point arclength.
-* Dynamics: eq. (8) with ``s_o' = nu_o`` (eq. (7)), discretised by the
-  implicit trapezoidal rule ``c_i = x_{i+1} - x_i - h/2 (f(x_i, u_i) + f(x_{i+1}, u_{i+1})) = 0``
-  with ``x_0 = (rho0, alpha0, s_o0)`` given (second order).
-* Cost: trapezoid rule ``J = sum_i w_i l(x_i, u_i)``, ``l = u^2/2 + chi (1/2 (rho - rho_d)^2
-  + 1 - cos(alpha - alpha_d))``, ``w = h (1/2, 1, ..., 1, 1/2)``.
-* Object curvature: ``kappa_o(sigma)`` is a periodic cubic spline through ``M`` samples of the
-  boundary's exact curvature (:class:`CurvatureTable`); its first and second derivatives are
-  the spline's own, so the discrete problem is defined with this function and every gradient
-  below is exact for it (the table differs from the true curvature by O(M^-4)).
-* State constraints (rho > 0, 0 < alpha < pi, 1 + rho kappa_o > 0) enter as a
-  Powell-Hestenes-Rockafellar augmented-Lagrangian term (the paper's footnote to the
-  Hamiltonian) ``sum_i w_i sum_j psi(q_ij)``, ``psi(q) = (max(0, y - mu q)^2 - y^2) / (2 mu)``.
-
-The adjoint ``lambda_i`` (one 3-vector per step ``c_i``) solves ``(dc/dx)^T lambda = -dJ/dx``;
-the reduced gradient is ``dJ/du_j = w_j u_j + h/2 (lambda_{j-1,2} + lambda_{j,2})``. The nodal
-costates ``p_j = h / (2 w_j) (lambda_{j-1} + lambda_j)`` are the discrete counterparts of
-eq. (12) (plus the third costate of s_o), so the gradient reads ``w_j (kappa_j + p_{j,2})``
-and the discrete PMP condition is exactly ``kappa_j = -p_{j,2}``.
-
-With ``frozen=True`` the derivative of kappa_o(s_o(s)) with respect to the state is dropped:
-that is the gradient of the paper's costate equations (12), which are written for a given kappa_o(s).
+One discretisation shared by every solver: ``N`` nodes on ``[0, L]``, state ``(rho, alpha,
+s_o)``, eq. (8) with eq. (7) by the implicit trapezoidal rule, the cost by the trapezoid rule,
+the object curvature as a periodic cubic spline (:class:`CurvatureTable`), the state constraints
+as an augmented-Lagrangian term. The exact discrete adjoint gives the reduced gradient and the
+nodal costates (the discrete counterparts of eq. (12)); ``frozen=True`` drops ``d kappa_o / d
+s_o``, the paper's costate equations. docs/optimal.md, "Discretisation" and "Exact discrete gradient".
 """
 
 from __future__ import annotations

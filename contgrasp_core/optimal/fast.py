@@ -1,31 +1,11 @@
 """Fast solver of the discretised eq. (9): Newton's method on the KKT conditions.
 
-A cold start runs three stages (``docs/optimal.md`` has the derivation and measurements):
-
-1. coarse grid (about N/8 nodes): full-space SQP steps (Newton on the KKT conditions, no line
-   search) from the initial guess; each costs one linearisation and one banded KKT solve. The
-   steps are trusted only while their predicted change contracts; they stop at a predicted
-   change of ``COARSE_SWITCH`` J (the coarse solution only seeds the fine grid); otherwise the
-   damped reduced Newton iterations below globalise the coarse problem first (to
-   ``coarse_tol``), then SQP;
-2. fine grid: SQP steps from the interpolated coarse (kappa, states, multipliers) until the
-   predicted change is deep in Newton's quadratic region, then c = 0 restored exactly (chord
-   trajectory Newton); the KKT factors of the last step are kept;
-3. fine grid: reduced-space Newton iterations that certify the optimum and, if needed, finish:
-   the exact discrete adjoint gives dJ/dkappa (including the dependence of kappa_o on the
-   control through s_o) and the costates; the Newton direction solves the banded KKT system
-   with the exact Hessian (Gauss-Newton if it is not a descent direction); an Armijo line
-   search integrates every trial control (iterates satisfy the dynamics). With ``cost_tol`` the
-   first check reuses the kept KKT factors (a chord step, not taken); a new matrix is formed
-   only if that check fails.
-
-Stopping rules (reduced Newton, at a feasible iterate with exact costates): the discrete PMP
-residual ``max_s |kappa + p_2| <= tol``, or, with ``cost_tol``, the Newton decrement
-``-1/2 dJ . dkappa <= cost_tol |J|`` - the second-order prediction of J - J*, asymptotically
-exact at a non-degenerate minimum (an estimate, not a bound: the problem is not convex; the
-benchmark measures the actual error). State constraints: augmented-Lagrangian outer loop
-(``y <- max(0, y - mu q)``, ``mu <- 10 mu`` when the violation does not shrink 4x); when no
-constraint is active it ends after the first inner solve.
+A cold start runs three stages: SQP steps on a coarse grid (about N/8 nodes) to seed the fine
+grid; SQP steps on the fine grid, then feasibility restored exactly; reduced-space Newton
+iterations with the exact discrete adjoint that certify the optimum (the discrete PMP residual
+``max_s |kappa + p_2| <= tol``, or with ``cost_tol`` the Newton decrement) and finish if needed.
+State constraints: an augmented-Lagrangian outer loop. Derivation and measurements:
+docs/optimal.md, "Fast solver" and "Constraint handling".
 """
 
 from __future__ import annotations

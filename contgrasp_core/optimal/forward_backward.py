@@ -1,18 +1,11 @@
 """The paper's forward-backward sweep (Sec. III-A, the update eq. (13)), the reference baseline.
 
-Every iteration: (1) integrate the contact kinematics eq. (8) forward for the current
-curvature (trapezoidal rule of :mod:`.discrete`, the same discretisation as the fast solver;
-warm-started Newton on the trajectory); (2) integrate the costates backward from
-p(L) = 0 - by default the paper's costates, eq. (12), i.e. with kappa_o(s) frozen along the arm
-(``gradient='paper'``), or the exact discrete adjoint including d kappa_o / d s_o
-(``gradient='exact'``); (3) update ``kappa <- kappa + eta (-p_2 - kappa)``.
-
-The paper's defaults are eta = 1e-6 and chi = 10. Iterates that leave the admissible set
-(rho <= 0: the arm passing through the object; alpha outside (0, pi)) are counted and
-reported, not treated as errors; only a singular forward integration
-(1 + rho kappa_o <= 0, where eq. (8) is undefined) or a non-finite cost stops it.
-The state constraints enter through the same augmented-Lagrangian penalty as the fast
-solver (multipliers 0, weight ``problem.penalty``), as the paper's footnote says.
+Every iteration integrates eq. (8) forward (the trapezoidal rule of :mod:`.discrete`, as the fast
+solver), the costates backward from p(L) = 0 (the paper's eq. (12), ``gradient='paper'``, or the
+exact discrete adjoint, ``gradient='exact'``), then updates ``kappa <- kappa + eta (-p_2 -
+kappa)`` (paper defaults eta = 1e-6, chi = 10). Inadmissible iterates are counted, not errors;
+a singular forward integration or a non-finite cost stops it. docs/optimal.md, "The paper's
+forward-backward sweep".
 """
 
 from __future__ import annotations

@@ -1,24 +1,12 @@
 """Compiled kernels (numba ``@njit(cache=True)``) of the rod engine's hot paths.
 
-The implicit step evaluates, per Newton iteration, the generalised force and the exact Newton
-matrix (:meth:`contgrasp_core.rod.integrator.RodSystem._evaluate`, O(N^2) numpy expressions with
-some forty temporary arrays) and solves the dense system. :func:`newton_system` computes the
-same residual and matrix without temporaries (every term of the numpy path: the Gram forms of
-:func:`contgrasp_core.rod.chain.gram_form` through their tail sums, bending, inertia, damping,
-drag, penalty contact and the feedback couple's Jacobian), the matrix in the structure its terms
-give it (:class:`contgrasp_core.rod.newton_matrix.ChainMatrix`: the lower triangle dense, the
-upper triangle rank 2 plus a band; the row sums by O(N) prefix and suffix sums), and
-:func:`chain_solve` solves it in O(N^2) (a dense numba LU was 2.5x slower than LAPACK at N = 100
-and 8x at N = 400; the numpy path keeps LAPACK).
-
-Results agree with the numpy path to rounding (sums are accumulated in a different order;
-tests/test_kernels.py). The numpy path stays selectable: ``CONTGRASP_KERNELS=0`` in the
-environment (or :data:`ENABLED` set to False at run time) uses it;
-``NUMBA_DISABLE_JIT=1`` runs these functions as plain Python (for debugging; slow).
-Compiled code is cached on disk (numba's ``cache=True``: ``__pycache__`` next to
-``_kernels_jit.py``, or ``NUMBA_CACHE_DIR``), so only the first use on a machine pays the
-compilation. The compiled functions live in :mod:`._kernels_jit`, imported on first use
-(module ``__getattr__``): importing the package does not import numba (~0.5 s).
+:func:`newton_system` computes the residual and the exact Newton matrix of
+:meth:`contgrasp_core.rod.integrator.RodSystem._evaluate` without temporaries, the matrix in its
+structured form (:class:`contgrasp_core.rod.newton_matrix.ChainMatrix`), and :func:`chain_solve`
+solves it in O(N^2); results equal the numpy path to rounding (tests/test_kernels.py).
+``CONTGRASP_KERNELS=0`` (or :data:`ENABLED` = False) selects the numpy path. The compiled
+functions live in :mod:`._kernels_jit`, imported on first use, so importing the package does not
+import numba. Caching, debugging and measurements: docs/design.md, "Compiled kernels".
 """
 
 from __future__ import annotations

@@ -1,23 +1,11 @@
 """The grasped object as a planar rigid body (beyond the paper: its Sec. V-C object is fixed).
 
-The object keeps its boundary (:class:`~contgrasp_core.boundary.Boundary`) and moves rigidly:
-its configuration is the displacement ``q = (dx, dy, dpsi)`` from the start pose, a translation
-of the centroid and a rotation about it, with velocity ``v = (vx, vy, omega)``. A point ``p``
-of the object at the start pose is at
-
-``c0 + (dx, dy) + R(dpsi) (p - c0)``
-
-(``c0`` the centroid at the start pose). Newton-Euler in the plane, no gyroscopic terms:
-
-``m (vx', vy') = F``, ``J omega' = tau`` (about the centroid),
-
-with ``F``, ``tau`` the contact forces of the rod (equal and opposite to those on the rod, see
-:mod:`contgrasp_core.rod.coupling`), the applied wrench and, in ``"spring"`` mode, a
-spring-damper to the start pose per axis: ``-K q - C v`` (``K``, ``C`` diagonal).
-
-Modes: ``"fixed"`` (the paper's immovable object; the integrator takes exactly the code path
-of before), ``"spring"`` and ``"free"``. Mass and polar moment come from an areal density
-(kg/m^2) over the region the boundary encloses, or are given directly.
+The object keeps its boundary and moves rigidly: the displacement ``q = (dx, dy, dpsi)`` from the
+start pose (the centroid's translation and a rotation about it) and its velocity, under
+Newton-Euler in the plane (``m v' = F``, ``J omega' = tau``) with the rod's contact forces
+(:mod:`contgrasp_core.rod.coupling`), an applied wrench and, in ``"spring"`` mode, a
+spring-damper to the start pose. Modes ``"fixed"`` (the paper's; the engine's fixed-object path),
+``"spring"``, ``"free"``; mass and inertia from an areal density or given. docs/rod.md, "A movable object".
 """
 
 from __future__ import annotations

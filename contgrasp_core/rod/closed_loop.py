@@ -1,21 +1,12 @@
 """Closed-loop grasp: the rod engine driven by the feedback law (paper Sec. V-B, V-C).
 
-Two ways to close the loop:
-
-* ``control_period=None`` (default): continuous feedback. The law is evaluated on the rod's own
-  state inside every implicit step (:class:`~contgrasp_core.control.StateFeedback`), which is
-  the continuous-time loop of paper Prop. 5.2 and stays stable at large steps ``dt``.
-* ``control_period=T``: sampled feedback. Every ``T`` seconds the runner senses ``(rho, alpha)``
-  at the rod nodes from the current centreline (:func:`contgrasp_core.contact.sense` with the
-  fast :class:`Obstacle` projection, eq. (4)), evaluates the couple of
-  eq. (19) at the joints and holds it (zero-order hold) while the integrator advances
-  with steps ``dt`` dividing ``T``. This is what a lock-step ROS loop does; it needs ``T`` well
-  below the fastest bending period of the tip (see docs/rod.md) or the loop flutters.
-
-The runner records the state every ``record_period`` and stops at ``duration``, or earlier when
-the rod has settled (maximum node speed below ``settle_speed`` for ``settle_hold`` seconds after
-``min_time``) against a fixed object; a movable object is watched for the whole duration
-(:func:`stops_at_settle`), and the run is settled if it is quiet at its end.
+``control_period=None`` (default): continuous feedback, the law inside every implicit step
+(:class:`~contgrasp_core.control.StateFeedback`, the loop of Prop. 5.2). ``control_period=T``:
+the couple of eq. (19) sensed every ``T`` and held (zero-order), as a lock-step ROS loop without
+the first-order hold; it flutters unless ``T`` is well below the tip's bending periods. The
+runner records every ``record_period`` and stops at ``duration`` or, against a fixed object, once
+settled (:class:`SettleDetector`; a movable object is watched to the end: :func:`stops_at_settle`).
+docs/rod.md, "Closing the loop".
 """
 
 from __future__ import annotations

@@ -1,33 +1,12 @@
 """Contact between the rod and a movable object, with every derivative the implicit step needs.
 
-The penalty contact of :mod:`contgrasp_core.rod.loads` (paper Remark 2, Sec. V-C), extended to
-an object that moves (:mod:`contgrasp_core.rod.body`). Per element centre ``c_i`` near the
-object, the step's tangent-line model (foot ``p_i`` and outward normal ``n_i``, frozen over the
-step in the object's own frame) rides with the object: at the displacement ``q = (dx, dy, psi)``
-
-``p_i = X + R(psi) (p_i0 - c0)``, ``n_i = R(psi) n_i0``, ``t_i = R(pi/2) n_i``, ``X = c0 + (dx, dy)``.
-
-Penetration ``pen = r_i - n_i . (c_i - p_i)``, its rate from the velocity of the rod relative to
-the object's material point at the centre, ``w_i = v_i - V - Omega R(pi/2) (c_i - X)``:
-``pen' = -n_i . w_i``; the force on the rod is ``f_i = f_n (n_i - mu tanh(t_i . w_i / v_eps)
-t_i)`` with ``f_n = h max(k pen + c pen', 0)`` (active only while ``pen > 0``), as for a fixed
-object. The object receives ``-f_i`` at the same point ``c_i``: forces equal, opposite and
-collinear, so rod + object conserve linear and angular momentum when nothing else acts.
-
-Stick-slip friction (``RodModel.friction_model == "stick"``): each contact keeps an anchor
-``A_i``, the object's material point (start-pose frame) where it stuck. The tangential force is
-an elastic spring to it, ``-h (k e_i + c t_i . w_i) t_i`` with ``e_i = t_i . (c_i - A_i)``,
-while that stays inside the Coulomb cone ``mu f_n``, and ``-mu f_n sign(.) t_i`` beyond (slip).
-After a step the anchors of slipping contacts are moved back to the cone's edge (the return
-map of elastoplasticity), those of contacts that opened are forgotten, and new contacts stick
-where they are. A load below the cone is then held without creep; at the cone the contact
-slides at Coulomb's force (the capstan law, tested).
-
-:func:`body_coupling` returns the rod's generalised force, the object's wrench (contact, the
-applied wrench, the spring-damper) and their exact derivatives with respect to the rod's angles
-and rates and the object's displacement and velocity (tested against finite differences). With
-``body=None`` it is the same contact against a fixed object (zero displacement and velocity):
-the engine's path for stick-slip friction on a fixed object.
+The penalty contact of :mod:`contgrasp_core.rod.loads` (paper Remark 2, Sec. V-C) extended to an
+object that moves (:mod:`contgrasp_core.rod.body`): the step's tangent-line model rides with the
+object, penetration rate and friction use the rod's velocity relative to the object, and the
+object receives the opposite force at the same point (momentum balances). Also stick-slip
+friction (anchors, Coulomb cone, return map). :func:`body_coupling` returns the rod's generalised
+force, the object's wrench and their exact derivatives; with ``body=None`` the same contact
+against a fixed object. docs/rod.md, "A movable object".
 """
 
 from __future__ import annotations

@@ -1,18 +1,10 @@
 """Disturbances: a wrench on the movable object over time (beyond the paper).
 
-A :class:`Disturbance` is a step, a ramp or a pulse of the wrench ``(fx, fy, torque)`` (N, N,
-N m; force at the object's centroid) starting at ``start`` (s of simulated time):
-
-* ``step``: the wrench from ``start`` on;
-* ``ramp``: rising linearly from zero at ``start`` to the wrench at ``start + duration``, then held;
-* ``pulse``: the wrench from ``start`` for ``duration`` seconds, then zero.
-
-The closed loop holds the wrench of the start of each control period over that period (like
-the couple), so a scripted disturbance gives the same run in the core loop and in the ROS graph.
-
-:class:`WrenchInput` adds what a user applies while the loop runs (the ROS simulator's wrench
-topic and service) to the scripted disturbance: an input received while period k is held takes
-effect from period k + 1 on, so the wrench of every period is fixed when its state goes out.
+A :class:`Disturbance` is a step, a ramp or a pulse of the wrench ``(fx, fy, torque)`` (N, N, N m;
+force at the centroid) from ``start`` (s of simulated time). The loop holds the wrench of the
+start of each control period over that period, so a scripted disturbance gives the same run in
+the core loop and in the ROS graph; :class:`WrenchInput` adds a user's live inputs, each taking
+effect from the next period on. docs/ros.md, "A movable object".
 """
 
 from __future__ import annotations

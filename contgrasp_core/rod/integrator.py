@@ -1,44 +1,13 @@
 """Implicit time integration of the reduced-coordinate rod (paper eqs. (17), (18)).
 
-Equations of motion (Lagrange, generalised coordinates ``theta``):
-
-``M(theta) theta'' = Q(theta, theta')`` with
-``Q = G^T (f_ext - m a_cent) - (m_k - m_{k+1}) - zeta M theta'`` where ``m_k = EI_k kappa_k + u_k``
-is the total joint couple (``m_N = 0``: free tip), ``f_ext`` drag + contact (+ node loads),
-``a_cent`` the centripetal accelerations and ``G`` the centre Jacobian (:mod:`.chain`).
-
-Schemes (unknown ``omega_{n+1}``, solved by Newton):
-
-* ``"euler"`` - backward Euler, first order, L-stable (default: robust with stiff contact);
-* ``"midpoint"`` - implicit midpoint, second order, no numerical dissipation (energy error
-  O(dt^2) and bounded for the undamped rod).
-
-The Newton matrix ``M + dt c_w (-dQ/domega) + c_q (dt (-dQ/dtheta) + d(M delta)/dtheta)`` is the
-exact derivative of the residual (checked against finite differences in the tests): bending,
-inertia (the mass matrix's own dependence on the angles and the centripetal terms), damping,
-anisotropic quadratic drag, penalty contact (with the step's frozen tangent-line frame) and the
-state feedback's couple, all assembled in O(N^2) (:func:`.chain.gram_form`). An exact matrix
-gives quadratic convergence, so Newton needs 2-6 iterations where the earlier approximate
-matrix needed 9-12 and often failed.
-
-Step control (:meth:`RodSystem.advance`): a step whose Newton iteration diverges (an increment
-more than twice the previous one from the third iteration on, or no convergence in
-``max_iter``) is retried with half the step; after four halvings a linearly implicit Euler
-step is taken instead (the residual is then discontinuous, see
-:meth:`RodSystem._linearly_implicit_step`); a run fails only if even that is unusable down to
-``duration / 2**max_halvings``. A converged step that rotates an element by more
-than ``max_angle_step`` (accuracy guard for violent transients) is retried with the step
-scaled to 0.9 ``max_angle_step``. After an accepted step the step doubles if Newton took at
-most ``max_iter / 2`` iterations (never beyond 0.9 ``max_angle_step`` of rotation). The first
-Newton iterate is extrapolated from the previous step's rate change.
-
-Compiled kernels: by default the residual, the Newton matrix and the solve run in numba kernels
-(:mod:`contgrasp_core.rod._kernels`, the same terms fused, equal to the numpy path
-:meth:`RodSystem._evaluate` to rounding); the matrix keeps the structure its terms give it
-(:class:`.newton_matrix.ChainMatrix`, the upper triangle rank 2 plus a band) and is solved in
-O(N^2) instead of LAPACK's O(N^3). ``CONTGRASP_KERNELS=0`` in the environment,
-or ``contgrasp_core.rod._kernels.ENABLED = False``, selects the numpy path (kept as the readable reference and
-for the comparison tests and benchmarks).
+``M(theta) theta'' = Q(theta, theta')`` in the element angles (Lagrange; total joint couple
+``EI kappa + u``, free tip), stepped by backward Euler (``"euler"``, the default) or the implicit
+midpoint rule (``"midpoint"``) with Newton on the exact Newton matrix, assembled in O(N^2)
+(:func:`.chain.gram_form`). :meth:`RodSystem.advance` controls the step (halving, an accuracy
+guard on the rotation per step, a linearly implicit fallback). By default the residual, matrix
+and solve run in the compiled kernels (:mod:`contgrasp_core.rod._kernels`, the structured solve of
+:mod:`.newton_matrix`); ``CONTGRASP_KERNELS=0`` selects the numpy path
+(:meth:`RodSystem._evaluate`, the readable reference). docs/rod.md, "Integrator".
 """
 
 from __future__ import annotations

@@ -1,19 +1,11 @@
 """External loads on the rod's element centres and their linearisations (paper eq. (17), the rod dynamics).
 
-* Fluid drag ``f^drag`` (Appendix IV): per unit length
-  ``-c_n d |v.b| (v.b) b - c_t d |v.a| (v.a) a`` with the local diameter ``d = 2 r(s)``.
-* Contact with a fixed object (paper Remark 2, "Contact forces", Sec. V-C "modeled as an
-  obstacle, rudimentary repulsive contact forces"): the rod's outer surface at element ``i``
-  penetrates the object by ``p_i = r_i - n_i . (c_i - foot_i)`` where ``foot_i`` and the outward
-  normal ``n_i`` come from the closest-point projection at the start of the time step (the
-  boundary is replaced by its tangent line for the duration of one step). The force per unit
-  length is ``max(k p + c dp/dt, 0) n_i`` for ``p > 0``: stiff, damped and never adhesive.
-  Optional regularised Coulomb friction ``-mu |f_n| tanh(v_t / v_eps) t_i`` along the object
-  tangent.
-
-Each function returns centre forces (N, 2) (already multiplied by the element length) and the
-force derivatives the implicit integrator needs, per centre (assembled in the integrator with
-:func:`contgrasp_core.rod.chain.gram_form`).
+Fluid drag (Appendix IV; normal and tangential, quadratic in the velocity, over the local
+diameter) and penalty contact with a fixed object (paper Remark 2, Sec. V-C: the surface's
+penetration against the step's frozen tangent line, ``max(k p + c dp/dt, 0)`` per unit length,
+never adhesive, optional regularised Coulomb friction). Each function returns the centre forces
+(N, 2) and their derivatives for the integrator (:func:`contgrasp_core.rod.chain.gram_form`).
+docs/rod.md, "Model".
 """
 
 from __future__ import annotations

@@ -1,36 +1,13 @@
 """Material and discretisation of the planar Kirchhoff rod (paper eq. (17), the rod dynamics; Appendix IV).
 
-The rod of length ``L`` is cut into ``N`` equal elements of length ``h = L/N``. Element ``i``
-carries the tangent angle ``theta_i`` at its centre ``s = (i + 1/2) h`` (reduced coordinates:
-the rod is exactly inextensible and unshearable). Bending joints sit at the nodes
-``s_k = k h``, ``k = 0..N-1``; joint 0 is the clamp (distance ``h/2`` to the first centre),
-the free tip ``s = L`` carries no couple (eq. (18)).
-
-The cross-section is a circle whose radius tapers linearly from ``radius_base`` to
-``radius_tip``; ``A = pi r^2``, ``I = pi r^4 / 4`` from the local radius.
-
-Parameters (SI):
-
-* ``damping`` ``zeta`` (1/s): mass-proportional viscous damping, force density
-  ``-zeta rho_m A r_t`` and couple density ``-zeta rho_m I theta_t``. This is the paper's
-  ``-zeta r_t`` / ``-zeta theta_t`` with the coefficient scaled by the local inertia, the same
-  law as PyElastica's ``AnalyticalLinearDamper(uniform_damping_constant=zeta)``.
-* ``drag_normal``, ``drag_tangential`` (kg/m^3): quadratic fluid drag with force per unit length
-  ``-c d(s) |v_n| v_n`` normal and ``-c_t d(s) |v_t| v_t`` tangential, ``d = 2 r`` the local
-  diameter (``c = rho_water C_d / 2``; the octopus values 5110 and 25.55 are
-  ``511 * 10`` and ``511 * 0.05``).
-* ``contact_stiffness`` (N/m^2) and ``contact_damping`` (N s/m^2): penalty contact with the
-  object, force per unit length ``max(k p - c dp/dt, 0)`` along the outward object normal for a
-  penetration ``p = r(s) - distance > 0`` of the rod surface; ``friction`` (Coulomb coefficient).
-  ``friction_model`` ``"regularised"`` (default): ``mu f_n tanh(v_t / friction_velocity)``, a
-  grasp under a steady load creeps; ``"stick"``: stick-slip, an elastic tangential spring of
-  stiffness ``contact_stiffness`` (and damping ``contact_damping``) per unit length to the
-  point of the object where the contact stuck, capped by the Coulomb cone ``mu f_n`` (the
-  anchor slides with the contact at the cap). See :mod:`contgrasp_core.rod.loads` and
-  :mod:`contgrasp_core.rod.coupling`.
-* ``max_muscle_stress`` (Pa): the muscles' largest active stress; the active couple of each
-  section is bounded by :attr:`RodModel.muscle_bound` (:mod:`contgrasp_core.rod.muscle`,
-  docs/rod.md "Muscles with limits"); 0 = unbounded (the paper's law as printed).
+``N`` equal elements of length ``h = L/N``, the tangent angle ``theta_i`` at each centre (exactly
+inextensible and unshearable), bending joints at ``s_k = k h`` (joint 0 the clamp; the free tip
+carries no couple, eq. (18)); a circular cross-section tapering linearly from ``radius_base`` to
+``radius_tip``. :class:`RodModel` holds the SI parameters: damping ``zeta``, quadratic drag,
+penalty contact (stiffness, damping, Coulomb friction, ``"regularised"`` or ``"stick"``) and the
+muscles' ``max_muscle_stress`` (0: unbounded). Their laws: docs/rod.md ("Model",
+"Discretisation", "Muscles with limits"), :mod:`contgrasp_core.rod.loads`,
+:mod:`contgrasp_core.rod.coupling`.
 """
 
 from __future__ import annotations

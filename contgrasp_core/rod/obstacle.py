@@ -1,21 +1,11 @@
 """Fast closest-point queries against a fixed object boundary, for the rod's inner loop.
 
-:meth:`contgrasp_core.boundary.Boundary.project` is exact and general but costs milliseconds
-per call; the rod engine queries the boundary every time step. :class:`Obstacle` wraps any
-:class:`~contgrasp_core.boundary.Boundary` with
-
-* an exact analytic projection for circles (``kind == "circle"``; a compiled loop,
-  :func:`contgrasp_core.rod._kernels.circle_projection`, unless the kernels are disabled), and
-* for every other boundary, a table of ``samples`` arclength-equispaced boundary points with
-  tangent angle and curvature, a KD-tree for the nearest sample and one Newton step on the
-  osculating circle of that sample (error ``O(ds^3 kappa^2)``, about 1e-10 of the object size
-  with the default 8192 samples; checked against ``Boundary.project`` in the tests).
-
-It returns the same geometric quantities as the paper's sensing (eq. (4)):
-foot, object arclength, tangent angle ``phi``, curvature, and the signed distance (> 0 outside).
-:meth:`Obstacle.moved` is the same object displaced rigidly (a movable object,
-:mod:`contgrasp_core.rod.body`): the points are taken into the object's start-pose frame,
-projected there, and the results taken back.
+:meth:`contgrasp_core.boundary.Boundary.project` is exact but costs milliseconds per call;
+:class:`Obstacle` wraps any boundary with an analytic projection for circles and, for every other
+boundary, a table of samples, a KD-tree and one Newton step on the osculating circle (checked
+against ``Boundary.project`` in the tests). It returns the paper's sensing quantities (eq. (4)):
+foot, object arclength, tangent angle, curvature and the signed distance. :meth:`Obstacle.moved`
+is the same object displaced rigidly (:mod:`contgrasp_core.rod.body`).
 """
 
 from __future__ import annotations

@@ -1,23 +1,12 @@
 """The closed loop as explicit steps, shared by the core runner and the ROS nodes.
 
-One control cycle k (paper Sec. V-B):
-
-1. :meth:`LoopSession.observe` - the rod state k as arrays at the nodes (what the simulator
-   publishes) and the settle/duration bookkeeping;
-2. :func:`contgrasp_core.contact.sense` of :attr:`Observation.shape` - geometric sensing of
-   (rho, alpha, delta, s_o) from those arrays (eqs. (4), (5), Definition 1,
-   with :meth:`Boundary.project <contgrasp_core.boundary.Boundary.project>`) (what the sensor does);
-3. :func:`contgrasp_core.control.feedback_at_joints` - the couple of eq. (19) at the joints and its
-   first-order expansion in (rho, alpha) (what the controller does);
-4. :meth:`LoopSession.advance` - hold the couple, to first order in the state
-   (:class:`contgrasp_core.control.HeldExpansion`), for one control period (the integrator's substeps) to reach
-   state k + 1 (what the simulator does when the couple arrives).
-
-:meth:`LoopSession.check_divergence` tells a broken run (NaN/Inf state, penetration or kinetic
-energy beyond :class:`DivergenceLimits`) from a merely violent one.
-
-Because the ROS nodes call exactly these functions on exactly these arrays (CDR carries
-float64 unchanged), a lock-step ROS run reproduces the core-only run bit for bit.
+One control cycle k (paper Sec. V-B): :meth:`LoopSession.observe` (rod state k at the nodes: what
+the simulator publishes), :func:`contgrasp_core.contact.sense` (eqs. (4), (5), Definition 1: what
+the sensor does), :func:`contgrasp_core.control.feedback_at_joints` (eq. (19) and its first-order
+expansion: what the controller does), :meth:`LoopSession.advance` (the couple held to first order
+for one control period: what the simulator does). :meth:`LoopSession.check_divergence` tells a
+broken run from a violent one. The ROS nodes call exactly these functions on exactly these
+arrays, so a lock-step ROS run reproduces the core-only run bit for bit.
 """
 
 from __future__ import annotations
