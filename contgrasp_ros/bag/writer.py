@@ -1,20 +1,11 @@
 """Writing a recording: MCAP with rosbag2's layout (profile ``ros2``, ``ros2msg`` schemas, ``cdr``).
 
-A :class:`BagWriter` writes either a bag folder (``NAME/NAME_0.mcap`` + ``metadata.yaml``, like
-``ros2 bag record -s mcap``) or a single ``.mcap`` file. Messages are collected in chunks
-compressed with zstd (or lz4, or none); a chunk is finished and handed to the operating system
-when it reaches ``chunk_size`` bytes or when :meth:`BagWriter.flush` is called (the recorder
-does so periodically), so a process killed with SIGKILL loses at most the open chunk and every
-complete chunk can be recovered (:func:`contgrasp_ros.bag.reader.recover`). Closing writes the
-summary and indexes, the ``rosbag2`` metadata record and ``metadata.yaml``.
-
-Splitting (like ``ros2 bag record --max-bag-duration / --max-bag-size``): a bag folder can be
-split into ``NAME_0.mcap``, ``NAME_1.mcap``, ... once a file spans ``max_bag_duration`` seconds
-of log time or reaches ``max_bag_size`` bytes on disk. Each finished file is a complete MCAP
-file (summary, indexes, ``rosbag2`` record); ``metadata.yaml`` lists them all at close. Besides
-bounding the file size, splitting bounds the writer's memory: an MCAP writer keeps one chunk
-index (~0.9 kB) per chunk until it writes the summary, so an unsplit recording's writer grows
-linearly with the recording's length (docs/RELIABILITY.md, soak).
+A :class:`BagWriter` writes a bag folder (``NAME/NAME_0.mcap`` + ``metadata.yaml``, like ``ros2
+bag record -s mcap``) or a single ``.mcap`` file, in zstd (or lz4, or plain) chunks finished at
+``chunk_size`` or on :meth:`BagWriter.flush`, so a SIGKILL loses at most the open chunk
+(:func:`contgrasp_ros.bag.reader.recover`). A bag folder can be split at ``max_bag_duration`` or
+``max_bag_size``, every file a complete MCAP file; splitting also bounds the writer's memory.
+docs/recording.md ("Format", "Long runs: split the bag").
 """
 
 from __future__ import annotations

@@ -1,18 +1,10 @@
-"""The Fast DDS discovery profile of the launcher's graph: its node processes get it in their
-environment, its own participant (the monitor) while it is created (:func:`discovery_profile_set`;
-the launcher's environment is left as it was, so tests that run it in-process do not pass the
-profile on to nodes they start by hand).
+"""The Fast DDS discovery profile of the launcher's graph (``config/fastdds_discovery.xml``: more
+discovery announcements at start, so processes started together meet at once).
 
-Participants started at the same moment - the launcher's node processes - often miss each
-other's first discovery announcements on loopback and then meet only at the next periodic
-announcement, 2-3 s later. ``config/fastdds_discovery.xml`` announces 30 times every 100 ms
-instead of Fast DDS's 5 (the steady-state period is unchanged); rmw_fastrtps applies
-``ROS_AUTOMATIC_DISCOVERY_RANGE`` on top of it.
-
-Only the launcher's node processes get it. Nodes started by hand keep Fast DDS's defaults: with the profile,
-a by-hand sensor started 3 s before a simulator whose first state fails (it exits 1 s later,
-``tests/test_by_hand.py``) missed the simulator's failure status in 5 of 6 tries (0 of 5
-without; the cause inside Fast DDS was not found).
+The launcher's node processes get it in their environment and its own participant (the monitor)
+while it is created (:func:`discovery_profile_set`; the launcher's environment is left as it
+was). Nodes started by hand keep Fast DDS's defaults. Why, and what was measured: docs/design.md,
+"Start-up".
 """
 
 from __future__ import annotations

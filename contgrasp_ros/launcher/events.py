@@ -1,20 +1,9 @@
 """The launcher's machine-readable events: JSON lines on a channel of their own.
 
-``contgrasp-launch --events FILE`` (``-`` for stdout, ``fd:N`` for an inherited file
-descriptor) writes one JSON object per line and flushes it, so a program can follow a run while
-the human-readable log on stderr stays as it is. Every event has ``event`` (its kind) and
-``time`` (Unix time, s); the kinds and their fields:
-
-* ``domain_id``: ``domain_id`` (the ``ROS_DOMAIN_ID`` of the graph, to attach with ``ros2``
-  tools), ``mode`` (``processes`` or ``in-process``); always the first event;
-* ``started``: ``node``, ``pid``, a node process was started; ``restarted``: the same, for a
-  process started again after it exited;
-* ``exited``: ``node``, ``pid``, ``exit_code`` (negative: killed by that signal), ``action`` (what
-  the launcher did: ``restarted``, ``continued without it``, ``continued unrecorded``, ``run
-  ended``) for a node process that exited during the run;
-* ``resumed``: ``restart`` (false: the run started; true: a restarted simulator was resumed);
-* ``finished``: ``exit_code``, ``error`` (null on success); always the last event.
-
+``contgrasp-launch --events FILE`` (``-`` for stdout, ``fd:N`` for an inherited file descriptor)
+writes and flushes one JSON object per line, with ``event`` (its kind) and ``time`` (Unix time,
+s): ``domain_id`` (always first), ``started``, ``restarted``, ``exited``, ``resumed`` and
+``finished`` (always last). The fields of each kind: docs/cli.md, ``contgrasp-launch``.
 Nothing here imports rclpy.
 """
 

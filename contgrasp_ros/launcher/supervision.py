@@ -1,30 +1,12 @@
 """The launcher's supervision of one graph run as a plain state machine (no rclpy).
 
-:class:`Supervisor` decides; ``graph_run._drive`` observes and acts. Each tick the driver spins
-the executor, hands :meth:`Supervisor.step` an :class:`Observation` (the time, the node
-processes that have exited, whether the graph is connected, the simulator's ``/diagnostics``
-state, the readiness and answers of the services it called, the rod-state publishers) and
-performs the returned actions (:class:`Resume`, :class:`Restart`, :class:`Unrecorded`,
-:class:`SetMinSubscribers`, :class:`Log`, :class:`Notify`, :class:`Finish`).
-
-The run goes through :class:`Phase` ``CONNECTING`` (every node up and every topic matched),
-``RESUMING`` (the paused simulator's ``~/pause`` service called with ``false``), ``RUNNING``
-(until the simulator reports ``finished`` or ``failed`` and no restarted simulator waits to be
-resumed), ``SETTLING`` (one more second for the last contact and quality to arrive) and
-``DONE``. The rules:
-
-* a node process that exits is restarted up to ``respawn`` times; a restarted simulator starts
-  over from the initial state and is resumed once its rod-state publisher is discovered, plus a
-  grace period for the subscribers to match it (its first state is not lost); the call is
-  repeated until the new simulator answers (the dead one's service may still be listed);
-* beyond ``respawn``, the simulator's exit ends the run, and so does any node's before the
-  simulator was first resumed (the graph cannot connect without it); a sensor, controller or
-  quality node that stays dead is reported and the run goes on (the simulator's lock-step
-  timeout applies its fallback couple);
-* the recorder is never restarted (its file exists): the run goes on unrecorded and the running
-  simulator's ``min_subscribers`` is lowered so it no longer waits for the recorder; the run
-  then ends with an error (exit 1) naming the lost recording, unless ``allow_unrecorded``;
-* a wall-clock ``timeout`` over the whole run ends it with an error naming the phase.
+:class:`Supervisor` decides, ``graph_run._drive`` observes and acts: each tick it hands
+:meth:`Supervisor.step` an :class:`Observation` (time, exited processes, graph connected, the
+simulator's status, service answers, rod-state publishers) and performs the returned actions
+(:class:`Resume`, :class:`Restart`, :class:`Unrecorded`, :class:`SetMinSubscribers`,
+:class:`Log`, :class:`Notify`, :class:`Finish`). The run goes through the phases (:class:`Phase`)
+``CONNECTING``, ``RESUMING``, ``RUNNING``, ``SETTLING`` and ``DONE``; the rules for restarts, a
+lost recorder and timeouts are in docs/design.md ("One run summary") and docs/ros.md ("Running").
 """
 
 from __future__ import annotations

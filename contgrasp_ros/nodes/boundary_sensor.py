@@ -1,21 +1,12 @@
 """boundary_sensor: rod state + object boundary -> contact state (rho, alpha, delta, s_o, contact set).
 
-Every rod state is sensed and its contact state published for the loop (``/contgrasp/contact``);
-the contact states of the simulator's sampled rod states (``/contgrasp/rod_state/sampled``: the
-same steps, whichever of the two arrives first) go out again on ``/contgrasp/contact/sampled``,
-the observers' stream. A rod state taken again (the simulator re-sends the state its loop waits
-for until the loop closes) is answered again with the contact state published for it, not
-sensed twice (:class:`~contgrasp_ros.nodes.lockstep.Answered`; a new object forgets it).
-
-Thin wrapper of :func:`contgrasp_core.contact.sense` of the rod state's arm shape (paper eqs.
-(4), (5), Definition 1; the object's ``Boundary.project``). When the object moves, the rod state
-carries the object's displacement of the same step and the arm is sensed in the object's
-start-pose frame (:attr:`~contgrasp_ros.plumbing.convert.RodArrays.sensed_shape`): the contact state
-(its feet ``shadow_x/y`` included) is then in that frame, against the boundary as published. The
-arm's own shape (``theta``, ``kappa`` of the rod state, unchanged; none when the rod state has no
-``kappa``) goes out with it: what the holding law senses besides (rho, alpha). Malformed rod states or objects, bad
-stamps and states whose sensing fails are dropped with a throttled warning and counted per
-reason (``/diagnostics``); see :mod:`contgrasp_ros.plumbing.runtime`.
+A thin wrapper of :func:`contgrasp_core.contact.sense` (paper eqs. (4), (5), Definition 1) of the
+rod state's arm shape, in the object's start-pose frame when the object moves
+(:attr:`~contgrasp_ros.plumbing.convert.RodArrays.sensed_shape`). Every rod state is answered on
+``/contgrasp/contact`` (a state sent twice with the same answer:
+:class:`~contgrasp_ros.nodes.lockstep.Answered`), the sampled ones again on
+``/contgrasp/contact/sampled``; the arm's own ``theta`` and ``kappa`` go along for the holding
+law. Bad input is dropped and counted (:mod:`contgrasp_ros.plumbing.runtime`). docs/ros.md, "Nodes".
 """
 
 from __future__ import annotations

@@ -3,16 +3,11 @@ in one process, on one executor (ROS 2's composition, for contgrasp's Python nod
 
 Each node keeps its name, its parameters (its own section of a ``--params-file``; a ``-p
 NAME:=VALUE`` applies to every node of the process that declares NAME), its topics and its
-services: to the rest of the graph the composed nodes are the nodes started alone. Only the
-process is shared, so a message between two of them crosses no process boundary: composing the
-boundary sensor with the controller saves the loop a process hop each control period (about a
-sixth of the lock-step period through processes on two cores; docs/ros.md, "Composition"), at
-the price of isolation (a crash or a fatal error of one ends all of them).
-
-The nodes are built in the order given (``NODE`` is one of :data:`NODE_CLASSES`, each at most
-once); the process spins until SIGINT/SIGTERM or until every node asks to stop (``on_finish:
-exit``), and exits as :func:`contgrasp_ros.plumbing.runtime.run_nodes` says (2 for bad usage or a
-refused parameter, naming the node; 1 for a failure).
+services; a message between two of them crosses no process boundary, at the price of isolation
+(a crash of one ends all of them). ``NODE`` is one of :data:`NODE_CLASSES`, each at most once,
+built in the order given. The process spins until SIGINT/SIGTERM or until every node asks to
+stop, and exits as :func:`contgrasp_ros.plumbing.runtime.run_nodes` says (2 for bad usage or a
+refused parameter, 1 for a failure). docs/ros.md, "Composition".
 """
 
 from __future__ import annotations

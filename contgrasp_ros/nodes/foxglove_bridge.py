@@ -1,23 +1,10 @@
 """foxglove_bridge: the running graph, live in the Foxglove app, without a ROS install.
 
-Serves the run over the Foxglove WebSocket protocol (the ``foxglove-sdk`` package; connect
-the app to ``ws://HOST:PORT``, default ``ws://127.0.0.1:8765``). Channels, each message logged
-at its header stamp (simulated time, so the app's timeline is the simulation's):
-
-* ``/contgrasp/scene`` (``foxglove.SceneUpdate``, frame ``world``): the arm (a line strip at
-  the rod's centreline), the object's outline (where the object is, when it moves) and the
-  nodes in contact; one per ``scene_period`` of simulated time;
-* ``/contgrasp/rod_state`` (JSON: step, t, s, x, y, theta, kinetic_energy; a movable object's
-  object_q, object_v, object_wrench) for plots, from the simulator's sampled stream
-  (``/contgrasp/rod_state/sampled``: every ``sample_period``, 0.01 s of simulated time by default);
-* ``/contgrasp/contact`` (JSON: step, t, s, rho, alpha, delta, in_contact), from the sensor's
-  sampled stream (``/contgrasp/contact/sampled``);
-* ``/contgrasp/quality`` (JSON: step, t, Q1, Q2, Q3, contact_length, valid);
-* ``/contgrasp/status`` (JSON: the simulator's status from ``/diagnostics``).
-
-The same node runs by hand (``ros2 run contgrasp_ros foxglove_bridge``) or inside
-``contgrasp-launch --foxglove [PORT]``. It only listens: the loop does not wait for it.
-Malformed messages are dropped and counted like in every node (``/diagnostics``).
+Serves the run over the Foxglove WebSocket protocol (``foxglove-sdk``; default
+``ws://127.0.0.1:8765``): a scene (arm, object, contact nodes) and the rod state, contact,
+quality and simulator status as JSON channels, each message logged at its simulated time. By
+hand (``ros2 run contgrasp_ros foxglove_bridge``) or inside ``contgrasp-launch --foxglove
+[PORT]``; it only listens, the loop does not wait for it. Channels: docs/ros.md, "Watching".
 """
 
 from __future__ import annotations

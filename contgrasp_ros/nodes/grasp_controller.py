@@ -1,24 +1,12 @@
 """grasp_controller: contact state -> internal couple control u(s) (paper eq. (19), or the
 holding law of docs/holding.md).
 
-Thin wrapper of the core's laws: the ``law`` parameter (read-only) chooses the paper's, eq.
-(19) through :func:`contgrasp_core.control.feedback_at_joints`, or the holding law,
-:class:`contgrasp_core.control.hold_law.HoldController` ((H1)-(H6); its settings are the
-read-only ``hold_<name>`` parameters): the same functions the core-only closed loop calls, so a
-lock-step ROS run reproduces it exactly. The holding law keeps a state (its phase) along the
-run: it is stepped once per rod state, by the steps elapsed times ``control_period`` (the
-simulator's), and starts afresh with a new run (step 0, or a step below the last one: the
-simulator was reset); it senses the arm's own shape (``theta``, ``kappa`` of the contact state)
-and a contact state without it is dropped. Its hold goes out as the rest curvature
-``kappa_ref`` and ``hold_gain`` (the simulator applies it in the state), and every couple says
-whether the law is still in ``transition``; the ``/diagnostics`` status names the law and its
-phase (``law``, ``law_phase``), at once when the phase changes. The paper law's gains (mu1, mu2 or the adaptive mu2
-of Appendix IV, the law's length unit) are parameters; a change takes effect at the next contact
-message (a set that gives unusable gains is refused). The rod geometry parameters (read-only)
-must match the simulator's. Malformed contact states, bad stamps and
-states of another rod size are dropped and counted (``/diagnostics``). A contact state taken
-again (the answer to a rod state the simulator re-sent) is answered again with the couple
-published for it, not computed twice (:class:`~contgrasp_ros.nodes.lockstep.Answered`).
+A thin wrapper of the core's laws, chosen by the read-only ``law`` parameter: the paper's through
+:func:`contgrasp_core.control.feedback_at_joints`, or
+:class:`contgrasp_core.control.hold_law.HoldController` ((H1)-(H6); ``hold_<name>`` parameters).
+The same functions the core-only loop calls, so a lock-step ROS run reproduces it exactly. A
+state sent twice is answered with the couple already published
+(:class:`~contgrasp_ros.nodes.lockstep.Answered`). docs/ros.md ("Either law").
 """
 
 from __future__ import annotations

@@ -1,22 +1,11 @@
 """The rod simulator's stepping rules as plain logic (no rclpy), so they are unit-tested alone.
 
-:class:`StartGate` decides when the run's first state (step 0) may go out: a graph started by
-hand (``ros2 run`` per node, in any order) must not lose it to a sensor that has not matched yet,
-or the lock-step loop stalls for a whole couple timeout at step 0 and the run differs from the
-launcher's. :class:`LockStep` is the lock-step rule itself: state k out, wait for the couple
-answering step k; until the loop has closed once (the run's first couple) the awaited state is
-sent again every ``resend`` seconds, for a peer whose reader matched too late to get it, and so
-it is after a peer (re)joined mid-run while it stays unanswered; a couple
-that arrives while paused is kept; after the couple timeout the configured fallback is applied
-and the miss counted, once per outage in the log. :class:`Answered` lets the sensor and the
-controller answer a state sent twice with the answer they gave it, and the simulator ignore a
-second answer.
-:class:`WallClock` is the free-running rule (``lockstep: false``): every whole control period
-the simulation falls behind the wall clock is a missed deadline; :class:`CoupleWait` lets a
-free-running step wait, briefly, for the couple answering the state it starts from.
-
-The node (:mod:`contgrasp_ros.nodes.rod_simulator`) feeds them wall-clock times (``now``, s,
-monotonic) and what it sees of the graph, and performs what they return.
+:class:`StartGate`: when step 0 may go out (the loop's peers matched, so a graph started by hand
+runs like the launcher's). :class:`LockStep`: state k out, wait for the couple answering it,
+resend while unanswered, fall back after the couple timeout. :class:`Answered`: a state sent twice
+gets the same answer. :class:`WallClock` and :class:`CoupleWait`: the free-running rule
+(``lockstep: false``). The node (:mod:`contgrasp_ros.nodes.rod_simulator`) feeds them monotonic
+wall-clock times and what it sees of the graph. docs/ros.md ("Lock-step", "Step 0 waits for the loop").
 """
 
 from __future__ import annotations

@@ -1,43 +1,11 @@
 """mcap_recorder: records the graph's topics to MCAP the way rosbag2's MCAP storage does.
 
-Subscribes with raw (serialized) subscriptions to every topic (or a list / regular expression),
-discovering topics that appear mid-run, and writes them with :class:`contgrasp_ros.bag.writer.BagWriter`
-(profile ``ros2``, ``ros2msg`` schemas from the installed ``.msg`` files, ``cdr``, channel
-metadata ``offered_qos_profiles`` and ``topic_type_hash``, zstd chunks, a bag folder with
-``metadata.yaml`` or a single ``.mcap``). The subscription QoS adapts to the publishers' offers
-like rosbag2 (reliable / transient-local only if every publisher offers it) with a deep queue.
-Every ``flush_period`` wall seconds the open chunk is finished and handed to the OS, so a
-SIGKILL loses at most that much; SIGINT/SIGTERM finalise the file. Received and written
-message counts are published on ``/diagnostics`` and stored in the file (metadata record
-``contgrasp_recorder``). A file that cannot be created or written ends the node with code 1.
-
-Messages lost before they reach the recorder (in the middleware, e.g. a publisher's keep-last
-queue overrun at very high rates) are detected from gaps in the publishers' sequence numbers
-and reported as ``lost_in_transport`` (diagnostics WARN). rclpy does not say which publisher
-sent a message, so the check runs only while exactly one publisher is matched (tracked with the
-subscription's matched event; a change of publishers starts the count over) and never on the
-topics every node publishes to (``sequence_check_exclude_regex``: ``/parameter_events``,
-``/rosout``, ``/diagnostics``), where a new publisher's first messages can arrive before its
-matched event and would read as a gap.
-
-A bag folder can be split into several files (``max_bag_duration`` / ``max_bag_size``, like
-``ros2 bag record``'s options of the same names); this also bounds the recorder's memory, which
-otherwise grows by the MCAP chunk index (~0.9 kB per chunk) for as long as one file is open.
-
-Log times (``log_time``): ``receive`` (default, like ``ros2 bag record``) stamps each message
-with the wall clock when it arrived; ``sim`` (like ``ros2 bag record --use-sim-time``; the
-launcher's default) with simulated time: a message's own header stamp when its type starts with
-one (every message of the graph, ``/clock`` included) and it is within an hour of the
-node's clock, else the node's clock, which follows ``/clock`` (``use_sim_time`` is switched on;
-``/rosout`` always takes the clock: its stamps are wall time). A lock-step run of 2.2 s of simulated time then
-spans 2.2 s of log time however long it took. The clock is stored when the file opens (metadata
-record ``contgrasp_log_time``), and so is ``run_info`` (``contgrasp_run``): a recording cut short
-by a crash and recovered still says how its run was made.
-
-Optional decimation (to keep shipped sample recordings small): topics in ``decimate_topics``
-keep one message per ``decimate_period`` seconds of their header stamp (the quality node's
-rule: skip while ``0 <= t - t_kept < period``) plus the last message received; the skipped
-ones are counted as ``decimated`` (received = written + decimated).
+Raw subscriptions to every topic (or a list / regular expression, new topics found mid-run),
+written with :class:`contgrasp_ros.bag.writer.BagWriter`; QoS adapted to the publishers' offers
+like rosbag2; the open chunk handed to the OS every ``flush_period``; counts (received, written,
+``lost_in_transport`` from sequence gaps, decimated) on ``/diagnostics`` and in the file.
+Optional bag splitting, simulated-time log times and decimation. Parameters, format, counts and
+robustness: docs/recording.md ("The recorder node").
 """
 
 from __future__ import annotations

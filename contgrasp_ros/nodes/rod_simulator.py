@@ -1,58 +1,14 @@
-"""rod_simulator: the planar Cosserat rod and the object; publishes /clock, the rod state (every
-step for the loop, and every ``sample_period`` of simulated time on the observers' sampled
-stream), the object boundary (transient-local), RViz markers and /diagnostics; applies the
-couple control.
+"""rod_simulator: the planar Cosserat rod and the object (paper eq. (17)); publishes /clock, the rod
+state (every step for the loop, every ``sample_period`` on the observers' sampled stream), the
+object boundary, RViz markers and /diagnostics, and applies the couple control.
 
-Thin wrapper of :class:`contgrasp_core.rod.session.LoopSession` (the same stepping the
-core-only closed loop uses); the stepping rules are :mod:`contgrasp_ros.nodes.lockstep`. Step 0 goes
-out once the loop's peers are matched (``wait_for_peers``, the default: a
-rod-state subscriber and a couple publisher; always at least ``min_subscribers`` subscribers of
-the two rod-state topics together;
-after ``peer_timeout`` wall seconds it goes out anyway), so a graph started by hand runs like the launcher's. Lock-step
-mode (default): state k is published and the rod advances only when the couple stamped with
-step k arrives; until the run's first couple the awaited state is published again every
-second (a peer whose reader matched after it went out never got it; a couple equal to the one
-taken, the answer to a repeat, is ignored), and after a peer of the loop joined mid-run (a
-restarted sensor or controller) it goes out again while unanswered; after ``couple_timeout`` wall seconds the configured fallback (``hold`` the last
-couple or apply ``zero``) is used, the miss is counted and a warning logged. Free-running mode
-advances every ``control_period`` of wall time with the latest couple, from the run's first
-couple on (the loop closed: a controller's first answer can take a few milliseconds more than
-the next ones, and stepping on without it starts the grasp on stale feedback; after
-``couple_timeout`` it starts without one); a step whose tick comes before the couple answering
-its state waits up to ``couple_wait`` control periods for it, then goes on with the newest couple
-(a late couple, counted: :class:`~contgrasp_ros.nodes.lockstep.CoupleWait`); each whole period it
-falls behind the wall clock is a missed deadline (:class:`~contgrasp_ros.nodes.lockstep.WallClock`). Services: ``~/pause``
-(std_srvs/SetBool: true pauses, false resumes) and ``~/reset`` (std_srvs/Trigger). The node runs
-in simulated time (``use_sim_time`` defaults to true: the ``/clock`` it publishes every
-``clock_period`` of simulated time, before the state of that time) and, when the
-run is over, stays up or exits as ``on_finish`` says (:class:`~contgrasp_ros.plumbing.runtime.FinishPolicy`).
-
-Couples are validated (lengths, NaN/Inf, joints, the stamp rule, the step in lock-step) and
-bad ones dropped and counted. A run that breaks - Newton fails, NaN/Inf in the state, the rod
-deeper inside the object than ``max_penetration_limit``, kinetic energy above
-``max_kinetic_energy`` - stops stepping: state ``failed``, the cause and simulated time in
-the status ``message``, logged once. The status (``/diagnostics``, name ``rod_simulator``)
-goes out with the states at most every 0.2 s of wall time, and at once when its level or state
-changes (running, paused, finished, failed; the first missed deadline or drop), and every
-second of wall time.
-
-The object is fixed (the paper), or moves (``object_mode`` spring or free: a rigid body in the
-rod engine, :meth:`contgrasp_core.scenario.Scenario.system`). A movable object's displacement,
-velocity and the wrench held on it go out in every rod state (so the sensor senses against
-the object where it is at that very step), and on ``/contgrasp/object_pose`` and
-``/contgrasp/object_twist`` for RViz and Foxglove. The wrench over each control period is the
-scripted disturbance (``disturbance_*``) plus the live inputs, ``/contgrasp/object_wrench``
-(geometry_msgs/WrenchStamped, held until the next one) and the service ``~/apply_wrench``
-(contgrasp_msgs/srv/ApplyWrench: a step, ramp or pulse); an input takes effect from the next
-control period on (:class:`contgrasp_core.rod.disturbance.WrenchInput`), so the wrench of
-every period is fixed when its state goes out and a lock-step run stays deterministic. Inputs
-for a fixed object are refused (dropped and counted; the service answers ``success`` false).
-
-Either law drives it (the controller's ``law``): a couple with its expansion (the paper's law,
-the holding law's cage) or the holding law's hold (``kappa_ref`` and ``hold_gain``: the rod
-engine applies ``-EI kappa_ref + G EI (kappa - kappa_ref)`` in the state, eq. (H4) of
-docs/holding.md). A couple flagged ``transition`` (the holding law before its hold is
-complete) keeps the next state from counting as settled, as in the core loop.
+A thin wrapper of :class:`contgrasp_core.rod.session.LoopSession`, the core loop's stepping, so a
+lock-step run equals the core-only run bit for bit; the stepping rules (step 0 waiting for the
+loop's peers, lock-step, free-running, timeouts) are :mod:`contgrasp_ros.nodes.lockstep`. Services
+``~/pause`` and ``~/reset``; a movable object takes wrench inputs (``~/apply_wrench``,
+``/contgrasp/object_wrench``); the couple is eq. (19)'s or the holding law's hold (eq. (H4) of
+docs/holding.md). Parameters, status, divergence limits and the movable object: docs/ros.md
+("Nodes", "A movable object").
 """
 
 from __future__ import annotations

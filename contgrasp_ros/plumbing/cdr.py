@@ -1,32 +1,13 @@
 """The loop's messages as CDR bytes, straight from and into numpy arrays.
 
-The lock-step loop's three topics (rod state, contact, couple) carry a handful of float64
-arrays per message. rclpy converts every message between its C form and a Python object on each
-publish and each take (the array fields element by element into ``array('d')`` objects); the
-loop's nodes skip that: they publish the serialized message (``Publisher.publish`` of
-``bytes``) and subscribe with ``raw=True``, and :class:`Codec` writes and reads the bytes with
-numpy. On the wire nothing changes: rclpy's own deserializer reads the bytes as the message they
-were made from, and the codec reads rclpy's serialization of a message as that message
-(tests/test_cdr.py), so every other reader (the recorder, ``ros2 topic echo``, Foxglove) sees the
-typed message as before. (A round trip between two processes with trivial
-callbacks: 0.24 ms typed, 0.16 ms raw; benchmarks/RESULTS.md, ros_loop.)
-
-The encoding is OMG CDR version 1 (what rmw_fastrtps sends): a 4-byte encapsulation header
-(``00 01 00 00``: little endian), then the fields in declaration order, each aligned to its
-size counted from the end of that header; a string is its length (with the terminating NUL)
-and its bytes, a sequence its uint32 count and its elements. Big-endian payloads (``00 00``) are
-read too. A :class:`Codec` handles messages whose fields are ``std_msgs/Header``, ``uint64``,
-``double``, ``boolean`` (one byte, 0 or 1), ``sequence<double>`` and ``sequence<boolean>`` (the
-loop's three types); other types are refused when the codec is made.
-
-:meth:`Codec.decode` gives a :class:`MessageView`: the message's fields as attributes (arrays as
-writable, aligned float64 / bool numpy arrays, the header as ``header.stamp.sec`` ...), so
-:mod:`contgrasp_ros.plumbing.convert`'s readers validate it as they validate a typed message. Bytes that
-are not a message of the type (truncated, a count beyond the end, trailing garbage, another
-encapsulation, a frame_id that is not a terminated UTF-8 string) raise
-:class:`~contgrasp_ros.plumbing.convert.MessageError` (reason ``"bad encoding"``), which a node counts as
-a drop. Padding bytes are written as zeros and not read; bytes after the last field are ignored
-(rmw_fastrtps's serializer leaves uninitialised padding and may hand over a longer buffer).
+The loop's nodes publish serialized messages and subscribe with ``raw=True``; :class:`Codec`
+writes and reads the bytes (OMG CDR version 1, what rmw_fastrtps sends) with numpy, for messages
+of ``std_msgs/Header``, ``uint64``, ``double``, ``boolean`` and sequences of double and boolean
+fields (the loop's three types). :meth:`Codec.decode` gives a :class:`MessageView` that
+:mod:`contgrasp_ros.plumbing.convert`'s readers validate like a typed message; bytes that are not
+a message of the type raise :class:`~contgrasp_ros.plumbing.convert.MessageError` (``"bad
+encoding"``). Nothing changes on the wire (tests/test_cdr.py). docs/ros.md, "Serialized messages
+on the loop".
 """
 
 from __future__ import annotations

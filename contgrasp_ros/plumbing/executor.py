@@ -1,36 +1,11 @@
 """A single-threaded rclpy executor that keeps its wait set between waits.
 
-rclpy's :class:`~rclpy.executors.SingleThreadedExecutor` rebuilds its wait set from every
-node's entities on every wait (a Python loop over each subscription, timer, service, client,
-guard condition and QoS-event waitable, entering each handle's context), wraps every callback
-in a :class:`~rclpy.task.Task` and triggers its own guard condition twice per callback, so the
-next wait returns at once and rebuilds the set again. For a node that handles one message per
-control period (docs/ros.md, "Executors") that bookkeeping is most of the per-message cost.
-
-:class:`LeanExecutor` does the same work with less of it:
-
-* the entities are gathered once and again only when they change: a node creating or destroying
-  an entity wakes its executor (:meth:`wake`), as do :meth:`add_node` and :meth:`remove_node`;
-* one ``_rclpy.WaitSet`` sized for them is cleared and refilled before each wait;
-* every callback ready after a wait runs in that one :meth:`spin_once` (messages before
-  timers: :meth:`_dispatch`), called directly
-  through rclpy's own ``_take_*`` functions (so services answer, clients complete their futures
-  and QoS events reach their handlers exactly as with rclpy's executors); a coroutine callback
-  that has to wait for a future becomes a Task and is resumed by later spins, as are tasks from
-  :meth:`create_task` (``spin_until_future_complete`` works as usual);
-* QoS events (incompatible QoS, lost messages, ...: rclpy gives every publisher and
-  subscription such handlers) join the wait set once every :data:`EVENTS_PERIOD_S` of wall
-  time, not on every wait (a wait is then no longer than that): an event is reported up to
-  that much later, and a wait costs a handful of entities instead of dozens;
-* SIGINT/SIGTERM wake the wait through rclpy's signal guard condition and end the spin with
-  :class:`~rclpy.executors.ExternalShutdownException`, as in rclpy.
-
-It is single-threaded by design: callback groups are respected trivially (one callback at a
-time) and it must be spun from one thread only. Entities are created and destroyed from that
-thread (in callbacks) or while it does not spin: rclpy's executors also guard a wait against an
-entity destroyed by another thread (each handle entered for the wait), which this one leaves
-out to keep a wait cheap. contgrasp's nodes build their entities at construction and destroy
-them after spinning.
+rclpy's :class:`~rclpy.executors.SingleThreadedExecutor` rebuilds its wait set on every wait and
+wraps every callback in a Task; :class:`LeanExecutor` gathers the entities once (again when one is
+added or removed: :meth:`wake`), refills one wait set, runs every ready callback directly through
+rclpy's ``_take_*`` functions (messages before timers) and looks at QoS events only every
+:data:`EVENTS_PERIOD_S`. Single-threaded by design: spin it from one thread, and create or destroy
+entities from that thread or while it does not spin. docs/ros.md, "Executors".
 """
 
 from __future__ import annotations

@@ -1,22 +1,12 @@
 """Shared node plumbing: parameters with validation, drop counting, the last-resort callback
 guard, the stamp rule, the /diagnostics status and main().
 
-Every contgrasp node uses these, so they degrade the same way (see docs/ros.md, Reliability):
-
-* :func:`declare` - a parameter with a descriptor and its validation (range, choices, or a
-  check function): an invalid value stops the node at start-up (exit code 2 through
-  :func:`run_node`) and an invalid ``ros2 param set`` is refused with the reason;
-* :class:`DropCounter` - counts dropped messages per ``<topic>: <reason>``, warns at most once
-  per period per reason, and counts unexpected exceptions as ``internal error: <ExcType>``;
-* :func:`guarded` / :meth:`DropCounter.guard` - wrap every subscription, service, timer and
-  parameter callback so that no exception leaves it (except :class:`FatalNodeError`);
-* :class:`StampGate` - the stamp rule (invalid, from the past, from the future);
-* :class:`Diagnostics` - the node's DiagnosticStatus on ``/diagnostics``: every second of wall
-  time, at once on the first drop, and on a node's events at a few Hz at most;
-* :class:`GuardedSpin` - executor turns that survive a message rclpy fails to take;
-* :func:`sim_time_by_default` - the graph's time is the simulator's ``/clock`` unless the user
-  sets ``use_sim_time``;
-* :class:`FinishPolicy` - what a node does when the run is over (parameter ``on_finish``).
+Every contgrasp node uses these, so they degrade the same way (docs/ros.md, "Nodes";
+docs/RELIABILITY.md): :func:`declare` (a validated parameter: exit 2 at start-up, a refused
+``ros2 param set``), :class:`DropCounter` and :func:`guarded` (dropped messages and unexpected
+exceptions counted, never raised out of a callback), :class:`StampGate` (the stamp rule),
+:class:`Diagnostics` (the node's status), :class:`GuardedSpin`, :func:`sim_time_by_default` and
+:class:`FinishPolicy` (``on_finish``).
 """
 
 from __future__ import annotations

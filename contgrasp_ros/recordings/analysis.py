@@ -1,24 +1,11 @@
 """Offline analysis of a recorded graph run (``contgrasp analyze BAG``), without ROS.
 
-A recording made by the launcher (``contgrasp-launch --bag``) holds the simulator's rod states,
-the sensor's contact states, the quality node's Q1..Q3, ``/diagnostics`` and, as MCAP metadata,
-the run's parameters. :func:`load_run` decodes it (``mcap_ros2``, no message packages) into
-numpy arrays; :func:`recompute` repeats the sensing (paper eqs. (4) and
-(5), Definition 1) and the grasp quality (Sec. IV: W = int_S G G^T ds, Q1 = lambda_min(W),
-Q2 = det W, Q3 = lambda_min / lambda_max) from the recorded rod states with exactly the
-functions the nodes call (:func:`contgrasp_core.contact.sense`,
-:func:`contgrasp_ros.plumbing.evaluate.contact_quality`), so on a genuine recording the
-recomputation agrees with the recorded topics to rounding (in practice bitwise);
-:func:`summarize` builds the launcher's summary (with the launcher's own builder,
-:func:`contgrasp_ros.launcher.summary.build_summary`) plus the recomputation errors. :func:`write_csv`
-and :func:`write_plots` export the run.
-
-Recordings may be decimated (the recorder keeps rod state/contact/couple only every so many
-seconds of sim time, plus the last message of each topic): messages are paired by their
-``step``, never by position, and the settle time is recomputed (with the simulator's
-:class:`~contgrasp_core.rod.closed_loop.SettleDetector`) only when the rod states are complete.
-
-Nothing here imports rclpy or generated message packages.
+:func:`load_run` decodes a launcher's recording (``mcap_ros2``, no message packages) into numpy
+arrays; :func:`recompute` repeats the sensing (paper eqs. (4), (5), Definition 1) and the grasp
+quality (Sec. IV) from the recorded rod states with the functions the nodes call, so a genuine
+recording agrees with its recorded topics to rounding; :func:`summarize` builds the launcher's
+summary plus the recomputation errors; :func:`write_csv` and :func:`write_plots` export the run.
+Decimated recordings are paired by ``step``. Nothing here imports rclpy. docs/analysis.md.
 """
 
 from __future__ import annotations
