@@ -1,19 +1,10 @@
 """Benchmark: memory the bag writer holds as a recording grows, one file versus split files.
 
-An MCAP writer keeps one chunk index per finished chunk in memory until it writes the summary
-at close. The recorder finishes the open chunk at least every ``flush_period`` (0.5 s), and in
-the soak (docs/RELIABILITY.md) it finished 2-10.5 chunks per second, so an unsplit recording's
-writer grows for as long as the run lasts. This script measures that growth with ``tracemalloc``
-(Python allocations, independent of the machine's load and of allocator noise in RSS) for the
-same stream of messages written (a) into one file (the baseline, ``max_bag_duration = 0``) and
-(b) into a bag folder split every ``--split`` seconds of log time (``max_bag_duration``).
-
-The stream imitates the graph's recording: ``--topics`` channels (10 in a launcher run), one
-message per channel per chunk, and a chunk finished every ``1 / --chunk-rate`` seconds of log
-time (by ``flush()``, as the recorder's timer does). Payloads are small (``--payload`` bytes):
-a chunk index does not depend on the payload size, and small payloads keep the disk out of it.
-Reported: traced memory after every ``--report-every`` chunks, for (a) the growth per chunk and
-per hour at the chunk rate, for (b) the peak over the run, and the ratio (a) final / (b) peak.
+An MCAP writer keeps one chunk index per finished chunk until it closes, so an unsplit
+recording's writer grows for as long as the run lasts (docs/recording.md, "Long runs"). This
+measures it with ``tracemalloc`` for a stream like the graph's (``--topics`` channels, a chunk
+every ``1 / --chunk-rate`` s of log time) written (a) into one file and (b) into a bag folder split
+every ``--split`` s: the growth per chunk and per hour of (a), the peak of (b), their ratio.
 
 Usage (from the repository root):
     .venv/bin/python benchmarks/bag_memory.py [--chunks 30000] [--write-results]

@@ -1,18 +1,13 @@
 """Benchmark: memory of a long-lived node while its peers keep dying and coming back.
 
-In the soak (docs/RELIABILITY.md) the long-lived node processes' RSS rose in small steps, and
-most steps came within seconds after a node of the graph was killed and restarted (a new DDS
-participant joining, endpoints matching, the dead one's lease expiring). This script isolates
-that: one ``boundary_sensor`` process runs the whole time while a peer process (a node that
-publishes ``/contgrasp/rod_state`` and subscribes ``/contgrasp/contact``, as the simulator does)
-is started, waits until the sensor has matched it, and is killed with SIGKILL, ``--cycles``
-times. The sensor's RSS (``VmRSS``) is sampled after every cycle; a quiet phase with no churn
-before and after gives the baseline. Reported: RSS over the cycles, the least-squares slope per
-cycle over the first and the second half, and what that would be per hour at one restart every
-``--per`` seconds (the soak's mean kill period).
+In the soak (docs/RELIABILITY.md) long-lived nodes' RSS rose in small steps after peers were
+killed and restarted. Here one ``boundary_sensor`` runs while a peer that publishes rod states
+and subscribes to contacts is started, matched and SIGKILLed ``--cycles`` times; the sensor's RSS
+after each cycle (and in quiet phases before and after) gives the slope per cycle and per hour at
+one restart every ``--per`` seconds.
 
 Usage (from the repository root):
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ROS_LOG_DIR=/tmp/rl_bench AMENT_PREFIX_PATH=.venv \\
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ROS_LOG_DIR=/tmp/rl_bench AMENT_PREFIX_PATH=.venv \
         .venv/bin/python benchmarks/churn_memory.py [--cycles 150] [--write-results]
 """
 

@@ -1,25 +1,11 @@
 """Per-step cost of the core lock-step loop (the paper scenario as the ROS graph steps it).
 
-``contgrasp_core.rod.session.run_sampled(PAPER)``: N = 100 elements, 2 ms control period; each
-step is observe, sense (``contact.sense``: ``Boundary.project``), the law
-(``feedback_at_joints``) and ``LoopSession.advance`` (the implicit step: ~3 Newton iterations,
-each a residual + exact Newton matrix and a solve).
-
-Compares, in ONE process, interleaved, medians over ``--repeats`` (the machine is shared, so
-only ratios within a run mean much; the load average is printed at start and end):
-
-* ``before``: the code as it was before the compiled kernels: the numpy residual/matrix
-  (``CONTGRASP_KERNELS=0`` path, kept selectable), the numpy circle obstacle and the general
-  closest-point search for the sensing (the circle as a ``fourier_polar`` curve without
-  harmonics: the path ``Boundary.project`` took for circles before its closed form). Solves on one BLAS thread for both (the old code
-  ran them on OpenBLAS's default threads: ``--old-threads`` measures that too);
-* ``after``: the kernels (the Newton matrix in its structured form, solved in O(N^2):
-  ``contgrasp_core.rod.newton_matrix``) and the circle's closed-form projection.
-
-Both runs must end in the same state (checked: same step count and settle time, states within
-1e-9). Then the breakdown per step (observe / sense / law / advance, the advance split into
-Newton matrix + residual, the solve (LAPACK before, the structured solve after) and the rest), the scaling with N (time per step, the
-first ``--scaling-steps`` control steps: the approach and first contact) and the floor.
+``run_sampled(PAPER)`` (N = 100, 2 ms control period: observe, sense, law, advance), in one
+process, interleaved, medians over ``--repeats``: ``before`` (the numpy path,
+``CONTGRASP_KERNELS=0``, and the general closest-point search) against ``after`` (the compiled
+kernels, the structured O(N^2) solve and the circle's closed-form projection); both must end in
+the same state. Then the breakdown per step, the scaling with N and the floor. Results:
+benchmarks/RESULTS.md.
 
     python benchmarks/core_step.py                 # full paper run, 3 repeats, N-scaling
     python benchmarks/core_step.py --repeats 1 --scaling-steps 100

@@ -1,22 +1,10 @@
 """Benchmark: the fast optimal-grasp solver against the paper's forward-backward sweep.
 
-For the three Fig. 2 objects at N = 500 nodes (paper settings, chi = 10), in one process:
-
-  reference  fast solver at tol 1e-11 -> J*
-  (a)        sweep at the paper's eta = 1e-6 (paper's costates, eq. (12)) until J <= 1.01 J*,
-             or its cost after a fixed iteration budget
-  (b)        sweep at the largest stable eta found by a geometric search (factor sqrt 2,
-             300-iteration probes; stable = no divergence/singularity and cost decreased),
-             run until J <= 1.01 J* (stepping eta down if the long run diverges)
-  (c)        fast solver with cost_tol = 1e-7: it stops when the Newton decrement at the
-             returned (feasible) iterate predicts J - J* <= 1e-7 |J|, 10x below the 1e-6
-             target (an estimate, asymptotically exact; the measured relative cost error vs J*
-             is printed). Median of 12 runs: 6 before the sweeps and 6 after them, so that the
-             fast timings sample the machine load over the same period as the sweep runs.
-             (c') the default residual tol 1e-9 for reference (median of 6).
-
-and prints time ratios (b)/(c) and (a)/(c) (for (a) a lower bound when it never got there).
-All solvers start from the same initial curvature ('approach', see optimal/guess.py).
+For the three Fig. 2 objects at N = 500 nodes (chi = 10), in one process: the fast solver at tol
+1e-11 gives J*; (a) the sweep at the paper's eta = 1e-6 until J <= 1.01 J* (or a budget), (b) the
+sweep at the largest stable eta, (c) the fast solver with ``cost_tol`` = 1e-7 (and (c') at its
+default tol); prints the time ratios (b)/(c) and (a)/(c). All start from the same initial
+curvature. Method and results: docs/optimal.md, "Measured behaviour".
 
 Usage:  .venv/bin/python benchmarks/optimal_grasp.py [--nodes 500] [--paper-budget 3000]
 """

@@ -1,18 +1,10 @@
 """Benchmark: quality maps with the paper's method vs the project's fast paths.
 
-For each paper object on the same (psi, d) grid (default 24 x 6 = 144 poses), in one process:
-
-  (a) the paper's method: every pose's inner problem solved by the forward-backward sweep
-      (the gradient step eq. (13), eta = 1e-6, the paper's costates). A full map would take hours,
-      so it is ESTIMATED from a sample of poses: each sampled sweep runs until its cost is
-      within 1 % of the fast solver's optimum or a time budget expires (then the per-pose
-      time is a LOWER bound, marked '>=');
-  (b) the project's serial fast path (Newton-KKT inner solves, warm-started along d);
-  (c) the local-process executor (all cores).
-
-Prints wall times, per-pose median times and the ratios (a)/(b), (a)/(c), (b)/(c); then, for
-one object, times a full 72 x 11 map with (c) and compares it with the paper's method on 10
-poses (estimated from the sample).
+For each paper object on the same (psi, d) grid (default 24 x 6), in one process: (a) the paper's
+method (each pose's inner problem by the forward-backward sweep, eq. (13); ESTIMATED from a
+sample of poses, '>=' where a budget expired), (b) the serial fast path, (c) the local-process
+executor. Prints wall times, per-pose medians and their ratios; then times a full 72 x 11 map
+with (c) for one object.
 
 Usage: .venv/bin/python benchmarks/quality_map.py [--psi-steps 24 --d-steps 6 --sample 3 --budget 20]
 """

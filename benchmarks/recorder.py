@@ -1,28 +1,13 @@
 """Benchmark: throughput of the MCAP recorder node (`contgrasp_ros.nodes.mcap_recorder`).
 
-For each target rate (default 500, 1000, 2000, 5000, 7500, 10000, 20000 msg/s and "max" = as
-fast as possible) a fresh recorder process (bag folder, zstd, default chunk size / queue depth /
-flush period, recording only `/contgrasp/rod_state`) and a publisher process (this file,
-`--publisher`) are started. The publisher sends `contgrasp_msgs/msg/RodState` with N = 101 nodes
-(8 float64 arrays, 6.6 kB CDR) on `/contgrasp/rod_state` with the graph's QoS (`qos.STREAM`:
-reliable, keep-last 10, volatile), a fixed count per run, `step` = 0, 1, 2, ... It waits until
-the recorder has matched (`get_subscription_count()`), publishes on a schedule (the messages due,
-then sleep), and afterwards follows the recorder's `/diagnostics` until its received count
-reaches the published count or stops growing; then the recorder is stopped with SIGINT (by pid)
-and the finished bag is read: the recorder's counts (metadata record `contgrasp_recorder`), the
-bag's message count and whether the `step` sequence 0..n-1 is complete and in order.
+For each target rate (500 to 20000 msg/s and "max") a fresh recorder and a publisher process
+(this file, `--publisher`) are started; the publisher sends RodState messages of the paper's size
+with the graph's QoS, then the bag is read back. Reported per run: publish rate, messages/s and
+MB/s written, drain time, drops, bag size; the highest rate without drops is compared with the
+graph's own rate, measured from a recording given with `--bag`. `--write-results` replaces the
+`## recorder` section of benchmarks/RESULTS.md.
 
-Each rate is run `--repeat` times (default 3). Reported per run: achieved publish rate, messages/s
-and payload MB/s written (over the wall time of the publishing phase), drain time (end of
-publishing until the recorder had its final count; 0.5 s resolution), drops = published -
-written, bag size. The highest rate without drops (in every run) is compared with the graph's
-requirement: the real graph publishes ~5 messages per simulated step (RodState, ContactState,
-CoupleControl, /clock, /diagnostics) at 500 Hz simulated; its measured wall-clock rate (and bytes
-per simulated second) come from a real recording given with `--bag` (`contgrasp-launch --bag`).
-`--write-results` replaces the `## recorder` section of benchmarks/RESULTS.md.
-
-Usage (from the repository root):
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ROS_LOG_DIR=/tmp/rl_bench AMENT_PREFIX_PATH=.venv \\
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ROS_LOG_DIR=/tmp/rl_bench AMENT_PREFIX_PATH=.venv \
         .venv/bin/python benchmarks/recorder.py [--quick] [--bag /tmp/bench_bags/graph] [--write-results]
 """
 

@@ -1,35 +1,14 @@
 """Closed-loop paper scenario (Sec. V-C): contgrasp's implicit rod engine vs PyElastica.
 
-Both simulate the same rod (L = 0.2 m, radius 1 cm -> 1 mm, density 1042, E = 10 kPa, Poisson
-0.5, 100 elements), the same environment (mass-proportional damping zeta, quadratic drag
-5110 / 25.55 per unit projected area, the same penalty contact law on the element centres
-against the circle of radius 2.5 cm at (8, 8) cm) and the same feedback law (eq. (19)
-with mu1 = 1 and the adaptive mu2, centimetre units), from the straight arm at rest.
-
-PyElastica (explicit PositionVerlet, stepped with the stepper's own ``step(sim, t, dt)``) applies
-the feedback couple the way a muscle does, through the **rest curvature**: its internal moment is
-``B (kappa - kappa_rest)`` and the paper's total moment is ``EI kappa + u``, so before every step
-the law is evaluated on the sensed centreline (rho, alpha at the interior nodes) and
-``kappa_rest = -u / EI`` is written into ``rod.rest_kappa`` (no external torque; the director
-shear mode that external couples excite is not driven). The continuous loop still flutters at
-the element scale at zeta = 1 (see docs/rod.md), so PyElastica's ``LaplaceDissipationFilter``
-(order ``--filter-order``, default 1) is added; it damps only velocities, so equilibria are
-unchanged. PyElastica runs at the largest stable step of ``--pe-dts``; the project engine runs
-continuous implicit feedback with adaptive steps up to ``--dt``.
-
-Reports wall seconds per simulated second for both (same process, one BLAS thread; medians of
-``--repeats`` full runs of each engine, and contgrasp also with its compiled kernels switched off,
-``CONTGRASP_KERNELS=0`` path), their ratio and the max distance between the two final
-centrelines at equal arclength; the load average is printed at start and end (the machine may be
-shared: only ratios within one run mean much). ``--also-unfiltered``
-also tries the closed loop without the filter and with external torques. Part 2 compares both
-engines open loop (``--open-duration``, default 8 s, no filter) under a held couple
-``u = -EI(s) kappa`` (default kappa = 30 /m: the arm curls onto the object), applied in
-PyElastica both as external torques on neighbouring elements and as rest curvature. Needs the
-optional extra ``bench`` (pyelastica).
+Both engines simulate the same rod, environment, penalty contact and feedback law (eq. (19)) from
+the straight arm at rest; PyElastica (explicit, at its largest stable step of ``--pe-dts``) takes
+the couple through its rest curvature, with a ``LaplaceDissipationFilter``. Reports wall seconds
+per simulated second of both (and of contgrasp's numpy path), their ratio and the distance
+between the final centrelines; ``--also-unfiltered`` tries without the filter; part 2 compares
+the engines open loop under a held couple. Needs the extra ``bench`` (pyelastica). Method and
+results: docs/rod.md, "PyElastica comparison".
 
     python benchmarks/rod_vs_pyelastica.py --duration 3 --also-unfiltered --json
-    python benchmarks/rod_vs_pyelastica.py --duration 3 --skip-open-loop --repeats 3
 """
 
 from __future__ import annotations

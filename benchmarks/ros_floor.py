@@ -1,17 +1,11 @@
 """Benchmark: the floor of the lock-step loop through rclpy - the paper run with nodes that do
 nothing but the loop's own work.
 
-Three bare rclpy nodes (the project's lean executor, QoS and serialized messages,
-`contgrasp_ros.plumbing.cdr`) do only what the loop needs: the simulator advances the rod
-(`LoopSession`) and publishes its state, the sensor senses it (`contact.sense`), the controller
-answers with the law's expansion (`control.feedback_at_joints`). No validation, stamp rule,
-diagnostics, sampled streams, /clock or markers: what is left is the middleware, the process
-hops and the core's own work. The same three nodes run grouped into one, two or three
-processes, and the core loop (`session.run_sampled`) runs in this process for the ratio; each
-way must end in the core loop's final state bit for bit (checked).
-
-What it tells: how fast the real graph could become by trimming its nodes' Python alone. The
-real graph's figures are benchmarks/ros_loop.py's; both are in benchmarks/RESULTS.md.
+Three bare rclpy nodes (lean executor, serialized messages) advance the rod, sense it and answer
+with the law, without validation, diagnostics or observers' streams, grouped into one, two or
+three processes; each must end in the core loop's final state bit for bit. It tells how fast the
+real graph could become by trimming its nodes' Python alone (the real graph: ros_loop.py;
+results: benchmarks/RESULTS.md).
 
 Usage: AMENT_PREFIX_PATH=.venv .venv/bin/python benchmarks/ros_floor.py [--repeat 3]
 """

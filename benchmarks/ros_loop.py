@@ -1,29 +1,14 @@
 """Benchmark: the paper's closed-loop grasp with and without the ROS 2 middleware.
 
-The full paper scenario (`contgrasp_ros/config/default.yaml` = `contgrasp_core.scenario.PAPER`:
-N = 100, 2 ms control period, until settled) run six ways in one process, one after the other:
-
-  (a) core only: `contgrasp_core.rod.session.run_sampled` (observe, sense, law, advance; no ROS);
-  (b) the graph in one process on one executor (`contgrasp-launch --in-process`), lock-step;
-  (c) the graph as separate processes (`contgrasp-launch`), lock-step: the main job;
-  (d) the graph as separate processes in wall-clock mode (`lockstep: false`: the simulator steps
-      every control period of wall time, each step waiting up to `couple_wait` for the couple
-      answering its state, else with the newest couple);
-  (e), (f) as (c) and (d) with the sensor, controller and quality node hosted by one process
-      (`contgrasp-launch --compose boundary_sensor,grasp_controller,grasp_quality`): two node
-      processes instead of four.
-
-(a) is timed after one untimed run (its compiled kernels loaded, as the simulator node loads them
-while the graph connects). For each: per-step wall milliseconds, the real-time factor (simulated / wall seconds of the
-loop), the ratio to (a), missed deadlines (the most of the runs), late couples (wall-clock mode:
-steps without their own answer; the most of the runs) and for (b)-(d) the start-up time (launcher start to
-the simulator's first step, from the launcher's `resumed` event). Loop wall times of (b)-(d)
-are the launcher's own measurement from the first state to the last. (b), (c) and (e) must end in
-(a)'s final state bit for bit (checked). Each way runs `--repeat` times; medians are reported.
-The load average is printed at start and end (the machine is shared: compare ratios).
+The paper scenario (N = 100, 2 ms control period, until settled) run in one process six ways:
+(a) core only (``run_sampled``); (b) the graph in one process, lock-step; (c) separate processes,
+lock-step (the main job); (d) separate processes, wall-clock mode; (e), (f) as (c), (d) with the
+sensor, controller and quality node composed into one process. Per way: milliseconds per step,
+real-time factor, ratio to (a), missed deadlines, late couples, start-up time; (b), (c) and (e)
+must end in (a)'s final state bit for bit. Medians of ``--repeat`` runs; results:
+benchmarks/RESULTS.md.
 
 Usage: AMENT_PREFIX_PATH=.venv .venv/bin/python benchmarks/ros_loop.py [--repeat 3] [--only a,c]
-(``--only`` runs just the named ways; (a) always runs, the others' "x core" ratio needs it).
 """
 
 from __future__ import annotations

@@ -1,23 +1,11 @@
 """The arm's self-contact on a coiling case: contgrasp's implicit engine vs PyElastica's ``RodSelfContact``.
 
-The paper's arm (no object, no drag: drag would slow the curl for minutes) is curled by a held
-couple ``u = -EI(s) kappa`` (default kappa = 45 /m: 1.4 turns of a 2.2 cm circle, so the distal
-part runs into the proximal one and must coil inside it). Both engines have the same damping
-(2 /s); contgrasp its self-contact
-(:mod:`contgrasp_core.rod.self_contact`: penalty ``k = contact_stiffness`` per unit length on the
-element centres against the other part's centreline), PyElastica its own ``RodSelfContact``
-(segment against segment, ``k`` per pair of elements: an element facing a run touches three of
-its elements at one distance, so ``k = contact_stiffness h / 3`` gives the same force per
-length), the couple through its rest curvature, at its largest stable step.
-
-Reports, from the same process: contgrasp's wall seconds per simulated second with and without
-self-contact (its cost), PyElastica's with its self-contact, the smallest surface gap between
-non-neighbouring parts of each engine's final shape (without self-contact contgrasp's arm
-passes through itself) and the largest distance between the two engines' final centrelines at
-equal arclength. Then what the search (and the loop's validity checks) cost where the arm never
-meets itself: the paper's continuous run and its sampled loop (``run_sampled``, the graph's), with
-and without self-contact, interleaved (paired medians). Needs the optional extra ``bench``
-(pyelastica).
+The paper's arm, no object and no drag, curled by a held couple ``u = -EI(s) kappa`` (default 45
+/m) until it coils inside itself; both engines with the same damping and equivalent contact
+stiffness. Reports both engines' wall seconds per simulated second (contgrasp with and without
+self-contact), the smallest surface gap of each final shape and the distance between the final
+centrelines; then what the self-contact search costs on the paper's runs, where the arm never
+meets itself. Needs the extra ``bench`` (pyelastica). docs/rod.md, "Self-contact".
 
     python benchmarks/self_contact.py --duration 3 --repeats 3
 """

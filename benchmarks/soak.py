@@ -1,44 +1,14 @@
 """Soak test: the launcher's process graph run back to back for a long time, with injected faults.
 
-Launcher runs (``contgrasp-launch --respawn 1000 --bag ...``) follow each other until
-``--wall-time`` is used up. Each run gets a random object (circle, ellipse or deformed circle,
-2-3 cm, centre 6-12 cm from the base, in front of it and to its left, clear of the straight
-initial arm) and a random base pose, written into a parameter file derived from the packaged
-default (``contgrasp_ros/config/default.yaml``: ``n_elements`` = ``--nodes``, ``couple_timeout``
-0.5 s so that the lock-step simulator's fallback covers a dead controller or sensor quickly,
-``duration`` and ``min_time`` 1e5 s so that the run never finishes or settles by itself). A run
-lasts ``--run-time`` seconds from the moment the launcher reports the loop running; then the
-launcher gets SIGINT (exit 130, error "interrupted", recording finalised, expected).
+Launcher runs (``contgrasp-launch --respawn 1000 --bag ...``), each with a random object and base
+pose, follow each other until ``--wall-time`` is used up; each lasts ``--run-time`` s and ends with
+SIGINT. Meanwhile random node processes get SIGKILL (mean interval ``--kill-period``; the simulator
+with probability ``--sim-fraction``) and the RSS of every process is sampled. Judged per run:
+every kill recovered, the rod-state steps without gaps or repeats, missed deadlines, the
+recorder's counts; per process, RSS growth beyond 3 standard errors of its slope (plotted to
+``--figure``). Setup, criteria and results: docs/RELIABILITY.md, "Soak test".
 
-During a run, faults come at exponentially distributed intervals (mean ``--kill-period``):
-SIGKILL to a random node process among boundary_sensor / grasp_controller / grasp_quality or,
-with probability ``--sim-fraction`` (default 1 in 5), the rod_simulator (whose replacement starts
-the run again from step 0). A node is only killed again once its replacement has been started;
-no fault is injected in the last ``--quiet-tail`` seconds of a run so that the last one has time
-to recover. Every ``--sample-period`` seconds the RSS (``VmRSS`` in /proc/PID/status) of the
-launcher and of every node process (including the recorder) is sampled.
-
-Per run, from the launcher's JSON summary and the recording (read back offline):
-* exit code, error, restarts and faults per node as the launcher reports them;
-* kills per node, and *recovered*: the launcher restarted each killed node exactly as often as it
-  was killed, the run ended only by our SIGINT ("interrupted", exit 130) and, for every kill, the
-  killed node's output topic (rod_state / contact / couple / quality) resumed afterwards with a
-  new publisher (its publication sequence numbers start over) - the recovery latency is the wall
-  time from the kill to that new publisher's first recorded message;
-* the recorded ``/contgrasp/rod_state`` steps split at each restart of the simulator into
-  segments: each segment must be 0, 1, ..., k without gaps or repeats;
-* missed deadlines summed over the simulator incarnations (from the simulator's recorded
-  ``/diagnostics``: its count restarts at 0 with each new simulator, so the launcher summary's
-  ``missed_deadlines`` is the last incarnation's only) and the summary's value;
-* the recorder's counts: received, written, lost_in_transport, decimated (no decimation is asked).
-
-RSS is judged per process that lived at least ``--min-lifetime`` seconds: start (first sample),
-end, max and the least-squares slope over the second half of its lifetime in MB/hour with its
-standard error from the residuals ("noise"); a slope counts as growth when it exceeds
-3 standard errors. The RSS series are plotted to ``--figure`` (default docs/figures/soak_rss.png).
-
-Usage (from the repository root; the domain id is the graph's ROS_DOMAIN_ID):
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ROS_LOG_DIR=/tmp/rl_soak AMENT_PREFIX_PATH=.venv \\
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ROS_LOG_DIR=/tmp/rl_soak AMENT_PREFIX_PATH=.venv \
         .venv/bin/python benchmarks/soak.py --wall-time 1860 --nodes 100 --domain-id 163
 """
 

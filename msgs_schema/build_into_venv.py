@@ -1,20 +1,11 @@
 """Build and install the contgrasp_msgs interface package into the running virtual environment.
 
 Run with the venv's interpreter (``.venv/bin/python msgs_schema/build_into_venv.py``); the
-project's set-up does it. Steps (docs/design.md, section 1):
-
-1. point the ROS wheels' exported CMake files, which hard-code the wheel builder's Python and
-   numpy include directories (``/opt/python/cp3XY-cp3XY/...``, one per Python version of the
-   wheels), at this interpreter's (idempotent text replacement; any Python the wheels exist for);
-2. plain ``cmake`` configure / build / install with ``CMAKE_INSTALL_PREFIX`` and
-   ``CMAKE_PREFIX_PATH`` set to the venv and ``BUILD_TESTING=OFF``;
-3. import the generated Python messages in a fresh interpreter to prove the install.
-
-The package stays buildable unchanged with ``colcon build`` in an ordinary ROS 2 workspace.
-A stamp with the hash of the interface sources makes a second run a no-op. The CMake build
-folder is inside the environment (``<venv>/build/contgrasp_msgs``), so environments of different
-Pythons built from one checkout do not share it, and a ROS 2 workspace that holds this checkout
-under ``src/`` finds no stray package files in it.
+project's set-up does it: point the ROS wheels' exported CMake files at this interpreter's
+include directories, then a plain ``cmake`` configure / build / install into the venv, then
+import the generated messages in a fresh interpreter. A stamp of the interface sources makes a
+second run a no-op; the build folder is ``<venv>/build/contgrasp_msgs``. The package stays
+buildable with ``colcon build``. docs/design.md, section 1.
 """
 
 from __future__ import annotations

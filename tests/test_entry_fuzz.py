@@ -1,32 +1,14 @@
 """Property-based fuzz tests of every public library and CLI entry point (docs/RELIABILITY.md).
 
-Library property: called with random inputs - valid ones mixed with NaN, +-Inf, zero/negative
-sizes, huge values (1e300, 10**12), wrong shapes, empty arrays and wrong Python types (strings,
-None, nested lists, dicts) - an entry point either returns finite results or raises a
-:class:`~contgrasp_core.errors.ContgraspError` subclass with a message. Any other exception
-(IndexError, ZeroDivisionError, LinAlgError, a TypeError/ValueError from deep inside numpy or
-scipy, ...) fails the test, and so does a RuntimeWarning or UserWarning (turned into errors
-here: an overflow or an invalid operation must be reported at the boundary, not warned about).
-Wrong Python types are part of the bad inputs everywhere, also for object parameters (a string
-where a Boundary, ArmShape, BasePose, GraspProblem or MapSpec is expected).
-
-Accepted, and therefore not fuzzed:
-
-* user callables (a kappa(s) or mu(s) profile, ``object_curvature(s_o)``, ``rho_d(s)``) are
-  trusted: what they raise propagates unchanged;
-* results that are legitimately non-finite by definition: ``PoseResult.Q`` of an invalid pose
-  (NaN), ``GraspQuality.contact_length`` when unknown (NaN), ``ContactState.nu_o`` and
-  ``ContactState.foot_turn`` where ``1 + rho kappa_o = 0`` (the ``valid`` flags say so);
-* an optimal-grasp solve that does not converge is a result (``converged=False``), not an error;
-* :func:`contgrasp_ros.recordings.analysis.analyze` is fuzzed through its recording path, and its
-  overrides of the wrong type are checked in :func:`test_analyze_overrides_of_the_wrong_type`.
-
-CLI property: ``contgrasp_core.cli.main(argv)`` (in-process) with argument lists in which at
-least one option value is bad (negative/zero/NaN/Inf/huge/non-numeric numbers, unknown object
-names, nonexistent, empty, binary or corrupt files, unwritable outputs) returns 2 and writes
-exactly one line, ``contgrasp COMMAND: error: ...``, to stderr, nothing to stdout, no
-traceback and no warning; argparse usage errors end in ``SystemExit(2)``. Every bad value is
-caught before any long computation (a run that starts computing would make this test slow).
+Library: called with random inputs, valid ones mixed with NaN, +-Inf, bad sizes, huge values,
+wrong shapes, empty arrays and wrong Python types, an entry point returns finite results or raises
+a :class:`~contgrasp_core.errors.ContgraspError` subclass with a message; any other exception, or
+a RuntimeWarning or UserWarning, fails. Not fuzzed: user callables (trusted), results non-finite by
+definition (flagged invalid), a non-converged optimal grasp (a result), and
+:func:`contgrasp_ros.recordings.analysis.analyze`'s overrides
+(:func:`test_analyze_overrides_of_the_wrong_type`). CLI: ``contgrasp_core.cli.main(argv)`` with at
+least one bad option value returns 2 with exactly one ``contgrasp COMMAND: error: ...`` line on
+stderr, caught before any long computation.
 """
 
 from __future__ import annotations
