@@ -163,8 +163,10 @@ FREE = replace(PAPER.rod, n_elements=50)  # the paper's arm, coarse, frictionles
 
 @pytest.fixture(scope="module")
 def held() -> tuple[ClosedLoopResult, ClosedLoopResult, HoldController]:
-    """The holding law on the paper's scenario with the circle free from the start (the continuous
-    loop of ``contgrasp simulate``), watched for 6 s (settled by then); then 5 s more from there."""
+    """The holding law on the paper's scenario with the circle free from the start, the continuous
+    loop at 10 ms steps, watched for 6 s (settled by then); then 5 s more from there. The 10 ms
+    step's numerical damping keeps the object: at 4 ms or finer it escapes (docs/holding.md,
+    "Resolved in time"); what these tests check is the rest state's balance, not that the law holds."""
     system = RodSystem(FREE, Obstacle(CIRCLE), body=ObjectDynamics(mode="free").body(CIRCLE))
     law = HoldController(FREE, R)
     gains = paper_gains(FREE, R)
