@@ -44,7 +44,7 @@ HOLD_PREFIX = "hold_"
 """The controller's parameters of the holding law: ``hold_<field>`` of :class:`HoldLawSettings`."""
 
 ROD_PARAMETERS = ("length", "n_elements", "radius_base", "radius_tip", "density", "youngs_modulus", "damping",
-                  "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction",
+                  "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction", "friction_model",
                   "max_muscle_stress", "base_x", "base_y", "base_angle")
 """The rod's parameters (ROS names), shared by the simulator and the controller."""
 

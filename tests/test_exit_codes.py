@@ -316,6 +316,8 @@ def test_launcher_bad_input_and_usage_exit_2(capsys: pytest.CaptureFixture[str],
 
     for argv, start in ((["--duration", "-1", "--no-record"], "contgrasp-launch: error: --duration must be"),
                         (["--no-record", "--respawn", "-2"], "contgrasp-launch: error: --respawn takes N >= 0"),
+                        (["--no-record", "--friction", "-0.5"], "contgrasp-launch: error: friction must be a finite number >= 0"),
+                        (["--no-record", "--friction", "nan"], "contgrasp-launch: error: friction must be a finite number >= 0"),
                         (["--bag", str(tmp_path), "--domain-id", "5"], f"contgrasp-launch: error: --bag {tmp_path} already exists"),
                         (["--params", str(tmp_path / "none.yaml")], "contgrasp-launch: error: cannot read parameter file")):
         capsys.readouterr()

@@ -58,14 +58,14 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     """``contgrasp-launch --law hold --object-mode free``: the paper's arm (N = 100, 2 ms), the
     circle free, Coulomb friction 0.5, the dwell (H8) of 0.05 s (25 samples) and the depth regulation (H7) on
     (gain 10/s), and a 20 mN push along x from 2.801 s, once the hold is complete. Separate node processes in
-    lock-step equal run_sampled of the same scenario bit for bit (arm, object pose and velocity);
+    lock-step equal run_sampled of the same scenario bit for bit (arm, object pose and velocity),
+    the friction given as ``--friction 0.5`` (stick-slip, as ``contgrasp simulate --friction``);
     the regulation has moved the hold's offset; the recording has the hold and the transition
     flag of every couple as the core law gave them, the arm's shape in every contact state, the
     push in the rod states; the held object moved under the push by less than a millimetre. (It
     is not yet at rest at 3.2 s: the regulation is still opening the offset, as it does for a few
     seconds after the squeeze; the rest it reaches is the core's test, in test_hold_law.py.)"""
     data = yaml.safe_load(default_params_file().read_text())
-    data["/**"]["ros__parameters"]["friction"] = 0.5
     data["rod_simulator"]["ros__parameters"].update(duration=3.2, disturbance_kind="step", disturbance_wrench=list(PUSH),
                                                     disturbance_start=PUSH_START)
     data["grasp_quality"]["ros__parameters"]["rate_hz"] = 0.0
@@ -74,7 +74,8 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     params.write_text(yaml.safe_dump(data))
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--params", str(params),
-                           "--law", "hold", "--object-mode", "free", "--bag", str(tmp_path / "bag"), "--json"],
+                           "--law", "hold", "--object-mode", "free", "--friction", "0.5", "--bag", str(tmp_path / "bag"),
+                           "--json"],
                           capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     summary = json.loads(proc.stdout)
@@ -82,8 +83,11 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
 
     p = load_params(params)
     p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "hold", "free"
+    for node in ("rod_simulator", "grasp_controller"):
+        p[node].update(friction=0.5, friction_model="stick")
     scenario = Scenario.from_ros_parameters(p)
     assert scenario.law == "hold" and scenario.dynamics.mode == "free" and scenario.rod.friction == 0.5
+    assert scenario.rod.friction_model == "stick"
     law = scenario.controller()
     assert isinstance(law, HoldController) and law.settings.depth_gain == 10.0 and law.settings.dwell == 0.05
     logged = _Logged(law)

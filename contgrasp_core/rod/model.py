@@ -19,7 +19,10 @@ import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError
 
-__all__ = ["RodModel"]
+__all__ = ["RodModel", "FRICTION_MODELS"]
+
+FRICTION_MODELS = ("regularised", "stick")
+"""The contact's friction laws: smooth Coulomb (regularised over ``friction_velocity``) or stick-slip."""
 
 
 def _pos(name: str, v: float, *, allow_zero: bool = False) -> float:
@@ -65,7 +68,7 @@ class RodModel:
                      "contact_damping", "friction", "max_muscle_stress"):
             _pos(name, getattr(self, name), allow_zero=True)
         _pos("friction_velocity", self.friction_velocity)
-        if self.friction_model not in ("regularised", "stick"):
+        if self.friction_model not in FRICTION_MODELS:
             raise InvalidParameterError(f"friction_model must be 'regularised' or 'stick', got {self.friction_model!r}")
         bp = np.asarray(self.base_position, dtype=float)
         if bp.shape != (2,) or not np.all(np.isfinite(bp)):

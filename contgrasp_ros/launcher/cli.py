@@ -111,6 +111,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--max-muscle-stress", type=float, default=None, metavar="PA",
                    help="the muscles' largest stress, Pa: bounds each section's couple (docs/rod.md); 0: unbounded "
                    "(default: the parameter file's)")
+    p.add_argument("--friction", type=float, default=None, metavar="MU",
+                   help="Coulomb friction coefficient of the contact, stick-slip when > 0 (as contgrasp simulate "
+                   "--friction); 0: frictionless, the paper (default: the parameter file's)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds to run at most (overrides the parameter file)")
     p.add_argument("--in-process", action="store_true", help="run all nodes in this process on one executor")
     p.add_argument("--executor", choices=("lean", "single", "events"), default=None,
@@ -213,7 +216,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
             raise InvalidParameterError(f"--duration must be a finite number > 0 (simulated seconds), got {args.duration}")
         params["rod_simulator"]["duration"] = float(args.duration)
     obj = object_from_args(args, ROD_SCALE) if args.object is not None or args.outline is not None else None
-    changes = launch_overrides(params, obj, args.law, args.object_mode, args.max_muscle_stress)
+    changes = launch_overrides(params, obj, args.law, args.object_mode, args.max_muscle_stress, args.friction)
     if changes:  # (the nodes read the changed scenario from a file of their own, removed at the end)
         for node, values in changes.items():
             params[node].update(values)

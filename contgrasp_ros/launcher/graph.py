@@ -18,6 +18,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from contgrasp_core.errors import InvalidParameterError
@@ -176,10 +177,11 @@ def object_parameters(params: dict[str, dict[str, Any]], obj: ObjectSpec) -> dic
 
 def launch_overrides(params: dict[str, dict[str, Any]], obj: ObjectSpec | None = None, law: str | None = None,
                      object_mode: str | None = None,
-                     max_muscle_stress: float | None = None) -> dict[str, dict[str, Any]]:
+                     max_muscle_stress: float | None = None, friction: float | None = None) -> dict[str, dict[str, Any]]:
     """The parameters per node that a launch's options change: the object (:func:`object_parameters`),
-    the controller's ``law``, the simulator's ``object_mode`` and the arm's ``max_muscle_stress``
-    (the simulator's and the controller's: they describe one rod) (None: unchanged); the result,
+    the controller's ``law``, the simulator's ``object_mode``, the arm's ``max_muscle_stress`` and
+    the contact's ``friction`` (stick-slip when > 0, as ``contgrasp simulate --friction``) (the
+    simulator's and the controller's: they describe one rod) (None: unchanged); the result,
     merged into ``params``, is checked as a scenario (:meth:`Scenario.from_ros_parameters`: an
     unknown law or mode, an impossible start)."""
     out = {} if obj is None else object_parameters(params, obj)
@@ -187,9 +189,17 @@ def launch_overrides(params: dict[str, dict[str, Any]], obj: ObjectSpec | None =
         out.setdefault(CONTROLLER, {})["law"] = law
     if object_mode is not None:
         out.setdefault(SIMULATOR, {})["object_mode"] = object_mode
+    rod: dict[str, Any] = {}
     if max_muscle_stress is not None:
-        for node in (SIMULATOR, CONTROLLER):
-            out.setdefault(node, {})["max_muscle_stress"] = float(max_muscle_stress)
+        rod["max_muscle_stress"] = float(max_muscle_stress)
+    if friction is not None:
+        if not (np.isfinite(friction) and friction >= 0):
+            raise InvalidParameterError(f"friction must be a finite number >= 0 (Coulomb coefficient), got {friction!r}")
+        rod["friction"] = float(friction)
+        if friction > 0:
+            rod["friction_model"] = "stick"
+    for node in (SIMULATOR, CONTROLLER) if rod else ():
+        out.setdefault(node, {}).update(rod)
     Scenario.from_ros_parameters({node: {**params[node], **out.get(node, {})} for node in params})
     return out
 

@@ -59,6 +59,9 @@ def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
         DeclareLaunchArgument("max_muscle_stress", default_value="",
                               description="the muscles' largest stress [Pa]: bounds each section's couple; 0: unbounded "
                                           "(default: the parameter file's)"),
+        DeclareLaunchArgument("friction", default_value="",
+                              description="Coulomb friction coefficient of the contact, stick-slip when > 0; 0: "
+                                          "frictionless (default: the parameter file's)"),
         DeclareLaunchArgument("lockstep", default_value=str(lockstep).lower(), choices=["true", "false"],
                               description="true: lock-step simulated time, deterministic; false: the wall clock (real time)"),
         DeclareLaunchArgument("duration", default_value="", description="simulated seconds at most (default: the parameter file's)"),
@@ -93,7 +96,7 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[GroupAction | N
     group under ``namespace`` when given (``PushRosNamespace``, and ``/clock`` remapped to the
     namespace's clock on every node of the group)."""
     arg = {name: LaunchConfiguration(name).perform(context) for name in
-           ("params_file", "object", "outline", "law", "object_mode", "max_muscle_stress", "lockstep", "duration", "compose",
+           ("params_file", "object", "outline", "law", "object_mode", "max_muscle_stress", "friction", "lockstep", "duration", "compose",
             "record", "bag", "on_finish", "namespace")}
     params_file = Path(arg["params_file"])
     params = load_params(params_file)
@@ -103,7 +106,8 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[GroupAction | N
                                             for name in nodes}
     obj = ObjectSpec.from_cli(arg["object"] or None, arg["outline"] or None, ROD_SCALE) if arg["object"] or arg["outline"] else None
     for name, values in launch_overrides(params, obj, arg["law"] or None, arg["object_mode"] or None,
-                                         _number("max_muscle_stress", arg["max_muscle_stress"])).items():
+                                         _number("max_muscle_stress", arg["max_muscle_stress"]),
+                                         _number("friction", arg["friction"])).items():
         if name in overrides:
             overrides[name].update(values)
     sim = overrides[SIMULATOR]

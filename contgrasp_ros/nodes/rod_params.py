@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from rclpy.node import Node
 
-from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.model import FRICTION_MODELS, RodModel
 from contgrasp_core.scenario import PAPER
 from contgrasp_ros.plumbing.runtime import declare
 
@@ -32,6 +32,9 @@ def declare_rod_model(node: Node) -> RodModel:
         "contact_stiffness": declare(node, "contact_stiffness", m.contact_stiffness, "contact stiffness [N/m^2]", lo=0.0, hi=1e12, read_only=True),
         "contact_damping": declare(node, "contact_damping", m.contact_damping, "contact damping [N s/m^2]", lo=0.0, hi=1e12, read_only=True),
         "friction": declare(node, "friction", m.friction, "Coulomb friction coefficient", lo=0.0, hi=10.0, read_only=True),
+        "friction_model": declare(node, "friction_model", m.friction_model,
+                                  "friction law with friction > 0: regularised (smooth Coulomb) or stick (stick-slip)",
+                                  read_only=True, choices=FRICTION_MODELS),
         "max_muscle_stress": declare(node, "max_muscle_stress", m.max_muscle_stress,
                                      "the muscles' largest stress, bounds each section's couple [Pa]; 0 = unbounded",
                                      lo=0.0, hi=1e9, read_only=True),
