@@ -282,8 +282,7 @@ def _run_study(spec: StudySpec, p: Path, executor: str, workers: int | None, sch
         differ = sorted(k for k in set(other) | set(wanted) if other.get(k) != wanted.get(k))
         raise InvalidParameterError(f"{p} holds a study of another specification (it differs in {', '.join(differ)}); "
                                     "give the same options to resume it, or another file")
-    qm = quality_map(spec.map_spec(), executor="serial" if executor == "dask" else executor, workers=workers,
-                     progress=progress)
+    qm = quality_map(spec.map_spec(), executor=executor, workers=workers, scheduler=scheduler, progress=progress)
     tasks = []
     for i in range(spec.distinct_rows()):
         for j in range(spec.d_steps):

@@ -411,3 +411,30 @@ def test_a_malformed_results_line_is_refused_with_its_line_number(tmp_path: Path
     out.write_text('{"key": "spec"}\n' + line + "\n")
     with pytest.raises(InvalidParameterError, match=rf"study.jsonl:2: .*{re.escape(why)}"):
         load_results(out)
+
+
+def test_a_dask_study_computes_its_quality_map_on_the_cluster(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``holding-study --executor dask``: the quality map's columns go to the cluster too (they were
+    computed serially on the client), the same map as a serial run's; the poses follow (left out here)."""
+    distributed = pytest.importorskip("distributed")
+    import contgrasp_core.holding_study as study
+
+    maps: list[tuple[str, Any]] = []
+    real = study.quality_map
+
+    def spy(spec: Any, **kw: Any) -> Any:
+        qm = real(spec, **kw)
+        maps.append((kw["executor"], kw.get("scheduler"), qm))
+        return qm
+
+    monkeypatch.setattr(study, "quality_map", spy)
+    monkeypatch.setattr(study, "run_tasks", lambda *a, **k: iter(()))
+    spec = StudySpec(object="circle", psi_steps=4, d_steps=2, nodes=51, arm="rod")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as client:
+            run_study(spec, tmp_path / "dask.jsonl", executor="dask", scheduler=cluster.scheduler_address)
+            ran = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.task_prefixes))  # (kinds of task it ran)
+    assert [(m[0], m[1]) for m in maps] == [("dask", cluster.scheduler_address)] and ran > 0
+    run_study(spec, tmp_path / "serial.jsonl", executor="serial")
+    np.testing.assert_array_equal(maps[1][2].Q, maps[0][2].Q)
+    np.testing.assert_array_equal(maps[1][2].valid, maps[0][2].valid)
