@@ -124,7 +124,7 @@ def wrench_capacity(s: ArrayLike, gamma: ArrayLike, phi: ArrayLike, delta: Array
 def static_capacity(spec: MapSpec, base: BasePose, mu: float) -> WrenchCapacity:
     """Q_H (M3) of the optimal grasp of Sec. III from ``base`` (the quality map's problem and
     contact set, paper units: :func:`contgrasp_core.quality_map.optimal_grasp` from its cold
-    starts), with Coulomb ``mu``, torques about the object frame origin scaled by the object's
+    starts), with Coulomb ``mu``, torques about the object's reference (an outline's centroid) scaled by its
     nominal radius: the measure before any simulation. :class:`ContgraspError` when the grasp
     cannot be solved from ``base``."""
     return _static(spec, spec.boundary(), base, mu, None)[0]
@@ -155,7 +155,7 @@ def _static(spec: MapSpec, boundary: Boundary, base: BasePose, mu: float, warm: 
     problem, res = optimal_grasp(spec, boundary, base, warm)
     s = problem.s
     cap = wrench_capacity(s, boundary.point(res.s_o), boundary.tangent_angle(res.s_o), problem.arm.radius(s) - res.rho,
-                          mu=mu, tol=spec.contact_tol, scale=spec.object.radius)
+                          mu=mu, tol=spec.contact_tol, ref=spec.object.reference, scale=spec.object.radius)
     return cap, res
 
 
@@ -166,7 +166,7 @@ def cage_capacity(scenario: Scenario, mu: float) -> WrenchCapacity:
     (:func:`~contgrasp_core.control.hold_law.cage_gains`,
     :func:`~contgrasp_core.control.rod_feedback.rest_shape`), and the enclosing band (H3) on it
     (nodes with ``rho - r <= g_f + band``, cut at the linear crossing as Q1-Q3 cut the contact
-    set) pressed at the shadow points. Coulomb ``mu``, torques about the object's centre scaled
+    set) pressed at the shadow points. Coulomb ``mu``, torques about the scenario's reference scaled
     by its nominal radius; SI (Q_H in m). :class:`ContgraspError` when the rest cannot be solved."""
     from .control.hold_law import HoldController, cage_gains
     from .control.rod_feedback import rest_shape
@@ -180,5 +180,5 @@ def cage_capacity(scenario: Scenario, mu: float) -> WrenchCapacity:
     theta = rest_shape(m, obstacle, cage_gains(m, law.object_radius, s, s.close_gap, law.length_unit))
     foot = obstacle.project(chain.nodes(m, theta))
     in_band = s.close_gap + s.band - (foot.signed_distance - m.radius(m.s_nodes))
-    return wrench_capacity(m.s_nodes, foot.foot, foot.phi, in_band, mu=mu, ref=scenario.object.center,
+    return wrench_capacity(m.s_nodes, foot.foot, foot.phi, in_band, mu=mu, ref=scenario.reference,
                            scale=scenario.object.radius)

@@ -212,6 +212,17 @@ class ObjectSpec:
         area = 0.5 * abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)))
         return float(np.sqrt(area / np.pi))
 
+    @property
+    def reference(self) -> tuple[float, float]:
+        """Where the object's torques are taken (Q1, Q3 and Q_H depend on it, Q2 does not): a
+        built-in shape's ``center``, an outline's centroid (its file's origin may lie anywhere)."""
+        if self.shape != "outline":
+            return self.center
+        from .rod.body import mass_properties
+
+        c = mass_properties(self.boundary())[1]
+        return float(c[0]), float(c[1])
+
     def _build(self) -> Boundary:
         p, c = self.params, self.center
         if self.shape == "circle":

@@ -24,7 +24,7 @@ from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSetting
 from contgrasp_core.control.law import CENTIMETRE
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
-from contgrasp_core.rod.body import ObjectDynamics, mass_properties
+from contgrasp_core.rod.body import ObjectDynamics
 from contgrasp_core.rod.disturbance import Disturbance
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.model import RodModel
@@ -143,14 +143,9 @@ class Scenario:
     @property
     def reference(self) -> tuple[float, float]:
         """The wrench reference point of the grasp map (m): the sensing's, else the object's
-        own: a built-in shape's centre, an outline's centroid (its file's origin, its ``center``,
-        may lie anywhere: Q1 and Q3 depend on the reference, Q2 does not)."""
-        if self.sensing.reference is not None:
-            return self.sensing.reference
-        if self.object.shape == "outline":
-            c = mass_properties(self.object.boundary())[1]
-            return float(c[0]), float(c[1])
-        return self.object.center
+        own (:attr:`ObjectSpec.reference <contgrasp_core.objects.ObjectSpec.reference>`: an
+        outline's centroid)."""
+        return self.object.reference if self.sensing.reference is None else self.sensing.reference
 
     # ------------------------------------------------------------------ ROS parameters
     def to_ros_parameters(self) -> dict[str, dict[str, Any]]:

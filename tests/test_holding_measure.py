@@ -5,6 +5,7 @@ invariance under a rigid rotation, monotonicity in mu, and bad input."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -171,3 +172,22 @@ def test_the_cage_of_a_uniform_arm_on_the_parallel_circle_wraps_it_once() -> Non
     assert errors[0] < 1e-3 and errors[1] < errors[0] / 10
     with pytest.raises(InvalidParameterError, match="holding law"):
         cage_capacity(replace(scenario, law="paper"), mu)
+
+
+def test_the_cage_capacity_of_a_fine_outline_of_the_circle_is_the_circles(tmp_path: Path) -> None:
+    """Q_H's torques are taken about the object's reference: an outline's centroid, not its file's
+    origin (0, 0), 11 cm from the paper's circle (cage Q_H 0.0031 against the circle's 0.0120
+    before). A 360-point outline of the circle gives the circle's cage Q_H."""
+    from contgrasp_core.holding_measure import cage_capacity
+    from contgrasp_core.objects import ObjectSpec
+    from contgrasp_core.scenario import PAPER
+
+    t = np.linspace(0.0, 2.0 * np.pi, 360, endpoint=False)
+    path = tmp_path / "circle360.csv"
+    np.savetxt(path, np.c_[0.08 + 0.025 * np.cos(t), 0.08 + 0.025 * np.sin(t)], delimiter=",")
+    outline = ObjectSpec.from_outline(path)
+    assert outline.center == (0.0, 0.0) and outline.reference == pytest.approx((0.08, 0.08), abs=1e-9)
+    assert PAPER.object.reference == PAPER.object.center
+    hold = replace(PAPER, law="hold")
+    circle = cage_capacity(hold, 0.5).measure
+    assert cage_capacity(hold.with_object(outline), 0.5).measure == pytest.approx(circle, rel=2e-3) and circle > 0
