@@ -1,6 +1,7 @@
-"""The library alone (README, "Install"): ``pip install`` of this repository with no extras, in a
-fresh virtual environment of the running interpreter, installs nothing from ROS, no mcap and no
-foxglove; the core subcommands run; the ROS layer's commands say in one line what to install.
+"""The library alone (docs/install.md, "The library alone"): ``pip install`` of this repository
+with no extras, in a fresh virtual environment of the running interpreter, installs nothing from
+ROS, no mcap and no foxglove; the core subcommands run; the ROS layer's commands say in one line
+what to install.
 
 This is what a researcher on macOS, Windows or aarch64 gets: the wheel is ``py3-none-any``, so it
 installs wherever numpy, scipy and numba do. It builds the wheel from the checkout's files and

@@ -1,10 +1,11 @@
-"""The paper map (docs/paper_map.md) and README's module table name only things that exist.
+"""The paper map (docs/paper_map.md) and the module table of docs/design.md name only things that exist.
 
 The map says which function implements which numbered equation and which test checks it; these
 tests import every function it names and find every test it names, and require every numbered
-equation of the paper to be either mapped or listed as not implemented. README's module table
-must name every module and package of ``contgrasp_core`` and ``contgrasp_ros`` exactly once and
-nothing that does not exist.
+equation of the paper to be either mapped or listed as not implemented. The module table
+(docs/design.md, "Every module") must name every module and package of ``contgrasp_core`` and
+``contgrasp_ros`` exactly once and nothing that does not exist; the links of README.md and
+docs/install.md must lead to files that exist.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_MAP = ROOT / "docs" / "paper_map.md"
 README = ROOT / "README.md"
+DESIGN = ROOT / "docs" / "design.md"
 
 # The paper's numbered equations as printed (derivation in docs/paper_map.md): (1)-(21) in the
 # body, (A-1) and (A-2) in the appendices.
@@ -133,23 +135,23 @@ def test_every_numbered_equation_is_mapped_or_listed_as_not_implemented() -> Non
     assert mapped | not_implemented == NUMBERED_EQUATIONS, NUMBERED_EQUATIONS - mapped - not_implemented
 
 
-# ----------------------------------------------------------------------------- README
+# ----------------------------------------------------------------------------- module table
 
 
-def readme_modules() -> list[str]:
-    """The names in the first column of README's module table (``What is here``)."""
-    _, rows = _table(README.read_text(encoding="utf-8"), "module", "paper", "holds")
+def table_modules() -> list[str]:
+    """The names in the first column of the module table (docs/design.md, ``Every module``)."""
+    _, rows = _table(DESIGN.read_text(encoding="utf-8"), "module", "paper", "holds")
     names = []
     for row in rows:
         cell = re.findall(r"`([^`]+)`", row[0])
-        assert cell, f"README module table row without a module name: {row}"
+        assert cell, f"design.md module table row without a module name: {row}"
         names.extend(cell)
     return names
 
 
 def existing_entries(package: str) -> set[str]:
     """Every module, package and data folder directly inside ``package`` (private ``_x`` modules
-    and ``__init__``/``__pycache__`` excluded) as README names them: ``pkg.mod`` or ``pkg/dir/``."""
+    and ``__init__``/``__pycache__`` excluded) as the module table names them: ``pkg.mod`` or ``pkg/dir/``."""
     out = set()
     for p in (ROOT / package).iterdir():
         if p.name.startswith("_"):
@@ -168,19 +170,39 @@ def exists(name: str) -> bool:
     return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
 
 
-def test_readme_module_table_names_only_what_exists_and_each_once() -> None:
-    names = readme_modules()
+def test_module_table_names_only_what_exists_and_each_once() -> None:
+    names = table_modules()
     assert len(names) == len(set(names)), sorted({n for n in names if names.count(n) > 1})
     assert [n for n in names if not exists(n)] == []
 
 
 @pytest.mark.parametrize("package", ["contgrasp_core", "contgrasp_ros"])
-def test_readme_module_table_covers_every_module(package: str) -> None:
-    listed = set(readme_modules())
+def test_module_table_covers_every_module(package: str) -> None:
+    listed = set(table_modules())
     assert package in listed
     assert sorted(existing_entries(package) - listed) == []
 
 
 def test_readme_and_design_link_the_paper_map() -> None:
     assert "docs/paper_map.md" in README.read_text(encoding="utf-8")
-    assert "paper_map.md" in (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
+    assert "paper_map.md" in DESIGN.read_text(encoding="utf-8")
+
+
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+@pytest.mark.parametrize("page", ["README.md", "docs/install.md", "docs/design.md"])
+def test_the_newcomers_pages_link_only_files_that_exist(page: str) -> None:
+    """README.md sends a reader on by links (install, the docs, the figures): each must lead somewhere."""
+    path = ROOT / page
+    targets = [t.split("#")[0] for t in LINK.findall(path.read_text(encoding="utf-8"))]
+    targets = [t for t in targets if t and "://" not in t]
+    assert targets
+    assert [t for t in targets if not (path.parent / t).exists()] == []
+
+
+def test_the_readme_links_every_doc() -> None:
+    """Depth lives in docs/, reached from README.md: every page of docs/ is linked from it."""
+    text = README.read_text(encoding="utf-8")
+    assert [p.name for p in sorted((ROOT / "docs").glob("*.md")) if f"docs/{p.name}" not in text] == []
+    assert "benchmarks/RESULTS.md" in text
