@@ -532,3 +532,19 @@ def test_node_with_bad_parameter_exits_2_and_recorder_with_failing_disk_exits_1(
     errors = [line for line in full.stderr.splitlines() if line.startswith("McapRecorder: error: ")]
     assert len(errors) == 1 and "File too large" in errors[0], full.stderr[-2000:]
 
+
+
+def test_launcher_without_ros_names_what_to_install(capsys: pytest.CaptureFixture[str],
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """In an install with the recording stack but no ROS 2 (``pip install 'contgrasp[ros]'``), a
+    run needs rclpy: one line naming what to install, exit 2, not ``ModuleNotFoundError``."""
+    from contgrasp_ros.launcher import cli as launcher
+
+    for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR"):  # the launcher sets them
+        monkeypatch.setenv(var, os.environ.get(var, "0"))
+    monkeypatch.setitem(sys.modules, "rclpy", None)  # (import rclpy: ModuleNotFoundError, name 'rclpy')
+    for module in [m for m in sys.modules if m.startswith("contgrasp_ros.launcher.graph_run")]:
+        monkeypatch.delitem(sys.modules, module)
+    assert launcher.main(["--no-record"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("contgrasp-launch: error: needs ROS 2 Jazzy (module 'rclpy' is missing)"), err

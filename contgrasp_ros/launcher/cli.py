@@ -38,6 +38,7 @@ from contgrasp_core.rod.body import MODES
 from contgrasp_core.scenario import Scenario
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
+from contgrasp_ros.layer import guarded
 from contgrasp_ros.launcher.events import EventWriter, open_events
 from contgrasp_ros.launcher.graph import compose_groups, default_params_file, launch_overrides, load_params, parameter_file
 from contgrasp_ros.plumbing import topics
@@ -191,7 +192,7 @@ def _main(argv: Sequence[str] | None) -> int:
                 raise InvalidParameterError("--events - and --json both write to stdout: give --events a file")
             events = open_events(args.events)
         with tempfile.TemporaryDirectory(prefix="contgrasp_params_") as folder:  # (a changed scenario's file)
-            return _launch(args, argv, Path(folder), events)
+            return guarded(_launch)(args, argv, Path(folder), events)  # (ROS missing: the one line naming it)
     except BrokenPipeError:  # (stdout closed by its reader: not the launcher's error)
         raise
     except Exception as exc:  # noqa: BLE001 - one line instead of a traceback (--debug shows it)
