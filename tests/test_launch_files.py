@@ -7,6 +7,7 @@ where ``launch_ros`` imports and are skipped with that reason elsewhere (the pip
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -30,7 +31,10 @@ def test_the_rviz_configuration_shows_the_markers_in_their_frame() -> None:
     manager = cfg["Visualization Manager"]
     assert manager["Global Options"]["Fixed Frame"] == "world"  # the frame of every marker and state
     markers = [d for d in manager["Displays"] if d["Class"] == "rviz_default_plugins/MarkerArray"]
-    assert [d["Topic"]["Value"] for d in markers] == [topics.resolve(topics.MARKERS)]
+    # (relative, as the graph's names are: RViz resolves it under its own namespace, the graph's)
+    assert [d["Topic"]["Value"] for d in markers] == [topics.MARKERS]
+    assert topics.resolve(markers[0]["Topic"]["Value"]) == "/contgrasp/markers"
+    assert topics.resolve(markers[0]["Topic"]["Value"], "/r1") == "/r1/contgrasp/markers"
     assert set(markers[0]["Namespaces"]) == {"arm", "object", "contact"}  # contgrasp_ros.plumbing.markers' namespaces
     assert manager["Views"]["Current"]["Class"] == "rviz_default_plugins/TopDownOrtho"  # the grasp's plane
 
@@ -54,6 +58,62 @@ def _env() -> dict[str, str]:
 def launch_ros() -> None:
     pytest.importorskip("launch_ros", reason="launch_ros is part of a ROS 2 install, not a wheel (docs/ros.md, "
                                              "'In a ROS 2 workspace')")
+
+
+# Evaluates a launch file as `ros2 launch` would, without starting a process: each node's
+# package, executable and the namespace and remapping rules in force where it is launched, as JSON.
+_LAUNCH_NODES = """
+import json, sys
+from launch import LaunchContext
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.utilities import normalize_to_list_of_substitutions, perform_substitutions
+from launch_ros.actions import Node
+
+context = LaunchContext()
+context.launch_configurations.update(a.split(":=", 1) for a in sys.argv[2:])
+description = PythonLaunchDescriptionSource(sys.argv[1]).get_launch_description(context)
+
+
+def text(value):
+    return perform_substitutions(context, normalize_to_list_of_substitutions(value))
+
+
+def nodes(entities):
+    for entity in entities:
+        if entity.condition is not None and not entity.condition.evaluate(context):
+            continue
+        if isinstance(entity, Node):
+            yield {"package": text(entity.node_package), "executable": text(entity.node_executable),
+                   "namespace": context.launch_configurations.get("ros_namespace", "/"),
+                   "remaps": [list(rule) for rule in context.launch_configurations.get("ros_remaps", [])]}
+        else:
+            yield from nodes(entity.visit(context) or [])
+
+
+print(json.dumps(list(nodes(description.entities))))
+"""
+
+
+@pytest.mark.parametrize("namespace", ["", "arm1"])
+def test_rviz_runs_in_the_graphs_namespace(launch_ros: None, tmp_path: Path, namespace: str) -> None:
+    """``rviz:=true`` starts RViz where the graph's nodes are: under ``namespace:=arm1`` it
+    resolves its configuration's relative ``contgrasp/markers`` to ``/arm1/contgrasp/markers``,
+    which the simulator there publishes (RViz was outside the group, on ``/contgrasp/markers``,
+    which a namespaced graph does not publish)."""
+    args = ["rviz:=true", *([f"namespace:={namespace}"] if namespace else [])]
+    out = subprocess.run([sys.executable, "-c", _LAUNCH_NODES, str(PACKAGE_DIR / "launch" / "paper_grasp.launch.py"), *args],
+                         env=dict(_env(), ROS_LOG_DIR=str(tmp_path)), capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+    nodes = {node["executable"]: node for node in json.loads(out.stdout)}
+    assert sorted(nodes) == ["boundary_sensor", "grasp_controller", "grasp_quality", "rod_simulator", "rviz2"]
+    rviz, simulator = nodes["rviz2"], nodes["rod_simulator"]
+    assert rviz["package"] == "rviz2"
+    assert rviz["namespace"] == simulator["namespace"] == ("/" + namespace if namespace else "/")
+    assert rviz["remaps"] == simulator["remaps"]  # (the namespace's clock, when one is given)
+    cfg = yaml.safe_load((PACKAGE_DIR / "rviz" / "contgrasp.rviz").read_text())
+    topic = next(d["Topic"]["Value"] for d in cfg["Visualization Manager"]["Displays"]
+                 if d["Class"] == "rviz_default_plugins/MarkerArray")
+    assert topics.resolve(topic, rviz["namespace"]) == topics.resolve(topics.MARKERS, simulator["namespace"])
 
 
 def test_paper_grasp_launch_runs_the_paper_grasp(launch_ros: None) -> None:

@@ -92,9 +92,9 @@ def _number(name: str, text: str) -> float | None:
 
 def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[GroupAction | Node]:
     """The graph's node processes with the launch arguments applied (the launcher's rules: an
-    override file after the scenario's parameter file, kept in the launch's log folder), in a
-    group under ``namespace`` when given (``PushRosNamespace``, and ``/clock`` remapped to the
-    namespace's clock on every node of the group)."""
+    override file after the scenario's parameter file, kept in the launch's log folder), and RViz
+    on ``rviz:=true``, in a group under ``namespace`` when given (``PushRosNamespace``, and
+    ``/clock`` remapped to the namespace's clock on every node of the group)."""
     arg = {name: LaunchConfiguration(name).perform(context) for name in
            ("params_file", "object", "outline", "law", "object_mode", "max_muscle_stress", "friction", "lockstep", "duration", "compose",
             "record", "bag", "on_finish", "namespace")}
@@ -132,6 +132,11 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[GroupAction | N
              sigterm_timeout="20")
         for proc in processes(nodes, compose, record=record)
     ]
+    # RViz in the group too: its configuration names the markers relatively (``contgrasp/markers``),
+    # so under the namespace it shows this graph's ``<namespace>/contgrasp/markers``
+    rviz_config = PathJoinSubstitution([FindPackageShare(PACKAGE), "rviz", "contgrasp.rviz"])
+    graph.append(Node(package="rviz2", executable="rviz2", arguments=["-d", rviz_config], output="screen",
+                      condition=IfCondition(LaunchConfiguration("rviz"))))
     if not arg["namespace"].strip("/"):
         return graph
     return [GroupAction([PushRosNamespace(arg["namespace"]), SetRemap(topics.CLOCK, topics.namespace_clock(arg["namespace"])), *graph])]
@@ -151,10 +156,7 @@ def graph_description(nodes: Sequence[str], *, lockstep: bool) -> LaunchDescript
     """The launch description of a graph of ``nodes`` (:data:`contgrasp_ros.launcher.graph.LOOP` or
     :data:`~contgrasp_ros.launcher.graph.PLANT`), lock-step by default when ``lockstep``, with RViz on
     ``rviz:=true``."""
-    rviz_config = PathJoinSubstitution([FindPackageShare(PACKAGE), "rviz", "contgrasp.rviz"])
     return LaunchDescription([
         *_arguments(lockstep),
         OpaqueFunction(function=_nodes, args=[tuple(nodes)]),
-        Node(package="rviz2", executable="rviz2", arguments=["-d", rviz_config], output="screen",
-             condition=IfCondition(LaunchConfiguration("rviz"))),
     ])
