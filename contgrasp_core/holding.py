@@ -130,6 +130,17 @@ class HoldResult:
         """The worst direction's capacity (N, scaled wrench space)."""
         return min(c.magnitude for c in self.capacity)
 
+    @property
+    def weakest(self) -> Capacity:
+        """The direction of :attr:`capacity_min` (the first of equals)."""
+        return min(self.capacity, key=lambda c: c.magnitude)
+
+    @property
+    def capacity_is_bound(self) -> bool:
+        """:attr:`capacity_min` is only a lower bound: its direction held to the ramp's end (the
+        object never escaped there), so the grasp may hold more."""
+        return self.weakest.held
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON-able result (``contgrasp hold --json``)."""
         return {
@@ -145,6 +156,8 @@ class HoldResult:
                                              strict=True)],
             "pressure_max": self.pressure_max,
             "capacity_min": self.capacity_min,
+            "capacity_is_bound": self.capacity_is_bound,
+            "capacity_min_reason": self.weakest.reason,
             "Q1": self.Q1, "Q2": self.Q2, "Q3": self.Q3,
             "Q1_force": self.force_weighted.Q1, "Q2_force": self.force_weighted.Q2, "Q3_force": self.force_weighted.Q3,
             "scale_m": self.scale,
@@ -351,7 +364,8 @@ class HoldExperiment:
         magnitude = rate * last.t
         return Capacity(direction=tuple(float(x) for x in direction),  # type: ignore[arg-type]
                         wrench=tuple(float(x) for x in magnitude * unscaled),  # type: ignore[arg-type]
-                        magnitude=float(magnitude), held=not why, reason=why or "held to the ramp's end")
+                        magnitude=float(magnitude), held=not why,
+                        reason=why or f"held to the ramp's end at {magnitude:.4g} N: a lower bound (a longer --ramp-time reaches further)")
 
 
 def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),

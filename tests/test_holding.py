@@ -76,6 +76,10 @@ def test_hold_command_reports_stiffness_capacity_and_quality() -> None:
     assert np.asarray(out["stiffness"]).shape == (3, 3) and len(out["stiffness_eigenvalues"]) == 3
     assert len(out["capacity"]) == 4
     assert out["capacity_min"] == min(c["magnitude"] for c in out["capacity"])
+    # (a direction that held to the ramp's end gives a lower bound, said so; never a bare ramp end)
+    weakest = min(out["capacity"], key=lambda c: c["magnitude"])
+    assert out["capacity_is_bound"] is weakest["held"] and out["capacity_min_reason"] == weakest["reason"]
+    assert all(("a lower bound" in c["reason"]) == c["held"] for c in out["capacity"])
     assert out["Q1"] > 0 and out["Q2"] > 0 and 0 < out["Q3"] <= 1
     bad = subprocess.run(cmd + ["--mu", "nan"], capture_output=True, text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1

@@ -85,10 +85,11 @@ def format_text(out: dict[str, Any]) -> str:
              + ", ".join(f"{v:.4g}" for v in out["stiffness_eigenvalues"]),
              "holding capacity (N, torque / radius) per direction (fx, fy, tau):"]
     for c in out["capacity"]:
-        state = "held to the ramp's end" if c["held"] else c["reason"]
+        state = "held to the ramp's end: a lower bound" if c["held"] else c["reason"]
         lines.append(f"  ({c['direction'][0]:+.2f}, {c['direction'][1]:+.2f}, {c['direction'][2]:+.0f}): "
                      f"{c['magnitude']:.4g} ({state})")
-    lines += [f"capacity_min {out['capacity_min']:.4g} N", *tail]
+    bound = " (a lower bound: that direction held to the ramp's end)" if out["capacity_is_bound"] else ""
+    lines += [f"capacity_min {out['capacity_min']:.4g} N{bound}", *tail]
     return "\n".join(lines)
 
 
