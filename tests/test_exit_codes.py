@@ -14,6 +14,7 @@ installed (``replay``). Only the launcher's and run_node's start-up failures are
 
 from __future__ import annotations
 
+import json
 import os
 import resource
 import subprocess
@@ -548,3 +549,23 @@ def test_launcher_without_ros_names_what_to_install(capsys: pytest.CaptureFixtur
     assert launcher.main(["--no-record"]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith("contgrasp-launch: error: needs ROS 2 Jazzy (module 'rclpy' is missing)"), err
+
+
+def test_launcher_json_stays_clean_when_native_code_writes_to_stdout(monkeypatch: pytest.MonkeyPatch,
+                                                                     capfd: pytest.CaptureFixture[str]) -> None:
+    """``--json``: stdout carries the summary only. While the graph runs, what native code writes
+    to file descriptor 1 (Fast DDS printed a shared-memory port error there, in-process, and the
+    summary no longer parsed) goes to stderr."""
+    import contgrasp_ros.launcher.graph_run
+    from contgrasp_ros.launcher import cli as launcher
+
+    def noisy(params: dict[str, Any], **_k: object) -> tuple[dict[str, Any], int]:
+        os.write(1, b"[RTPS_TRANSPORT_SHM Error] Failed init_port\\n")
+        return {"settled": True}, 0
+
+    monkeypatch.setattr(contgrasp_ros.launcher.graph_run, "run_graph", noisy)
+    for var in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR"):  # the launcher sets them
+        monkeypatch.setenv(var, os.environ.get(var, "0"))
+    assert launcher.main(["--no-record", "--in-process", "--json"]) == 0
+    out, err = capfd.readouterr()
+    assert json.loads(out)["settled"] is True and "Failed init_port" in err

@@ -23,7 +23,8 @@ import re
 import sys
 import tempfile
 import traceback
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -178,6 +179,26 @@ RECORDING_OPTIONS = ("--bag", "--bag-layout", "--bag-exclude", "--bag-decimate",
 """The options that set how the run is recorded: with ``--no-record`` they would do nothing."""
 
 
+@contextmanager
+def stdout_reserved(reserve: bool = True) -> Iterator[None]:
+    """While the graph runs, file descriptor 1 points at stderr: stdout carries the summary only.
+    The DDS library of an in-process graph (and a node process's native code) writes its own
+    errors to descriptor 1, which once broke ``--json`` (a Fast DDS shared-memory port error
+    before the summary)."""
+    if not reserve:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 def _main(argv: Sequence[str] | None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
@@ -273,10 +294,11 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
           "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; with a ROS 2 install: ros2 topic echo "
           f"{topics.resolve(topics.QUALITY, args.namespace)})",
           file=sys.stderr, flush=True)
-    summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout, record=record,
-                              respawn=args.respawn, keep_history=args.plot is not None, events=events,
-                              foxglove=args.foxglove, allow_unrecorded=args.allow_unrecorded, compose=compose,
-                              namespace=args.namespace)
+    with stdout_reserved(args.events != "-"):
+        summary, code = run_graph(params, in_process=args.in_process, params_file=params_file, timeout=args.timeout,
+                                  record=record, respawn=args.respawn, keep_history=args.plot is not None, events=events,
+                                  foxglove=args.foxglove, allow_unrecorded=args.allow_unrecorded, compose=compose,
+                                  namespace=args.namespace)
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
     if args.plot is not None and summary.get("history"):
