@@ -12,7 +12,7 @@ grasp of Sec. III, :func:`cage_capacity` the contact set the holding law will pr
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     from .scenario import Scenario
 
 __all__ = ["WrenchCapacity", "wrench_generators", "support", "wrench_capacity", "static_capacity", "static_capacity_column",
-           "cage_capacity", "SEARCH_DIRECTIONS"]
+           "cage_capacity", "cage_wrap", "check_reach", "SEARCH_DIRECTIONS"]
 
 Array = NDArray[np.float64]
 
@@ -161,13 +161,61 @@ def _static(spec: MapSpec, boundary: Boundary, base: BasePose, mu: float, warm: 
 
 def cage_capacity(scenario: Scenario, mu: float) -> WrenchCapacity:
     """(M4): Q_H (M3) of the contact set the holding law will press, before simulating: the
-    cage (H1) of ``scenario`` (law ``hold``) at rest at its close gap ``g_f``, the rod's static
-    closed loop under eq. (19) with the cage's gains at ``g_f``
-    (:func:`~contgrasp_core.control.hold_law.cage_gains`,
-    :func:`~contgrasp_core.control.rod_feedback.rest_shape`), and the enclosing band (H3) on it
-    (nodes with ``rho - r <= g_f + band``, cut at the linear crossing as Q1-Q3 cut the contact
-    set) pressed at the shadow points. Coulomb ``mu``, torques about the scenario's reference scaled
-    by its nominal radius; SI (Q_H in m). :class:`ContgraspError` when the rest cannot be solved."""
+    closed loop's static rest under eq. (19) with the cage's gains at the close gap ``g_f``
+    (:func:`_cage_rest`), and the enclosing band (H3) on it (nodes with ``rho - r <= g_f + band``,
+    cut at the linear crossing as Q1-Q3 cut the contact set) pressed at the shadow points.
+    Coulomb ``mu``, torques about the scenario's reference scaled by the object's nominal radius;
+    SI (Q_H in m). :class:`ContgraspError` when the rest cannot be solved."""
+    law, foot = _cage_rest(scenario, "close_gap")
+    s, m = law.settings, scenario.rod
+    in_band = s.close_gap + s.band - (foot.signed_distance - m.radius(m.s_nodes))
+    return wrench_capacity(m.s_nodes, foot.foot, foot.phi, in_band, mu=mu, ref=scenario.reference,
+                           scale=scenario.object.radius)
+
+
+def cage_wrap(scenario: Scenario) -> float:
+    """The wrap angle (H3, rad) of the holding law's cage at rest at its clearance: how much of
+    the object the arm surrounds from this base before the law can close (it closes at
+    ``wrap_angle``). :class:`ContgraspError` when the rest cannot be solved."""
+    from .control.hold_law import wrap_angle
+
+    law, foot = _cage_rest(scenario, "clearance")
+    s, m = law.settings, scenario.rod
+    band = foot.signed_distance - m.radius(m.s_nodes) <= s.clearance + s.band
+    return wrap_angle(foot.theta, foot.alpha, band)
+
+
+def check_reach(scenario: Scenario) -> None:
+    """Refuse, before simulating, a holding-law scenario whose cage cannot close: its rest at the
+    clearance (:func:`cage_wrap`) wraps less of the object than the law's ``wrap_angle``, so the
+    close never starts (the arm hovers; a free object is never held). Other laws pass."""
+    if scenario.law != "hold":
+        return
+    wrap, need = cage_wrap(scenario), scenario.hold_law.wrap_angle
+    if wrap < need:
+        raise InvalidParameterError(
+            f"the holding law cannot close on {scenario.object.text()} from this base: its cage at rest wraps "
+            f"{wrap:.2f} rad of the object and the close starts at wrap_angle {need:.2f} rad (a longer arm, a base "
+            "nearer the object or a smaller wrap_angle)")
+
+
+class CageRest(NamedTuple):
+    """The cage at rest at the nodes: shadow points ``foot``, boundary tangent angles ``phi``,
+    signed distances of the centreline ``signed_distance`` (m), node angles ``theta`` and contact
+    angles ``alpha`` (eq. (4))."""
+
+    foot: Array
+    phi: Array
+    signed_distance: Array
+    theta: Array
+    alpha: Array
+
+
+def _cage_rest(scenario: Scenario, gap: str) -> tuple[Any, CageRest]:
+    """The holding law and its cage's rest: the closed loop's static rest under eq. (19) with the
+    cage's gains at the law's ``gap`` setting (``clearance`` or ``close_gap``)
+    (:func:`~contgrasp_core.control.rod_feedback.rest_shape`)."""
+    from .contact import sense
     from .control.hold_law import HoldController, cage_gains
     from .control.rod_feedback import rest_shape
     from .rod import Obstacle, chain
@@ -177,8 +225,8 @@ def cage_capacity(scenario: Scenario, mu: float) -> WrenchCapacity:
         raise InvalidParameterError(f"the cage is the holding law's; the scenario's law is {scenario.law!r}")
     s = law.settings
     obstacle = Obstacle(scenario.object.boundary())
-    theta = rest_shape(m, obstacle, cage_gains(m, law.object_radius, s, s.close_gap, law.length_unit))
+    theta = rest_shape(m, obstacle, cage_gains(m, law.object_radius, s, getattr(s, gap), law.length_unit))
     foot = obstacle.project(chain.nodes(m, theta))
-    in_band = s.close_gap + s.band - (foot.signed_distance - m.radius(m.s_nodes))
-    return wrench_capacity(m.s_nodes, foot.foot, foot.phi, in_band, mu=mu, ref=scenario.reference,
-                           scale=scenario.object.radius)
+    shape = chain.arm_shape(m, theta)
+    contact = sense(shape, scenario.object.boundary(), m.radius(m.s_nodes))
+    return law, CageRest(foot.foot, foot.phi, foot.signed_distance, shape.theta, contact.alpha)

@@ -569,3 +569,22 @@ def test_launcher_json_stays_clean_when_native_code_writes_to_stdout(monkeypatch
     assert launcher.main(["--no-record", "--in-process", "--json"]) == 0
     out, err = capfd.readouterr()
     assert json.loads(out)["settled"] is True and "Failed init_port" in err
+
+
+def test_a_holding_law_that_cannot_close_is_refused_before_simulating(launched: list[dict[str, Any]],
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """A 35 mm circle from the paper's base: the holding law's cage wraps 2.8 rad of it at rest
+    and the close starts at pi, so the law would hover for the whole run (``contgrasp hold`` once
+    ended, exit 1, with "no node touched the object"). ``hold`` and the launcher refuse it before
+    any simulation, one line, exit 2; the paper's law on the same object runs."""
+    from contgrasp_ros.launcher import cli as launcher
+
+    proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "hold", "--law", "hold", "--object", "circle:0.035"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stdout == "", proc.stderr
+    (line,) = proc.stderr.strip().splitlines()
+    assert line.startswith("contgrasp hold: error: the holding law cannot close on circle:0.035 from this base")
+    assert launcher.main(["--no-record", "--law", "hold", "--object", "circle:0.035"]) == 2 and launched == []
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("contgrasp-launch: error: the holding law cannot close on circle:0.035"), err
+    assert launcher.main(["--no-record", "--object", "circle:0.035"]) == 0 and len(launched) == 1

@@ -191,3 +191,26 @@ def test_the_cage_capacity_of_a_fine_outline_of_the_circle_is_the_circles(tmp_pa
     hold = replace(PAPER, law="hold")
     circle = cage_capacity(hold, 0.5).measure
     assert cage_capacity(hold.with_object(outline), 0.5).measure == pytest.approx(circle, rel=2e-3) and circle > 0
+
+
+def test_the_cages_wrap_is_the_arc_its_band_spans_and_a_cage_that_cannot_close_is_refused() -> None:
+    """(H3) on the cage at rest, before simulating: on a circle the wrap is the angle its band's
+    shadow points span about the centre (the tangent turns with the polar angle). The paper's
+    circle is wrapped beyond pi (the law closes); a 35 mm circle only 2.8 rad from the same base,
+    so the close would never start: ``check_reach`` refuses it in one line, the paper's law passes."""
+    from contgrasp_core.holding_measure import _cage_rest, cage_wrap, check_reach
+    from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+    from contgrasp_core.scenario import PAPER
+
+    hold = replace(PAPER, law="hold")
+    law, rest = _cage_rest(hold, "clearance")
+    m, s = hold.rod, law.settings
+    band = np.flatnonzero(rest.signed_distance - m.radius(m.s_nodes) <= s.clearance + s.band)
+    polar = np.unwrap(np.arctan2(*(rest.foot[band] - np.asarray(PAPER.object.center)).T[::-1]))
+    assert cage_wrap(hold) == pytest.approx(polar[-1] - polar[0], abs=1e-9) and cage_wrap(hold) > np.pi
+    check_reach(hold)
+    wide = hold.with_object(ObjectSpec.parse("circle:0.035", ROD_SCALE))
+    assert 2.5 < cage_wrap(wide) < np.pi
+    with pytest.raises(InvalidParameterError, match=r"cannot close on circle:0.035 from this base: its cage at rest wraps 2\.8"):
+        check_reach(wide)
+    check_reach(replace(wide, law="paper"))

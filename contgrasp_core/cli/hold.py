@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from ..holding import HoldSettings, measure_holding
-from ..holding_measure import cage_capacity
+from ..holding_measure import cage_capacity, check_reach
 from ..objects import ROD_SCALE
 from ..scenario import PAPER
 from .common import add_muscle_argument, add_object_arguments, object_from_args
@@ -107,6 +107,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                             ramp_time=args.ramp_time, contact_wait=args.contact_wait, directions=args.directions,
                             escape_distance=args.escape_distance, escape_angle=args.escape_angle)
     scenario = PAPER.with_object(obj, rod=rod, law=args.law, hold_law=hold_law_from_args(args))
+    check_reach(scenario)  # (the holding law's cage must be able to close: refused before simulating)
     t0 = time.perf_counter()
     progress = None if args.json else (lambda phase: print(f"contgrasp hold: {phase}", file=sys.stderr, flush=True))
     cage = cage_capacity(scenario, settings.mu).measure if args.law == "hold" else None  # (before simulating)

@@ -36,6 +36,7 @@ from contgrasp_core.errors import InvalidParameterError, exit_code, one_line, re
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_core.outputs import check_output
 from contgrasp_core.rod.body import MODES
+from contgrasp_core.holding_measure import check_reach
 from contgrasp_core.scenario import Scenario
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
@@ -243,7 +244,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
         for node, values in changes.items():
             params[node].update(values)
         params_file = parameter_file(folder / "params.yaml", params)
-    Scenario.from_ros_parameters(params)  # the scenario's checks (an impossible start: check_start) before any node
+    # the scenario's checks before any node: an impossible start (check_start), a holding law whose cage cannot close
+    check_reach(Scenario.from_ros_parameters(params))
     domain = _domain_id(args.domain_id)
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     if events is not None:
