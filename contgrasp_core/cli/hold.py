@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import InvalidParameterError
 from ..holding import HoldSettings, measure_holding
-from ..holding_measure import cage_capacity
+from ..holding.measure import cage_capacity
 from ..objects import ROD_SCALE
 from ..scenario import PAPER
 from .common import add_muscle_argument, add_object_arguments, object_from_args

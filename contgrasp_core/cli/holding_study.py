@@ -2,7 +2,7 @@
 
 For every base pose of the object's quality map (paper Sec. IV-C) and each metric's optimum:
 the static Q1-Q3, then the rod's closed-loop grasp from that pose with its settled Q1-Q3, grasp
-stiffness and holding capacity (:mod:`contgrasp_core.holding_study`); Spearman correlations
+stiffness and holding capacity (:mod:`contgrasp_core.holding.study`); Spearman correlations
 with bootstrap intervals. Results go to ``--out FILE.jsonl`` as they arrive; running the same
 command again resumes.
 """
@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import InvalidParameterError
 from ..control.hold_law import LAWS
 from .hold import add_ramp_arguments
-from ..holding_study import ARMS, PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
+from ..holding.study import ARMS, PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
 from ..objects import FIG2_SCALE
 from ..outputs import check_output
 from .common import add_executor_arguments, add_muscle_argument, add_object_arguments, object_from_args

@@ -18,15 +18,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize
 
-from ._validate import float_array, real
-from .errors import ContgraspError, InvalidParameterError
-from .quality import contact_weights
+from .._validate import float_array, real
+from ..errors import ContgraspError, InvalidParameterError
+from ..quality import contact_weights
 
 if TYPE_CHECKING:
-    from .arm import BasePose
-    from .boundary import Boundary
-    from .quality_map import MapSpec
-    from .scenario import Scenario
+    from ..arm import BasePose
+    from ..boundary import Boundary
+    from ..quality_map import MapSpec
+    from ..scenario import Scenario
 
 __all__ = ["WrenchCapacity", "wrench_generators", "support", "wrench_capacity", "static_capacity", "static_capacity_column",
            "cage_capacity", "SEARCH_DIRECTIONS"]
@@ -150,7 +150,7 @@ def static_capacity_column(spec: MapSpec, bases: list[BasePose], mu: float) -> l
 
 def _static(spec: MapSpec, boundary: Boundary, base: BasePose, mu: float, warm: Any) -> tuple[WrenchCapacity, Any]:
     """Q_H of the optimal grasp from ``base`` and the grasp (a warm start for the next base)."""
-    from .quality_map import optimal_grasp
+    from ..quality_map import optimal_grasp
 
     problem, res = optimal_grasp(spec, boundary, base, warm)
     s = problem.s
@@ -168,9 +168,9 @@ def cage_capacity(scenario: Scenario, mu: float) -> WrenchCapacity:
     (nodes with ``rho - r <= g_f + band``, cut at the linear crossing as Q1-Q3 cut the contact
     set) pressed at the shadow points. Coulomb ``mu``, torques about the scenario's reference scaled
     by its nominal radius; SI (Q_H in m). :class:`ContgraspError` when the rest cannot be solved."""
-    from .control.hold_law import HoldController, cage_gains
-    from .control.rod_feedback import rest_shape
-    from .rod import Obstacle, chain
+    from ..control.hold_law import HoldController, cage_gains
+    from ..control.rod_feedback import rest_shape
+    from ..rod import Obstacle, chain
 
     law, m = scenario.controller(), scenario.rod
     if not isinstance(law, HoldController):
