@@ -2,7 +2,7 @@
 
 Two poses of `contgrasp holding-study --object circle --law hold --support 0 --arm rod
 --contact-wait 3 --rate 0.25 --ramp-time 8` (grid distances 5 and 9 paper units; the close,
-the free release, the stiffness probes and six capacity ramps: `holding_study.study_pose`),
+the free release, the stiffness probes and six capacity ramps: `holding.study.study_pose`),
 run in one process serially, on the process pool with two workers and on a local Dask cluster
 of two worker processes; then one pose serially with the rod's compiled kernels switched off
 (`contgrasp_core.rod._kernels.ENABLED = False`: numpy and LAPACK). Wall seconds and ratios to
@@ -20,7 +20,7 @@ from typing import Any
 import distributed
 
 from contgrasp_core.holding import HoldSettings
-from contgrasp_core.holding_study import StudySpec, _task
+from contgrasp_core.holding.study import StudySpec, _task
 from contgrasp_core.quality_map import disc_pose
 from contgrasp_core.rod import _kernels
 from contgrasp_core.executors import run_tasks

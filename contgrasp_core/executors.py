@@ -1,6 +1,6 @@
 """Running independent tasks serially, on a process pool or on a Dask cluster, in order.
 
-The sweeps (:mod:`contgrasp_core.quality_map`, :mod:`contgrasp_core.holding_study`) are pure
+The sweeps (:mod:`contgrasp_core.quality_map`, :mod:`contgrasp_core.holding.study`) are pure
 functions of their items; :func:`run_tasks` yields their results in the items' order whatever
 the executor, with a tqdm progress bar on request, so every executor gives the same results.
 """

@@ -190,17 +190,19 @@ def test_simulate_warns_once_for_an_unstable_zoh_and_not_for_first_order() -> No
 def test_first_order_hold_stays_calm_where_the_zoh_flutters() -> None:
     """The paper's arm at the graph's 2 ms: held to first order the swing-in is smooth; held
     constant the tip flutters (node speeds of ~1 m/s and 4x the penetration by 0.4 s)."""
-    from contgrasp_core.cli.simulate import run_first_order
+    from dataclasses import replace
+
     from contgrasp_core.control import paper_gains
     from contgrasp_core.objects import ROD_SCALE, ObjectSpec
     from contgrasp_core.rod import Obstacle, RodSystem
     from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
+    from contgrasp_core.rod.session import record_sampled
     from contgrasp_core.scenario import PAPER
 
     obj = ObjectSpec.from_cli(None, None, ROD_SCALE)
     cfg = ClosedLoopConfig(duration=0.4, control_period=0.002, record_period=0.01)
     gains = paper_gains(PAPER.rod, obj.radius)
-    foh = run_first_order(RodSystem(PAPER.rod, Obstacle(obj.boundary())), gains, cfg)
+    foh = record_sampled(PAPER.with_object(obj, loop=replace(cfg, record_period=None)), cfg.record_period)
     zoh = run_closed_loop(RodSystem(PAPER.rod, Obstacle(obj.boundary())), gains, cfg)
     assert foh.t[-1] == pytest.approx(0.4) and zoh.t[-1] == pytest.approx(0.4)
     assert foh.max_speed[-1] < 0.2 < 0.5 < zoh.max_speed[-1]
@@ -236,18 +238,26 @@ def test_max_penetration_is_over_every_control_step_recorded_or_not(hold: str) -
     """One definition of ``max_penetration``: the largest rod-surface
     penetration over every control step, as the ROS simulator's session reports it, whatever the
     record period. Truth: the same run recorded at every step (record_period None)."""
-    from contgrasp_core.cli.simulate import run_first_order
+    from dataclasses import replace
+
     from contgrasp_core.control import paper_gains
     from contgrasp_core.objects import ROD_SCALE, ObjectSpec
     from contgrasp_core.rod import Obstacle, RodSystem
-    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, run_closed_loop
+    from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
+    from contgrasp_core.rod.session import record_sampled
     from contgrasp_core.scenario import PAPER
 
     obj = ObjectSpec.from_cli(None, None, ROD_SCALE)
     gains = paper_gains(PAPER.rod, obj.radius)
-    run = run_first_order if hold == "first-order" else run_closed_loop
-    every, sparse = (run(RodSystem(PAPER.rod, Obstacle(obj.boundary())), gains,
-                         ClosedLoopConfig(duration=0.6, control_period=0.002, record_period=rp)) for rp in (None, 0.01))
+    config = ClosedLoopConfig(duration=0.6, control_period=0.002)
+
+    def run(record_period: float | None) -> ClosedLoopResult:
+        if hold == "first-order":
+            return record_sampled(PAPER.with_object(obj, loop=config), record_period)
+        return run_closed_loop(RodSystem(PAPER.rod, Obstacle(obj.boundary())), gains,
+                               replace(config, record_period=record_period))
+
+    every, sparse = (run(rp) for rp in (None, 0.01))
     assert len(every.t) > 4 * len(sparse.t)
     truth = float(every.penetration.max())
     assert truth > 0 and sparse.max_penetration == pytest.approx(truth, rel=1e-9)

@@ -12,7 +12,7 @@ import pytest
 from scipy.integrate import quad
 
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.holding_measure import support, wrench_capacity, wrench_generators
+from contgrasp_core.holding.measure import support, wrench_capacity, wrench_generators
 from contgrasp_core.quality import contact_weights
 
 R = 0.025
@@ -124,8 +124,8 @@ def test_the_columns_q_h_is_of_the_maps_own_grasps() -> None:
     the map's (grasp_quality's, from the same solution) at every valid pose; the first pose,
     without a warm start, is the cold start's."""
     from contgrasp_core.arm import BasePose
-    from contgrasp_core.holding_measure import static_capacity, static_capacity_column
-    from contgrasp_core.holding_study import StudySpec
+    from contgrasp_core.holding.measure import static_capacity, static_capacity_column
+    from contgrasp_core.holding.study import StudySpec
     from contgrasp_core.quality_map import _column
 
     ms = StudySpec(object="ellipse", arm="rod", d_steps=4).map_spec()
@@ -149,7 +149,7 @@ def test_the_cage_of_a_uniform_arm_on_the_parallel_circle_wraps_it_once() -> Non
     most its pure torque's ``mu L`` and the pure forces' ``2 rho (sqrt(1 + mu^2) + mu)``. The
     paper's law has no cage."""
     from contgrasp_core.contact import base_pose
-    from contgrasp_core.holding_measure import cage_capacity
+    from contgrasp_core.holding.measure import cage_capacity
     from contgrasp_core.scenario import PAPER
 
     mu, r, centre, R0 = 0.5, PAPER.rod.radius_base, np.asarray(PAPER.object.center), PAPER.object.radius
@@ -178,7 +178,7 @@ def test_the_cage_capacity_of_a_fine_outline_of_the_circle_is_the_circles(tmp_pa
     """Q_H's torques are taken about the object's reference: an outline's centroid, not its file's
     origin (0, 0), 11 cm from the paper's circle (cage Q_H 0.0031 against the circle's 0.0120
     before). A 360-point outline of the circle gives the circle's cage Q_H."""
-    from contgrasp_core.holding_measure import cage_capacity
+    from contgrasp_core.holding.measure import cage_capacity
     from contgrasp_core.objects import ObjectSpec
     from contgrasp_core.scenario import PAPER
 
@@ -198,7 +198,7 @@ def test_the_cages_wrap_is_the_arc_its_band_spans_and_a_cage_that_cannot_close_i
     shadow points span about the centre (the tangent turns with the polar angle). The paper's
     circle is wrapped beyond pi (the law closes); a 35 mm circle only 2.8 rad from the same base,
     so the close would never start: ``check_reach`` refuses it in one line, the paper's law passes."""
-    from contgrasp_core.holding_measure import _cage_rest, cage_wrap, check_reach
+    from contgrasp_core.holding.measure import _cage_rest, cage_wrap, check_reach
     from contgrasp_core.objects import ROD_SCALE, ObjectSpec
     from contgrasp_core.scenario import PAPER
 

@@ -1,4 +1,4 @@
-"""The holding study (contgrasp_core.holding_study): rank correlations against known
+"""The holding study (contgrasp_core.holding.study): rank correlations against known
 relations, a tiny real study that resumes without recomputing, and its figure."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import pytest
 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.holding import GraspFailure, HoldExperiment, HoldSettings
-from contgrasp_core.holding_study import (PREDICTORS, RESPONSES, StudySpec, _spearman_rows, correlations, expand_symmetric,
+from contgrasp_core.holding.study import (PREDICTORS, RESPONSES, StudySpec, _spearman_rows, correlations, expand_symmetric,
                                           load_results, base_si, pose_scenario, run_study, study_pose)
 from contgrasp_core.rod.session import run_sampled
 from contgrasp_core.scenario import PAPER
@@ -159,7 +159,7 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest
     lines = out.read_text().splitlines()
     # the static wrench capacity Q_H of each pose's optimal grasp (docs/holding.md (M3)) is in every row, written too
     from contgrasp_core.arm import BasePose
-    from contgrasp_core.holding_measure import static_capacity
+    from contgrasp_core.holding.measure import static_capacity
 
     assert all(json.loads(line)["static_QH"] >= 0.0 for line in lines[1:])
     assert all(math.isnan(json.loads(line)["cage_QH"]) for line in lines[1:])  # (the paper's law has no cage)
@@ -186,7 +186,7 @@ def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest
     assert marked["grid:0,0"]["map_changed"] and marked["grid:0,0"]["static_Q1"] == grid["static_Q1"]
     assert not any(r.get("map_changed") for k, r in marked.items() if k != "grid:0,0")
     assert "map_changed" not in grid
-    import contgrasp_core.holding_study as study
+    import contgrasp_core.holding.study as study
 
     def no_map(*args: object, **kwargs: object) -> None:
         raise AssertionError("the map was computed for a file that is refused")
@@ -208,7 +208,7 @@ def test_a_second_writer_is_refused_until_the_first_is_gone(tmp_path: Path, monk
     import subprocess
     import sys
 
-    import contgrasp_core.holding_study as study
+    import contgrasp_core.holding.study as study
     from contgrasp_core.errors import WriteError
 
     out = tmp_path / "study.jsonl"
@@ -291,7 +291,7 @@ def test_the_study_takes_the_holding_law_a_free_release_and_a_longer_arm(capsys:
     perimeters long, every pose's scenario runs the holding law, the spec records the options
     (and leaves them out at their defaults, so a file recorded before they existed resumes)."""
     from contgrasp_core.cli import main
-    from contgrasp_core.holding_study import _spec_dict
+    from contgrasp_core.holding.study import _spec_dict
 
     spec = StudySpec(object="circle", law="hold", length_fraction=1.0, hold=HoldSettings(support=0.0))
     assert spec.map_spec().length_fraction == 1.0
@@ -314,7 +314,7 @@ def test_the_study_takes_the_depth_regulation_of_the_holding_law(capsys: pytest.
     resume), and a gain without the holding law, negative or not finite is refused."""
     from contgrasp_core.cli import main
     from contgrasp_core.control.hold_law import HoldLawSettings
-    from contgrasp_core.holding_study import _spec_dict
+    from contgrasp_core.holding.study import _spec_dict
 
     spec = StudySpec(object="circle", law="hold", arm="rod", depth_gain=10.0)
     assert pose_scenario(spec, (0.0, -8.0, 0.0)).hold_law == HoldLawSettings(depth_gain=10.0)
@@ -337,8 +337,8 @@ def test_the_study_takes_the_dwell_and_measures_the_cage_before_simulating(capsy
     along it: the cage wraps it, positive); the paper's law has none (NaN)."""
     from contgrasp_core.cli import main
     from contgrasp_core.control.hold_law import HoldLawSettings
-    from contgrasp_core.holding_measure import cage_capacity
-    from contgrasp_core.holding_study import _before_simulating, _spec_dict
+    from contgrasp_core.holding.measure import cage_capacity
+    from contgrasp_core.holding.study import _before_simulating, _spec_dict
 
     spec = StudySpec(object="circle", law="hold", arm="rod", depth_gain=10.0, dwell=1.0)
     assert pose_scenario(spec, (0.0, -8.0, 0.0)).hold_law == HoldLawSettings(depth_gain=10.0, dwell=1.0)
@@ -363,7 +363,7 @@ def test_the_rod_arm_is_the_rod_scenarios_for_the_map_and_the_rod() -> None:
     arm (length and radii in the paper's units through ``scale``, rho_d = r(s)); a length
     fraction with it is refused (it sets the map's arm only), and the spec leaves ``arm`` out at
     its default so older result files resume."""
-    from contgrasp_core.holding_study import _spec_dict
+    from contgrasp_core.holding.study import _spec_dict
 
     spec = StudySpec(object="ellipse", arm="rod", law="hold")
     ms = spec.map_spec()
@@ -417,7 +417,7 @@ def test_a_dask_study_computes_its_quality_map_on_the_cluster(tmp_path: Path, mo
     """``holding-study --executor dask``: the quality map's columns go to the cluster too (they were
     computed serially on the client), the same map as a serial run's; the poses follow (left out here)."""
     distributed = pytest.importorskip("distributed")
-    import contgrasp_core.holding_study as study
+    import contgrasp_core.holding.study as study
 
     maps: list[tuple[str, Any]] = []
     real = study.quality_map

@@ -86,7 +86,7 @@ def test_paper_scenario_grasps_and_settles(paper_run):
 
 
 def test_paper_scenario_matches_static_theory_where_unobstructed(paper_run):
-    from contgrasp_core.control import static_solution
+    from contgrasp_core.rod.closed_loop import static_solution
 
     res, m = paper_run, paper_run.model
     s, rho_th, alpha_th = static_solution(res, 0.025)

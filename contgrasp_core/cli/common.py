@@ -1,15 +1,23 @@
 """Arguments several subcommands share: the object, ``--object NAME[:PARAMS]`` or ``--outline
-FILE.csv`` (:class:`contgrasp_core.objects.ObjectSpec`, one syntax everywhere), and how a sweep
-runs, ``--executor``, ``--workers``, ``--scheduler`` (:mod:`contgrasp_core.executors`)."""
+FILE.csv`` (:class:`contgrasp_core.objects.ObjectSpec`, one syntax everywhere), the parts of a
+:class:`~contgrasp_core.scenario.Scenario` ``simulate`` and ``hold`` both set (the rod's size and
+muscles, the law), and how a sweep runs, ``--executor``, ``--workers``, ``--scheduler``
+(:mod:`contgrasp_core.executors`)."""
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
+from typing import Any
 
+from ..control.hold_law import LAWS, HoldLawSettings, check_law_settings
 from ..executors import EXECUTORS
 from ..objects import SYNTAX, ObjectScale, ObjectSpec
+from ..rod.model import RodModel
+from ..scenario import PAPER
 
-__all__ = ["add_object_arguments", "object_from_args", "add_executor_arguments", "add_muscle_argument"]
+__all__ = ["add_object_arguments", "object_from_args", "add_executor_arguments", "add_muscle_argument",
+           "add_law_arguments", "hold_law_from_args", "rod_from_args"]
 
 
 def add_object_arguments(parser: argparse.ArgumentParser, scale: ObjectScale) -> None:
@@ -32,6 +40,44 @@ def add_muscle_argument(parser: argparse.ArgumentParser) -> None:
                         help="the muscles' largest stress, Pa: bounds the couple each section of the arm can make "
                         "(docs/rod.md, 'Muscles with limits'; published octopus-arm models use 1e4-1e5); default 0: "
                         "unbounded, the paper's law as printed")
+
+
+def add_law_arguments(p: argparse.ArgumentParser) -> None:
+    """``--law`` and the holding law's parameters (docs/holding.md (H1)-(H6))."""
+    d = HoldLawSettings()
+    g = p.add_argument_group("the closed loop's law (docs/holding.md, 'A law that holds')")
+    g.add_argument("--law", choices=LAWS, default="paper",
+                   help="paper: eq. (19) with rho_d = r (default); hold: cage at a clearance, close, hold the "
+                   "shape and squeeze (beyond the paper)")
+    g.add_argument("--clearance", type=float, default=d.clearance,
+                   help=f"hold: the cage's gap to the object, m (default {d.clearance:g})")
+    g.add_argument("--close-gap", type=float, default=d.close_gap,
+                   help=f"hold: the gap at which the shape is latched, m, below the clearance (default {d.close_gap:g})")
+    g.add_argument("--squeeze", type=float, default=d.squeeze,
+                   help=f"hold: how deep the held shape presses into the object, m (default {d.squeeze:g})")
+    g.add_argument("--hold-gain", type=float, default=d.stiffness_gain,
+                   help=f"hold: the held shape's stiffness gain G >= 0 (default {d.stiffness_gain:g})")
+    g.add_argument("--depth-gain", type=float, default=d.depth_gain,
+                   help="hold: after the squeeze, regulate the mean sensed contact depth to --squeeze with this "
+                   f"integral gain, 1/s >= 0 (docs/holding.md (H7); default {d.depth_gain:g}: off)")
+    g.add_argument("--dwell", type=float, default=d.dwell,
+                   help="hold: stay at the close gap this long, s >= 0, and latch the mean curvature over it "
+                   f"(docs/holding.md (H8); default {d.dwell:g}: the one sample at which the gap is reached)")
+
+
+def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
+    """The holding law's parameters of the command line, refused with an input error when out of
+    range or given to the paper's law, which ignores them (:func:`~contgrasp_core.control.hold_law.check_law_settings`)."""
+    settings = HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
+                               stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell)
+    check_law_settings(args.law, settings, lambda name: "--hold-gain" if name == "stiffness_gain" else f"--{name.replace('_', '-')}")
+    return settings
+
+
+def rod_from_args(args: argparse.Namespace, **changes: Any) -> RodModel:
+    """The scenario's rod (:data:`~contgrasp_core.scenario.PAPER`'s) with ``--nodes`` and
+    ``--max-muscle-stress``, and the command's other ``changes``."""
+    return replace(PAPER.rod, n_elements=args.nodes - 1, max_muscle_stress=args.max_muscle_stress, **changes)
 
 
 def object_from_args(args: argparse.Namespace, scale: ObjectScale) -> ObjectSpec:

@@ -5,7 +5,9 @@ the paper's eq. (19) or the holding law of docs/holding.md), releases it onto a 
 (``--support 0``: entirely free) with stick-slip friction, and measures the grasp stiffness
 matrix K and the holding capacity per wrench direction
 (:func:`contgrasp_core.holding.measure_holding`), beside Q1-Q3 of the settled contact (paper
-Sec. IV). A grasp that lets the released object go is reported as not held (a result).
+Sec. IV). A grasp that lets the released object go is reported as not held (a result). The
+arguments make one :class:`~contgrasp_core.scenario.Scenario` (:func:`scenario_from_args`) and
+the loading's :class:`~contgrasp_core.holding.HoldSettings` (:func:`settings_from_args`).
 """
 
 from __future__ import annotations
@@ -13,20 +15,18 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from ..errors import InvalidParameterError
 from ..holding import HoldSettings, measure_holding
-from ..holding_measure import cage_capacity, check_reach
+from ..holding.measure import cage_capacity, check_reach
 from ..objects import ROD_SCALE
-from ..scenario import PAPER
-from .common import add_muscle_argument, add_object_arguments, object_from_args
-from .simulate import add_law_arguments, hold_law_from_args
+from ..scenario import PAPER, Scenario
+from .common import add_law_arguments, add_muscle_argument, add_object_arguments, hold_law_from_args, object_from_args, rod_from_args
 
-__all__ = ["add_parser", "run", "format_text"]
+__all__ = ["add_parser", "run", "format_text", "scenario_from_args", "settings_from_args"]
 
 
 def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
@@ -93,25 +93,39 @@ def format_text(out: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
-    """Measure the holding of one grasp; return the JSON-able result."""
+def scenario_from_args(args: argparse.Namespace) -> Scenario:
+    """The scenario of the command line: the paper's (:data:`~contgrasp_core.scenario.PAPER`)
+    around the object, with the rod of ``--nodes``, ``--max-muscle-stress`` and ``--base``, and
+    the law and its settings (the object fixed while grasping: the loading releases it)."""
     if not 3 <= args.nodes <= 1001:
         raise InvalidParameterError(f"--nodes must be in [3, 1001], got {args.nodes}")
     obj = object_from_args(args, ROD_SCALE)
-    rod = replace(PAPER.rod, n_elements=args.nodes - 1, max_muscle_stress=args.max_muscle_stress)
+    base: dict[str, Any] = {}
     if args.base is not None:
         if not np.all(np.isfinite(args.base)):
             raise InvalidParameterError(f"--base must be three finite numbers, got {args.base}")
-        rod = replace(rod, base_position=(args.base[0], args.base[1]), base_angle=args.base[2])
-    settings = HoldSettings(areal_density=args.density, support=args.support, mu=args.mu, rate=args.rate,
-                            ramp_time=args.ramp_time, contact_wait=args.contact_wait, directions=args.directions,
-                            escape_distance=args.escape_distance, escape_angle=args.escape_angle)
-    scenario = PAPER.with_object(obj, rod=rod, law=args.law, hold_law=hold_law_from_args(args))
+        base = {"base_position": (args.base[0], args.base[1]), "base_angle": args.base[2]}
+    return PAPER.with_object(obj, rod=rod_from_args(args, **base), law=args.law, hold_law=hold_law_from_args(args))
+
+
+def settings_from_args(args: argparse.Namespace) -> HoldSettings:
+    """How the grasp is loaded: the released object, its support, friction, the ramps and escapes."""
+    return HoldSettings(areal_density=args.density, support=args.support, mu=args.mu, rate=args.rate,
+                        ramp_time=args.ramp_time, contact_wait=args.contact_wait, directions=args.directions,
+                        escape_distance=args.escape_distance, escape_angle=args.escape_angle)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Measure the holding of one grasp; return the JSON-able result."""
+    scenario = scenario_from_args(args)
+    settings = settings_from_args(args)
     check_reach(scenario)  # (the holding law's cage must be able to close: refused before simulating)
+    rod = scenario.rod
     t0 = time.perf_counter()
     progress = None if args.json else (lambda phase: print(f"contgrasp hold: {phase}", file=sys.stderr, flush=True))
-    cage = cage_capacity(scenario, settings.mu).measure if args.law == "hold" else None  # (before simulating)
+    cage = cage_capacity(scenario, settings.mu).measure if scenario.law == "hold" else None  # (before simulating)
     result = measure_holding(scenario, settings, progress)
-    return {"object": obj.text(), "base": [float(rod.base_position[0]), float(rod.base_position[1]), float(rod.base_angle)],
-            "law": args.law, "support": settings.support, "cage_QH": cage, **result.to_dict(),
+    return {"object": scenario.object.text(),
+            "base": [float(rod.base_position[0]), float(rod.base_position[1]), float(rod.base_angle)],
+            "law": scenario.law, "support": settings.support, "cage_QH": cage, **result.to_dict(),
             "wall_time_s": time.perf_counter() - t0}

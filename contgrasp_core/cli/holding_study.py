@@ -2,9 +2,11 @@
 
 For every base pose of the object's quality map (paper Sec. IV-C) and each metric's optimum:
 the static Q1-Q3, then the rod's closed-loop grasp from that pose with its settled Q1-Q3, grasp
-stiffness and holding capacity (:mod:`contgrasp_core.holding_study`); Spearman correlations
+stiffness and holding capacity (:mod:`contgrasp_core.holding.study`); Spearman correlations
 with bootstrap intervals. Results go to ``--out FILE.jsonl`` as they arrive; running the same
-command again resumes.
+command again resumes. The arguments make the study's :class:`~contgrasp_core.holding.study.StudySpec`
+(:func:`spec_from_args`, what the results file records), which makes each pose's
+:class:`~contgrasp_core.scenario.Scenario` (:func:`contgrasp_core.holding.study.pose_scenario`).
 """
 
 from __future__ import annotations
@@ -20,12 +22,12 @@ import numpy as np
 from ..errors import InvalidParameterError
 from ..control.hold_law import LAWS
 from .hold import add_ramp_arguments
-from ..holding_study import ARMS, PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
+from ..holding.study import ARMS, PREDICTORS, RESPONSES, StudySpec, correlations, expand_symmetric, run_study
 from ..objects import FIG2_SCALE
 from ..outputs import check_output
 from .common import add_executor_arguments, add_muscle_argument, add_object_arguments, object_from_args
 
-__all__ = ["add_parser", "run", "format_text"]
+__all__ = ["add_parser", "run", "format_text", "spec_from_args"]
 
 
 def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
@@ -87,6 +89,18 @@ def format_text(out: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def spec_from_args(args: argparse.Namespace) -> StudySpec:
+    """The study of the command line: the object and map grid, the rod's nodes and muscles, the
+    law, how long a grasp may take and how each is loaded; every pose's scenario follows from it
+    (:func:`contgrasp_core.holding.study.pose_scenario`)."""
+    return StudySpec(object=object_from_args(args, FIG2_SCALE).text(), psi_steps=args.psi_steps, d_steps=args.d_steps,
+                     d_min=args.d_min, d_max=args.d_max, nodes=args.nodes, duration=args.duration, law=args.law,
+                     length_fraction=args.length_fraction, arm=args.arm, depth_gain=args.depth_gain, dwell=args.dwell,
+                     max_muscle_stress=args.max_muscle_stress,
+                     hold=replace(StudySpec().hold, directions=args.directions, support=args.support, rate=args.rate,
+                                  ramp_time=args.ramp_time, contact_wait=args.contact_wait))
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run (or resume) the study; return the JSON-able summary."""
     if args.workers is not None and args.workers < 1:
@@ -96,12 +110,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         from ..figures.draw import check_figure_path
 
         check_figure_path(args.plot)
-    spec = StudySpec(object=object_from_args(args, FIG2_SCALE).text(), psi_steps=args.psi_steps, d_steps=args.d_steps, d_min=args.d_min,
-                     d_max=args.d_max, nodes=args.nodes, duration=args.duration, law=args.law,
-                     length_fraction=args.length_fraction, arm=args.arm, depth_gain=args.depth_gain, dwell=args.dwell,
-                     max_muscle_stress=args.max_muscle_stress,
-                     hold=replace(StudySpec().hold, directions=args.directions, support=args.support, rate=args.rate,
-                                  ramp_time=args.ramp_time, contact_wait=args.contact_wait))
+    spec = spec_from_args(args)
     qm, rows = run_study(spec, args.out, executor=args.executor, workers=args.workers, scheduler=args.scheduler,
                          progress=not args.json)
     ok = [r for r in rows if r.get("status") == "ok"]

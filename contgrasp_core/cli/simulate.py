@@ -1,8 +1,9 @@
 """``contgrasp simulate``: the closed-loop grasp of paper Sec. V-C on the project's rod engine.
 
-Wire-up (in ``cli/__init__.py``): ``simulate.add_parser(sub, [common])``; the parsed namespace has
-``func=simulate.run``, which returns the JSON-able result dict (``cli.main`` prints it).
-Without ``parents`` the subcommand adds its own ``--json`` flag.
+The arguments make one :class:`~contgrasp_core.scenario.Scenario` (:func:`scenario_from_args`),
+which the core runs (:func:`run_scenario`): the sampled loop held to first order as the ROS
+graph steps it, or the continuous or zero-order loop. ``func=simulate.run`` returns the JSON-able
+result dict (``cli.main`` prints it); without ``parents`` the subcommand adds its own ``--json``.
 """
 
 from __future__ import annotations
@@ -15,21 +16,22 @@ from typing import Any
 import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.control import FeedbackGains, paper_gains
-from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold, check_law_settings
+from contgrasp_core.control.hold_law import HoldController, Law
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
-from contgrasp_core.rod import RodModel, RodSystem
+from contgrasp_core.holding.measure import check_reach
+from contgrasp_core.rod import RodModel
 from contgrasp_core.rod.body import MODES, ObjectDynamics, motion_summary
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, object_motion, run_closed_loop
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, run_closed_loop
 from contgrasp_core.rod.self_contact import self_gap
+from contgrasp_core.rod.session import record_sampled
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_core.outputs import check_output
-from contgrasp_core.scenario import PAPER, rod_system
+from contgrasp_core.scenario import PAPER, Scenario
 from contgrasp_core.tracking import contact_stats
 
-from .common import add_muscle_argument, add_object_arguments, object_from_args
+from .common import add_law_arguments, add_muscle_argument, add_object_arguments, hold_law_from_args, object_from_args, rod_from_args
 
-__all__ = ["add_parser", "run", "summarize", "loop_config", "add_law_arguments", "hold_law_from_args"]
+__all__ = ["add_parser", "run", "scenario_from_args", "run_scenario", "summarize", "loop_config"]
 
 
 def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = None) -> argparse.ArgumentParser:
@@ -80,38 +82,6 @@ def add_parser(subparsers: Any, parents: list[argparse.ArgumentParser] | None = 
     p.add_argument("--animate", metavar="FILE.gif", help="write an animation of the grasp")
     p.set_defaults(func=run)
     return p
-
-
-def add_law_arguments(p: argparse.ArgumentParser) -> None:
-    """``--law`` and the holding law's parameters (docs/holding.md (H1)-(H6))."""
-    d = HoldLawSettings()
-    g = p.add_argument_group("the closed loop's law (docs/holding.md, 'A law that holds')")
-    g.add_argument("--law", choices=LAWS, default="paper",
-                   help="paper: eq. (19) with rho_d = r (default); hold: cage at a clearance, close, hold the "
-                   "shape and squeeze (beyond the paper)")
-    g.add_argument("--clearance", type=float, default=d.clearance,
-                   help=f"hold: the cage's gap to the object, m (default {d.clearance:g})")
-    g.add_argument("--close-gap", type=float, default=d.close_gap,
-                   help=f"hold: the gap at which the shape is latched, m, below the clearance (default {d.close_gap:g})")
-    g.add_argument("--squeeze", type=float, default=d.squeeze,
-                   help=f"hold: how deep the held shape presses into the object, m (default {d.squeeze:g})")
-    g.add_argument("--hold-gain", type=float, default=d.stiffness_gain,
-                   help=f"hold: the held shape's stiffness gain G >= 0 (default {d.stiffness_gain:g})")
-    g.add_argument("--depth-gain", type=float, default=d.depth_gain,
-                   help="hold: after the squeeze, regulate the mean sensed contact depth to --squeeze with this "
-                   f"integral gain, 1/s >= 0 (docs/holding.md (H7); default {d.depth_gain:g}: off)")
-    g.add_argument("--dwell", type=float, default=d.dwell,
-                   help="hold: stay at the close gap this long, s >= 0, and latch the mean curvature over it "
-                   f"(docs/holding.md (H8); default {d.dwell:g}: the one sample at which the gap is reached)")
-
-
-def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
-    """The holding law's parameters of the command line, refused with an input error when out of
-    range or given to the paper's law, which ignores them (:func:`~contgrasp_core.control.hold_law.check_law_settings`)."""
-    settings = HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
-                               stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell)
-    check_law_settings(args.law, settings, lambda name: "--hold-gain" if name == "stiffness_gain" else f"--{name.replace('_', '-')}")
-    return settings
 
 
 def summarize(res: ClosedLoopResult, contact_tol: float = PAPER.sensing.contact_tolerance, hold: str = "zoh") -> dict[str, Any]:
@@ -184,7 +154,7 @@ def default_dt(args: argparse.Namespace) -> float:
     return FIXED_DT if getattr(args, "object_mode", "fixed") == "fixed" else MOVABLE_DT
 
 
-def loop_config(args: argparse.Namespace, record_period: float | None = 0.01) -> ClosedLoopConfig:
+def loop_config(args: argparse.Namespace, record_period: float | None = None) -> ClosedLoopConfig:
     """The run's settings: the scenario's loop (its settle criterion: every node slower than
     ``settle_speed`` for ``settle_hold`` s, not before ``min_time``, the same as the ROS graph's)
     with the command's duration, control period and integrator step (:func:`default_dt`)."""
@@ -192,6 +162,9 @@ def loop_config(args: argparse.Namespace, record_period: float | None = 0.01) ->
     return replace(PAPER.loop, duration=duration, control_period=args.control_period,
                    dt=default_dt(args) if args.control_period is None else None, record_period=record_period)
 
+
+RECORD_PERIOD = 0.01
+"""How often a run is recorded (s): the series the figures draw; the JSON reports the final state."""
 
 HOLDS = ("zero-order", "first-order")
 
@@ -224,61 +197,6 @@ def _tip_rate(model: RodModel) -> float:
     ei = float(model.bending_stiffness(s_tip)[0])
     r = float(model.radius(s_tip)[0])
     return float(np.sqrt(ei / (model.density * np.pi * r**2)) / model.h**2)
-
-
-def run_first_order(system: RodSystem, gains: FeedbackGains, config: ClosedLoopConfig,
-                    law: Law | None = None) -> ClosedLoopResult:
-    """The sampled loop with the couple held to first order in the state between samples
-    (:class:`~contgrasp_core.control.HeldExpansion`, stepped by :class:`~contgrasp_core.rod.session.LoopSession`
-    exactly as the ROS graph steps it), recorded like :func:`run_closed_loop`; with a ``law``
-    its command each period (the holding law's hold applied exactly)."""
-    import time
-
-    from contgrasp_core.contact import sense
-    from contgrasp_core.control import FeedbackExpansion, feedback_at_joints
-    from contgrasp_core.rod import chain
-    from contgrasp_core.rod.muscle import saturate
-    from contgrasp_core.rod.session import LoopSession
-
-    m = system.model
-    assert system.obstacle is not None and config.control_period is not None
-    rec_every = 1 if config.record_period is None else max(1, int(round(config.record_period / config.control_period)))
-    rec: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed", "q")}
-    wall0 = time.perf_counter()
-    session = LoopSession(system, config)
-    period = config.control_period
-    max_ratio = 0.0
-    while True:
-        obs = session.observe(True if law is None else law.holding)
-        obstacle = system.obstacle_at(session.state)  # (a movable object: sensed where it is, as the graph does)
-        sn = sense(obs.shape, obstacle, obs.radius)
-        command = gains if law is None else law.command(sn.rho, sn.alpha, obs.theta, obs.kappa[:-1], period)
-        expansion: FeedbackExpansion | ShapeHold
-        if isinstance(command, ShapeHold):
-            expansion = command
-            couple = saturate(m, command.couple + command.couple_and_jacobian(session.state.theta, jacobian=False)[0])
-        else:
-            expansion = feedback_at_joints(m, command, sn.rho, sn.alpha)
-            couple = saturate(m, expansion.u)
-        pen_c = m.r_centres - obstacle.project(chain.centres(m, session.state.theta)).signed_distance
-        ratio = max(float((sn.delta / obs.radius).max()), float((pen_c / m.r_centres).max()), 0.0)
-        max_ratio = max(max_ratio, ratio)
-        if session.k % rec_every == 0 or session.finished:
-            for key, val in (("t", obs.t), ("x", obs.x), ("theta", obs.theta), ("rho", sn.rho), ("alpha", sn.alpha),
-                             ("couple", couple), ("pen", obs.penetration), ("ratio", ratio),
-                             ("speed", obs.max_speed), ("q", None if session.state.body is None else session.state.body.q)):
-                rec[key].append(val)
-        if session.finished:
-            break
-        session.advance(expansion)
-    arr = {k: np.asarray(v) for k, v in rec.items()}
-    return ClosedLoopResult(
-        t=arr["t"], x=arr["x"], theta=arr["theta"], rho=arr["rho"], alpha=arr["alpha"], couple=arr["couple"],
-        penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=session.settled,
-        settle_time=session.settle_time, wall_time=time.perf_counter() - wall0, newton_iterations=session.iterations,
-        final_state=session.state, model=m, gains=gains, config=config, steps=session.k,
-        integrator_steps=session.k * config.substeps, max_penetration=session.max_penetration,
-        max_penetration_ratio=max_ratio, health=session.health, **object_motion(system, rec["q"], law))
 
 
 MAX_NODES = 10_001
@@ -314,53 +232,71 @@ def object_dynamics(args: argparse.Namespace) -> ObjectDynamics:
                           damping=damping if spring else (0.0, 0.0, 0.0))
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
-    """Run the scenario; write the plot/animation if asked; return the JSON-able result."""
+def scenario_from_args(args: argparse.Namespace) -> Scenario:
+    """The scenario of the command line: the paper's (:data:`~contgrasp_core.scenario.PAPER`)
+    around the object, with the rod of ``--nodes``, ``--damping``, ``--friction`` and
+    ``--max-muscle-stress``, the loop of :func:`loop_config`, the object's motion
+    (:func:`object_dynamics`), the law and its settings, and the contact tolerance; an input error
+    for a value out of range or an impossible start (:func:`~contgrasp_core.scenario.check_start`)."""
     if not 3 <= args.nodes <= MAX_NODES:
         raise InvalidParameterError(f"--nodes must be in [3, {MAX_NODES}], got {args.nodes}")
     if not (np.isfinite(args.contact_tol) and args.contact_tol >= 0.0):
         raise InvalidParameterError(f"--contact-tol must be a finite number >= 0, got {args.contact_tol}")
     if args.dt is not None and not (np.isfinite(args.dt) and args.dt > 0.0):  # (checked also when unused)
         raise InvalidParameterError(f"--dt must be a finite number > 0, got {args.dt}")
+    obj = object_from_args(args, ROD_SCALE)
+    if not (np.isfinite(args.friction) and args.friction >= 0.0):
+        raise InvalidParameterError(f"--friction must be a finite number >= 0, got {args.friction}")
+    changes: dict[str, Any] = {} if args.damping is None else {"damping": args.damping}
+    if args.friction > 0:
+        changes.update(friction=args.friction, friction_model="stick")
+    rod = rod_from_args(args, **changes)
+    hold_law = hold_law_from_args(args)
+    if args.hold != "zero-order" and args.control_period is None:
+        raise InvalidParameterError(f"--hold {args.hold} holds a sampled couple: give --control-period too")
+    return PAPER.with_object(obj, rod=rod, loop=loop_config(args), dynamics=object_dynamics(args), law=args.law,
+                             hold_law=hold_law, sensing=replace(PAPER.sensing, contact_tolerance=args.contact_tol))
+
+
+def run_scenario(scenario: Scenario, law: Law, hold: str = "first-order",
+                 record_period: float | None = RECORD_PERIOD) -> ClosedLoopResult:
+    """The core's run of ``scenario`` with ``law`` (a fresh :meth:`~contgrasp_core.scenario.Scenario.controller`),
+    recorded every ``record_period``: a sampled loop held to first order, as the ROS graph steps
+    it (:func:`~contgrasp_core.rod.session.record_sampled`), else
+    :func:`~contgrasp_core.rod.closed_loop.run_closed_loop` (continuous, or sampled and held
+    constant: ``hold`` ``zero-order``)."""
+    if hold == "first-order" and scenario.loop.control_period is not None:
+        return record_sampled(scenario, record_period, law)
+    return run_closed_loop(scenario.system(), scenario.feedback_gains, replace(scenario.loop, record_period=record_period),
+                           law=law)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Run the scenario; write the plot/animation if asked; return the JSON-able result."""
     if args.plot:
         from contgrasp_core.figures.draw import check_figure_path
 
         check_figure_path(args.plot)
     if args.animate:
         _check_animation_path(args.animate)
-    obj = object_from_args(args, ROD_SCALE)
-    boundary, r_obj = obj.boundary(), obj.radius
-    if not (np.isfinite(args.friction) and args.friction >= 0.0):
-        raise InvalidParameterError(f"--friction must be a finite number >= 0, got {args.friction}")
-    overrides: dict[str, Any] = {"max_muscle_stress": args.max_muscle_stress}
-    if args.damping is not None:
-        overrides["damping"] = args.damping
-    if args.friction > 0:
-        overrides.update(friction=args.friction, friction_model="stick")
-    model = replace(PAPER.rod, n_elements=args.nodes - 1, **overrides)
-    hold_law = hold_law_from_args(args)
-    if args.hold != "zero-order" and args.control_period is None:
-        raise InvalidParameterError(f"--hold {args.hold} holds a sampled couple: give --control-period too")
-    cfg = loop_config(args)
-    system = rod_system(model, obj, object_dynamics(args))  # (refuses an impossible start: check_start)
-    warning = zoh_warning(model, args.control_period, args.hold)
+    scenario = scenario_from_args(args)
+    check_reach(scenario)  # (the holding law's cage must be able to close: refused before simulating)
+    warning = zoh_warning(scenario.rod, scenario.loop.control_period, args.hold)
     if warning:
         print(f"contgrasp simulate: {warning}", file=sys.stderr)
-    gains = paper_gains(model, r_obj)
-    law = HoldController(model, r_obj, hold_law) if args.law == "hold" else None
-    if args.hold == "first-order":
-        res = run_first_order(system, gains, cfg, law)
-    else:
-        res = run_closed_loop(system, gains, cfg, law=law)
-    out = summarize(res, args.contact_tol, "zoh" if args.hold == "zero-order" else "first-order hold")
-    out.update(object=obj.text(), object_mode=args.object_mode, law=args.law, law_phase=None if law is None else law.phase,
-               friction=model.friction)
+    law = scenario.controller()
+    res = run_scenario(scenario, law, args.hold)
+    out = summarize(res, scenario.sensing.contact_tolerance, "zoh" if args.hold == "zero-order" else "first-order hold")
+    out.update(object=scenario.object.text(), object_mode=scenario.dynamics.mode, law=scenario.law,
+               law_phase=law.phase if isinstance(law, HoldController) else None, friction=scenario.rod.friction)
     warning = validity_warning(out)
     if warning:
         print(f"contgrasp simulate: {warning}", file=sys.stderr)
+    obj = scenario.object
+    boundary = obj.boundary()
     if args.plot:
         # (the static solution is the paper's law's equilibrium: drawn for it only)
-        plot_fig4(res, boundary, args.plot, r_obj if boundary.kind == "circle" and args.law == "paper" else None)
+        plot_fig4(res, boundary, args.plot, obj.radius if boundary.kind == "circle" and scenario.law == "paper" else None)
     if args.animate:
         animate(res, boundary, args.animate)
     return out

@@ -5,7 +5,7 @@
   static closed-loop kinematics;
 * :mod:`.gains` - the law's gains at the rod joints (:class:`FeedbackGains`, :func:`paper_gains`);
 * :mod:`.rod_feedback` - the law on the rod engine: continuous state feedback, the sampled law at
-  the joints and its first-order hold, the static solution of Fig. 4.
+  the joints and its first-order hold, the rod's rest under the law.
 """
 
 from contgrasp_core.control.gains import FeedbackGains, paper_gains
@@ -26,7 +26,6 @@ from contgrasp_core.control.rod_feedback import (
     HeldExpansion,
     StateFeedback,
     feedback_at_joints,
-    static_solution,
 )
 
 __all__ = [
@@ -46,5 +45,4 @@ __all__ = [
     "HeldExpansion",
     "StateFeedback",
     "feedback_at_joints",
-    "static_solution",
 ]

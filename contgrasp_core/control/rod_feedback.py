@@ -4,10 +4,10 @@ Two ways the couple of eq. (19) reaches the rod: :class:`StateFeedback`, the law
 rod's own state inside every implicit step (the continuous-time loop of Prop. 5.2, with
 ``du/dtheta`` in the Newton matrix), and :func:`feedback_at_joints` + :class:`HeldExpansion`, the
 sampled law held to first order in the state (what the ROS controller sends). The law reads
-eq. (4) at the joints ``s_k = k h``. :func:`static_solution` is the static closed loop (eq. (8)
-with eq. (20)) of Fig. 4; :func:`rest_shape` the rod's own static closed loop;
-:func:`rest_stability` its linearisation (docs/holding.md, "The cage flutters"). docs/rod.md,
-"Closing the loop".
+eq. (4) at the joints ``s_k = k h``. :func:`rest_shape` is the rod's own static closed loop,
+:func:`rest_stability` its linearisation (docs/holding.md, "The cage flutters"). It needs the
+rod's geometry only, never the closed-loop runner (:mod:`contgrasp_core.rod.closed_loop` uses
+it). docs/rod.md, "Closing the loop".
 """
 
 from __future__ import annotations
@@ -20,20 +20,19 @@ from numpy.typing import NDArray
 
 from contgrasp_core.contact import shadow_geometry
 from contgrasp_core.control.gains import FeedbackGains
-from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple, feedback_couple_and_gradient
+from contgrasp_core.control.law import feedback_couple, feedback_couple_and_gradient
 from contgrasp_core.errors import IntegrationError, InvalidParameterError
 from contgrasp_core.rod import _kernels, chain
 from contgrasp_core.rod.model import RodModel
 
 if TYPE_CHECKING:  # (the obstacle imports scipy.spatial: the ROS controller process never needs it)
-    from contgrasp_core.rod.closed_loop import ClosedLoopResult
     from contgrasp_core.rod.integrator import CoupleFeedback
     from contgrasp_core.rod.obstacle import Obstacle
 
 Array = NDArray[np.float64]
 
 __all__ = ["StateFeedback", "joint_couple_jacobian", "FeedbackExpansion", "feedback_at_joints", "HeldExpansion",
-           "static_solution", "rest_shape", "RestStability", "rest_stability"]
+           "rest_shape", "RestStability", "rest_stability"]
 
 _SAFE_ONE_PLUS = 0.05  # below this 1 + rho kappa_o the foot's turning rate is dropped from the Jacobian
 
@@ -158,18 +157,6 @@ class HeldExpansion:
             return du, None
         b = chain.frames(theta)[1] if normals is None else normals
         return du, joint_couple_jacobian(m, e.g_rho, e.g_alpha, geometry, b)
-
-
-def static_solution(res: "ClosedLoopResult", obstacle_radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The theoretical static closed loop (eq. (8) with eq. (20)) from the
-    rod's base state, for a circular object: (s, rho, alpha) on the rod nodes."""
-    m, g = res.model, res.gains
-    s = m.s_nodes
-    mu2 = np.asarray(g.mu2, dtype=float)
-    mu2_fn = (lambda si: np.interp(si, m.joint_s, mu2)) if mu2.ndim else float(mu2)
-    sol = closed_loop_kinematics(float(res.rho[-1][0]), float(res.alpha[-1][0]), s, g.mu1, mu2_fn,
-                                 1.0 / obstacle_radius, length_unit=g.length_unit)
-    return s, sol.rho, sol.alpha
 
 
 def rest_shape(model: RodModel, obstacle: Obstacle, gains: FeedbackGains, *, tol: float = 1e-13,

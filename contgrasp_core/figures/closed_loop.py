@@ -17,9 +17,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..boundary import Boundary
-from ..control import static_solution
 from ..errors import output_error
-from ..rod.closed_loop import ClosedLoopResult
+from ..rod.closed_loop import ClosedLoopResult, static_solution
 from .draw import save
 
 __all__ = ["snapshot_indices", "snapshot_colours", "plane_axes", "finish_profile_panels", "fig4_figure", "plot_fig4", "animate",

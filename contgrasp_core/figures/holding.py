@@ -20,7 +20,7 @@ _PANELS = (("stiffness_min", "measured lambda_min of K's\nscaled symmetric part"
            ("capacity_min", "measured worst-direction\nholding capacity", "N"))
 
 _FAILED = {"no contact": ("x", "tab:red"), "not settled": ("+", "tab:orange"), "not held": ("d", "tab:purple")}
-"""How a pose without a measured grasp is drawn, by its outcome (:mod:`contgrasp_core.holding_study`)."""
+"""How a pose without a measured grasp is drawn, by its outcome (:mod:`contgrasp_core.holding.study`)."""
 
 
 def study_figure(qm: QualityMap, rows: list[dict[str, Any]]) -> Figure:

@@ -6,6 +6,7 @@ the couple of eq. (19) sensed every ``T`` and held (zero-order), as a lock-step 
 the first-order hold; it flutters unless ``T`` is well below the tip's bending periods. The
 runner records every ``record_period`` and stops at ``duration`` or, against a fixed object, once
 settled (:class:`SettleDetector`; a movable object is watched to the end: :func:`stops_at_settle`).
+:func:`static_solution` is Fig. 4's static closed loop (eq. (8) with eq. (20)) of a run's result.
 docs/rod.md, "Closing the loop".
 """
 
@@ -19,7 +20,7 @@ import numpy as np
 
 from contgrasp_core.contact import sense
 from contgrasp_core.control.gains import FeedbackGains
-from contgrasp_core.control.law import feedback_couple
+from contgrasp_core.control.law import closed_loop_kinematics, feedback_couple
 from contgrasp_core.control.rod_feedback import StateFeedback
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod import chain
@@ -33,7 +34,8 @@ if TYPE_CHECKING:  # (imported by the runner: the scenario's ClosedLoopConfig co
     from contgrasp_core.rod.integrator import RodState, RodSystem
     from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "SettleDetector", "stops_at_settle", "run_closed_loop", "object_motion"]
+__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "SettleDetector", "stops_at_settle", "run_closed_loop", "object_motion",
+           "static_solution"]
 
 
 @dataclass(frozen=True)
@@ -269,3 +271,16 @@ def object_motion(system: RodSystem, q: list[np.ndarray | None], law: Law | None
     body = system.body
     return {"law": "paper" if law is None else law.name, "object_q": None if body is None else np.array(q, dtype=float),
             "object_centroid": None if body is None else body.centroid}
+
+
+def static_solution(res: ClosedLoopResult, obstacle_radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The theoretical static closed loop (eq. (8) with eq. (20)) from the
+    rod's base state at the end of the run ``res``, for a circular object: (s, rho, alpha) on the
+    rod nodes (Fig. 4's dashed curves)."""
+    m, g = res.model, res.gains
+    s = m.s_nodes
+    mu2 = np.asarray(g.mu2, dtype=float)
+    mu2_fn = (lambda si: np.interp(si, m.joint_s, mu2)) if mu2.ndim else float(mu2)
+    sol = closed_loop_kinematics(float(res.rho[-1][0]), float(res.alpha[-1][0]), s, g.mu1, mu2_fn,
+                                 1.0 / obstacle_radius, length_unit=g.length_unit)
+    return s, sol.rho, sol.alpha

@@ -6,13 +6,16 @@ the sensor does), :func:`contgrasp_core.control.feedback_at_joints` (eq. (19) an
 expansion: what the controller does), :meth:`LoopSession.advance` (the couple held to first order
 for one control period: what the simulator does). :meth:`LoopSession.check_divergence` tells a
 broken run from a violent one. The ROS nodes call exactly these functions on exactly these
-arrays, so a lock-step ROS run reproduces the core-only run bit for bit.
+arrays, so a lock-step ROS run reproduces the core-only run bit for bit; :func:`run_sampled` is
+that run, :func:`record_sampled` the same run recorded (``contgrasp simulate --hold first-order``).
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,8 +28,9 @@ from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.scenario import Scenario
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.body import BodyState, shape_in_object_frame
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig, SettleDetector, stops_at_settle
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig, ClosedLoopResult, SettleDetector, object_motion, stops_at_settle
 from contgrasp_core.rod.integrator import RodLoads, RodState, RodSystem
+from contgrasp_core.rod.model import RodModel
 from contgrasp_core.rod.muscle import saturate
 from contgrasp_core.rod.obstacle import Obstacle
 from contgrasp_core.rod.validity import RunHealth
@@ -37,6 +41,7 @@ __all__ = [
     "DivergenceLimits",
     "SimulationDivergedError",
     "run_sampled",
+    "record_sampled",
     "drive",
     "sensed_shape",
     "preload",
@@ -44,13 +49,18 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
+Answer = FeedbackExpansion | ShapeHold
+"""What the law answers a state with, held for one control period (:meth:`LoopSession.advance`)."""
+
 
 @dataclass(frozen=True)
 class Observation:
     """Rod state k at the N+1 nodes (SI): arclength ``s``, positions ``x`` (N+1, 2), tangent
     angles ``theta``, curvature ``kappa`` (joints; 0 at the free tip), radius, velocities ``v``
     (N+1, 2); kinetic energy, the largest surface penetration and node speed (the object's
-    points included when it moves); ``body`` the movable object's state (None: fixed)."""
+    points included when it moves); ``body`` the movable object's state (None: fixed); the
+    largest penetration over the local radius at the nodes and element centres (what the run's
+    validity reads, :class:`~contgrasp_core.rod.validity.RunHealth`)."""
 
     k: int
     t: float
@@ -64,6 +74,7 @@ class Observation:
     penetration: float
     max_speed: float
     body: BodyState | None = None
+    penetration_ratio: float = 0.0
 
     @property
     def shape(self) -> ArmShape:
@@ -155,7 +166,8 @@ class LoopSession:
         depth = self._surface_radius - obstacle.project(points).signed_distance
         pen = max(float(depth.max()), 0.0)
         self.max_penetration = max(self.max_penetration, pen)
-        self.health.observe(float(st.t), st.theta, depth / self._surface_radius, self._surface_s)
+        ratios = depth / self._surface_radius
+        self.health.observe(float(st.t), st.theta, ratios, self._surface_s)
         obs = Observation(
             k=self.k,
             t=float(st.t),
@@ -169,6 +181,7 @@ class LoopSession:
             penetration=pen,
             max_speed=speed,
             body=st.body,
+            penetration_ratio=max(float(ratios.max()), 0.0),
         )
         self.settle.update(float(st.t), speed, ready)
         self.finished = (self.settle.settled and self._stop_at_settle) or self.k >= self.n_control
@@ -205,7 +218,7 @@ class LoopSession:
         """
         t, theta = float(self.state.t), self.state.theta
         if isinstance(couple, ShapeHold):
-            self.health.applied(t, saturate(self.system.model, couple.couple + couple.couple_and_jacobian(theta, jacobian=False)[0]))
+            self.health.applied(t, _applied_couple(self.system.model, couple, theta))
             self._step(RodLoads(couple=couple.couple, feedback=couple, wrench=wrench))
             return
         expansion = couple if isinstance(couple, FeedbackExpansion) else None
@@ -258,27 +271,76 @@ def sensed_shape(system: RodSystem, obs: Observation) -> ArmShape:
 
 def run_sampled(scenario: Scenario, system: RodSystem | None = None,
                 until: Callable[[Observation, ContactState], bool] | None = None,
-                law: Law | None = None) -> LoopSession:
+                law: Law | None = None,
+                record: Callable[[LoopSession, Observation, ContactState, Answer], None] | None = None) -> LoopSession:
     """The scenario's sampled loop with the core functions only, stepped exactly as the ROS nodes
     step it (:func:`drive`, with the scenario's disturbance): a lock-step ROS run of the same
     scenario ends in the same state bit for bit. Returns the session, finished or stopped early
-    by ``until(observation, contact)`` (:func:`drive`); ``law`` as :func:`drive`'s."""
+    by ``until(observation, contact)``; ``law`` and ``record`` as :func:`drive`'s."""
     system = scenario.system() if system is None else system
     session = LoopSession(system, scenario.loop)
-    drive(session, scenario, None if scenario.disturbance is None else scenario.disturbance.wrench_at, until, law)
+    drive(session, scenario, None if scenario.disturbance is None else scenario.disturbance.wrench_at, until, law, record)
     return session
+
+
+def record_sampled(scenario: Scenario, record_period: float | None = None, law: Law | None = None,
+                   system: RodSystem | None = None) -> ClosedLoopResult:
+    """:func:`run_sampled` recorded as a :class:`~contgrasp_core.rod.closed_loop.ClosedLoopResult`
+    every ``record_period`` (s; None: every control period) and at the final state, which the law
+    answers too: what ``contgrasp simulate --hold first-order`` reports and draws. The same steps,
+    so it ends where :func:`run_sampled` of the scenario ends, bit for bit. ``max_penetration``
+    and ``max_penetration_ratio`` are over every state, recorded or not."""
+    wall0 = time.perf_counter()
+    law = scenario.controller() if law is None else law
+    config = replace(scenario.loop, record_period=record_period)
+    period = scenario.loop.control_period
+    every = 1 if record_period is None or period is None else max(1, int(round(record_period / period)))
+    rows: dict[str, list[Any]] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed", "q")}
+    worst = 0.0
+
+    def record(session: LoopSession, obs: Observation, contact: ContactState, answer: Answer) -> None:
+        nonlocal worst
+        worst = max(worst, obs.penetration_ratio)
+        if obs.k % every == 0 or session.finished:
+            for key, val in (("t", obs.t), ("x", obs.x), ("theta", obs.theta), ("rho", contact.rho),
+                             ("alpha", contact.alpha), ("couple", _applied_couple(session.system.model, answer, session.state.theta)),
+                             ("pen", obs.penetration), ("ratio", obs.penetration_ratio), ("speed", obs.max_speed),
+                             ("q", None if obs.body is None else obs.body.q)):
+                rows[key].append(val)
+
+    session = run_sampled(scenario, system, law=law, record=record)
+    arr = {k: np.asarray(v) for k, v in rows.items()}
+    return ClosedLoopResult(
+        t=arr["t"], x=arr["x"], theta=arr["theta"], rho=arr["rho"], alpha=arr["alpha"], couple=arr["couple"],
+        penetration=arr["pen"], penetration_ratio=arr["ratio"], max_speed=arr["speed"], settled=session.settled,
+        settle_time=session.settle_time, wall_time=time.perf_counter() - wall0, newton_iterations=session.iterations,
+        final_state=session.state, model=session.system.model, gains=scenario.feedback_gains, config=config,
+        steps=session.k, integrator_steps=session.k * config.substeps, max_penetration=session.max_penetration,
+        max_penetration_ratio=worst, health=session.health, **object_motion(session.system, rows["q"], law))
+
+
+def _applied_couple(model: RodModel, answer: Answer, theta: Array) -> Array:
+    """The couple at the joints (N,) that ``answer`` applies at the element angles ``theta``
+    (N,), bounded by the muscles (:func:`~contgrasp_core.rod.muscle.saturate`)."""
+    if isinstance(answer, ShapeHold):
+        return saturate(model, answer.couple + answer.couple_and_jacobian(theta, jacobian=False)[0])
+    return saturate(model, np.asarray(answer.u, dtype=float))
 
 
 def drive(session: LoopSession, scenario: Scenario, wrench: Callable[[float], Array] | None = None,
           until: Callable[[Observation, ContactState], bool] | None = None,
-          law: Law | None = None) -> Observation:
+          law: Law | None = None,
+          record: Callable[[LoopSession, Observation, ContactState, Answer], None] | None = None) -> Observation:
     """Step ``session`` as the ROS nodes do until it finishes or ``until(observation, contact)``
     holds: observe, :func:`~contgrasp_core.contact.sense` of the observation with the object's
     :class:`~contgrasp_core.boundary.Boundary` and the sensor's tolerance (``contact``, which
     ``until`` gets too), the law's command for the period (``law``, default a fresh
     :meth:`Scenario.controller`; the paper's gains go through
     :func:`~contgrasp_core.control.feedback_at_joints`), advance with ``wrench(t)`` on the object
-    (t the period's start). Returns the last observation."""
+    (t the period's start). With ``record``, ``record(session, observation, contact, answer)`` is
+    told every state and the law's answer to it before it is held, the final state included
+    (sensed and answered then too, as the graph's controller answers the last state; ``until``
+    is not asked there). Returns the last observation."""
     from contgrasp_core.control import feedback_at_joints
 
     boundary = scenario.object.boundary()
@@ -288,12 +350,15 @@ def drive(session: LoopSession, scenario: Scenario, wrench: Callable[[float], Ar
     system = session.system
     while True:
         obs = session.observe(law.holding)
-        if session.finished:
+        if session.finished and record is None:
             return obs
         c = sense(sensed_shape(system, obs), boundary, obs.radius, tol=scenario.sensing.contact_tolerance)
-        if until is not None and until(obs, c):
+        if until is not None and not session.finished and until(obs, c):
             return obs
         command = law.command(c.rho, c.alpha, obs.theta, obs.kappa[:-1], period)
-        session.advance(command if isinstance(command, ShapeHold) else
-                        feedback_at_joints(scenario.rod, command, c.rho, c.alpha),
-                        None if wrench is None else wrench(obs.t))
+        answer = command if isinstance(command, ShapeHold) else feedback_at_joints(scenario.rod, command, c.rho, c.alpha)
+        if record is not None:
+            record(session, obs, c, answer)
+        if session.finished:
+            return obs
+        session.advance(answer, None if wrench is None else wrench(obs.t))

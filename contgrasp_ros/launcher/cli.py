@@ -24,7 +24,7 @@ import sys
 import tempfile
 import traceback
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +36,7 @@ from contgrasp_core.errors import InvalidParameterError, exit_code, one_line, re
 from contgrasp_core.objects import ROD_SCALE
 from contgrasp_core.outputs import check_output
 from contgrasp_core.rod.body import MODES
-from contgrasp_core.holding_measure import check_reach
+from contgrasp_core.holding.measure import check_reach
 from contgrasp_core.scenario import Scenario
 from contgrasp_ros.bag import BagError
 from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
@@ -189,13 +189,15 @@ def stdout_reserved(reserve: bool = True) -> Iterator[None]:
     if not reserve:
         yield
         return
-    sys.stdout.flush()
+    with suppress(OSError):  # (a closed stdout is the summary's business, after the run)
+        sys.stdout.flush()
     saved = os.dup(1)
     os.dup2(2, 1)
     try:
         yield
     finally:
-        sys.stdout.flush()
+        with suppress(OSError):
+            sys.stdout.flush()
         os.dup2(saved, 1)
         os.close(saved)
 

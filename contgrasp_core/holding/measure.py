@@ -18,15 +18,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize
 
-from ._validate import float_array, real
-from .errors import ContgraspError, InvalidParameterError
-from .quality import contact_weights
+from .._validate import float_array, real
+from ..errors import ContgraspError, InvalidParameterError
+from ..quality import contact_weights
 
 if TYPE_CHECKING:
-    from .arm import BasePose
-    from .boundary import Boundary
-    from .quality_map import MapSpec
-    from .scenario import Scenario
+    from ..arm import BasePose
+    from ..boundary import Boundary
+    from ..quality_map import MapSpec
+    from ..scenario import Scenario
 
 __all__ = ["WrenchCapacity", "wrench_generators", "support", "wrench_capacity", "static_capacity", "static_capacity_column",
            "cage_capacity", "cage_wrap", "check_reach", "SEARCH_DIRECTIONS"]
@@ -150,7 +150,7 @@ def static_capacity_column(spec: MapSpec, bases: list[BasePose], mu: float) -> l
 
 def _static(spec: MapSpec, boundary: Boundary, base: BasePose, mu: float, warm: Any) -> tuple[WrenchCapacity, Any]:
     """Q_H of the optimal grasp from ``base`` and the grasp (a warm start for the next base)."""
-    from .quality_map import optimal_grasp
+    from ..quality_map import optimal_grasp
 
     problem, res = optimal_grasp(spec, boundary, base, warm)
     s = problem.s
@@ -177,7 +177,7 @@ def cage_wrap(scenario: Scenario) -> float:
     """The wrap angle (H3, rad) of the holding law's cage at rest at its clearance: how much of
     the object the arm surrounds from this base before the law can close (it closes at
     ``wrap_angle``). :class:`ContgraspError` when the rest cannot be solved."""
-    from .control.hold_law import wrap_angle
+    from ..control.hold_law import wrap_angle
 
     law, foot = _cage_rest(scenario, "clearance")
     s, m = law.settings, scenario.rod
@@ -215,10 +215,10 @@ def _cage_rest(scenario: Scenario, gap: str) -> tuple[Any, CageRest]:
     """The holding law and its cage's rest: the closed loop's static rest under eq. (19) with the
     cage's gains at the law's ``gap`` setting (``clearance`` or ``close_gap``)
     (:func:`~contgrasp_core.control.rod_feedback.rest_shape`)."""
-    from .contact import sense
-    from .control.hold_law import HoldController, cage_gains
-    from .control.rod_feedback import rest_shape
-    from .rod import Obstacle, chain
+    from ..contact import sense
+    from ..control.hold_law import HoldController, cage_gains
+    from ..control.rod_feedback import rest_shape
+    from ..rod import Obstacle, chain
 
     law, m = scenario.controller(), scenario.rod
     if not isinstance(law, HoldController):

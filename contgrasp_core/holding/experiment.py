@@ -197,7 +197,7 @@ def friction_bound(rod: RodModel, boundary: Boundary, theta: Array, mu: float, d
     space: torque about ``ref`` over ``scale``): what the contact could resist along ``d`` with
     its pressure nowhere above today's largest and Coulomb ``mu`` (the role the capstan law
     plays for a belt)."""
-    from contgrasp_core.holding_measure import support, wrench_generators
+    from contgrasp_core.holding.measure import support, wrench_generators
 
     proj, pen = _penetration(rod, boundary, theta)
     p_max = float(rod.contact_stiffness * pen.max())

@@ -22,14 +22,14 @@ from typing import Any
 import numpy as np
 from filelock import FileLock, Timeout
 
-from .arm import BasePose
-from .errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
-from .control.hold_law import LAWS, HoldLawSettings, check_law_settings
-from .executors import run_tasks
-from .holding import GraspFailure, HoldSettings, measure_holding
-from .objects import FIG2_SCALE, OUTLINE, SHAPES, SYNTAX, ObjectSpec
-from .quality_map import MapSpec, QualityMap, quality_map
-from .scenario import PAPER, Scenario
+from ..arm import BasePose
+from ..errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
+from ..control.hold_law import LAWS, HoldLawSettings, check_law_settings
+from ..executors import run_tasks
+from .experiment import GraspFailure, HoldSettings, measure_holding
+from ..objects import FIG2_SCALE, OUTLINE, SHAPES, SYNTAX, ObjectSpec
+from ..quality_map import MapSpec, QualityMap, quality_map
+from ..scenario import PAPER, Scenario
 
 __all__ = ["ARMS", "StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_results", "correlations", "study_pose",
            "expand_symmetric", "pose_scenario"]
@@ -37,12 +37,12 @@ __all__ = ["ARMS", "StudySpec", "PREDICTORS", "RESPONSES", "run_study", "load_re
 PREDICTORS = ("static_Q1", "static_Q2", "static_Q3", "static_QH", "cage_QH", "Q1", "Q2", "Q3", "Q1_force", "Q2_force",
               "Q3_force", "bound_min")
 """The quality measures: the static map's (the paper's optimal grasp) Q1-Q3 and wrench capacity
-Q_H (:func:`contgrasp_core.holding_measure.static_capacity`, with the study's friction), the
+Q_H (:func:`contgrasp_core.holding.measure.static_capacity`, with the study's friction), the
 wrench capacity of the holding law's cage at rest (``cage_QH``,
-:func:`contgrasp_core.holding_measure.cage_capacity`: before simulating too; NaN for the
+:func:`contgrasp_core.holding.measure.cage_capacity`: before simulating too; NaN for the
 paper's law), the settled grasp's, the settled grasp's weighted by its contact forces
 (:func:`contgrasp_core.holding.force_weighted_quality`), and the settled grasp's friction bound
-``p_max h(d)`` (:func:`contgrasp_core.holding.friction_bound`, its pressure at rest) in the
+``p_max h(d)`` (:func:`contgrasp_core.holding.experiment.friction_bound`, its pressure at rest) in the
 weakest of the measured directions (a diagnostic after simulating: does friction at the rest
 pressure set the capacity?)."""
 RESPONSES = ("stiffness_min", "stiffness_det", "capacity_min", "grasped")
@@ -358,9 +358,9 @@ is ``math.nan``, one object, so rows compare equal run after run.)"""
 def _before_simulating(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...], tuple[float, ...]]]) -> dict[str, dict[str, float]]:
     """The wrench capacities before simulating of each task: ``static_QH`` of its optimal grasp
     (:func:`_static_capacities`) and, with the holding law, ``cage_QH`` of the law's cage at
-    rest (:func:`contgrasp_core.holding_measure.cage_capacity`, SI; NaN where the rod's
+    rest (:func:`contgrasp_core.holding.measure.cage_capacity`, SI; NaN where the rod's
     rest under the cage's law cannot be solved, and for the paper's law)."""
-    from contgrasp_core.holding_measure import cage_capacity
+    from contgrasp_core.holding.measure import cage_capacity
 
     static = _static_capacities(spec, tasks)
     out = {}
@@ -379,7 +379,7 @@ def _static_capacities(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...]
     """Q_H of each task's optimal grasp (paper units), with the study's friction: for the grid
     poses the map's own grasps (each row warm-started along increasing distance, as the map
     solves them), for the optima from a cold start; NaN where the grasp cannot be solved."""
-    from contgrasp_core.holding_measure import static_capacity, static_capacity_column
+    from contgrasp_core.holding.measure import static_capacity, static_capacity_column
 
     ms, out = spec.map_spec(), {}
     rows: dict[int, list[tuple[int, str, tuple[float, ...]]]] = {}
