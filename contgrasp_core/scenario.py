@@ -211,9 +211,12 @@ class Scenario:
                    law=str(ctl["law"]), hold_law=hold_law)
 
     def with_object(self, obj: ObjectSpec, **changes: Any) -> Scenario:
-        """The same scenario around another object (the adaptive gain follows its nominal radius),
-        with the other ``changes`` (fields, e.g. ``rod``) made at once: the start is checked
-        (:func:`check_start`) on the new object with the new rod, not on a mix of old and new."""
+        """The same scenario around another object (the adaptive gain follows its nominal radius, and
+        a wrench reference that was the old object's own follows the new object's), with the other
+        ``changes`` (fields, e.g. ``rod``) made at once: the start is checked (:func:`check_start`)
+        on the new object with the new rod, not on a mix of old and new."""
+        own = self.sensing.reference is not None and self.sensing.reference == self.object.reference
+        changes.setdefault("sensing", replace(self.sensing, reference=obj.reference) if own else self.sensing)
         return replace(self, object=obj, gains=replace(self.gains, object_radius=None), **changes)
 
 

@@ -292,3 +292,16 @@ def test_an_outline_travels_in_the_object_message_exactly(tmp_path: Path) -> Non
         assert got.length == sent.length
         np.testing.assert_array_equal(got.point(s), sent.point(s))
         np.testing.assert_array_equal(got.curvature(s), sent.curvature(s))
+
+
+def test_a_scenario_around_another_object_takes_its_wrench_reference(tmp_path: Path) -> None:
+    """``with_object`` (``contgrasp hold``, the study's poses): the paper's reference (0.08, 0.08),
+    its circle's centre, follows the new object (an outline elsewhere: its centroid; it stayed at
+    (0.08, 0.08)); a reference set apart from the object stays."""
+    t = np.linspace(0.0, 2.0 * np.pi, 90, endpoint=False)
+    path = tmp_path / "far.csv"
+    np.savetxt(path, np.c_[0.09 + 0.02 * np.cos(t), 0.07 + 0.02 * np.sin(t)], delimiter=",")
+    moved = PAPER.with_object(ObjectSpec.from_outline(path))
+    assert moved.reference == pytest.approx((0.09, 0.07), abs=1e-9)
+    chosen = replace(PAPER, sensing=replace(PAPER.sensing, reference=(0.1, 0.0)))
+    assert chosen.with_object(ObjectSpec.from_outline(path)).reference == (0.1, 0.0)
