@@ -8,6 +8,7 @@ import json
 import subprocess
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -114,3 +115,36 @@ def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop() -> No
     assert np.hypot(d["x"], d["y"]) < 0.010 and abs(d["angle"]) < 0.2
     assert np.hypot(v["x"], v["y"]) < 0.001
     assert out["validity"]["valid"] and out["law"] == "plan" and out["law_phase"] == "hold"
+
+
+def test_the_commands_take_law_plan_and_its_gain(tmp_path: Path) -> None:
+    """``--law plan`` in simulate, hold, holding-study and the launcher (their choices are the
+    laws); ``--plan-gain`` reaches the scenario as the controller's ``hold_plan_gain``, and is
+    refused under the paper's law in one line."""
+    from contgrasp_core.cli import build_parser, hold, holding_study, simulate
+    from contgrasp_ros.launcher.cli import _parser
+
+    parser = build_parser()
+    args = parser.parse_args(["simulate", "--law", "plan", "--plan-gain", "300", "--object-mode", "free"])
+    assert simulate.scenario_from_args(args) == Scenario.from_ros_parameters(
+        {"grasp_controller": {"law": "plan", "hold_plan_gain": 300.0}, "rod_simulator": {"object_mode": "free",
+                                                                                         "control_period": 0.0, "dt": 0.002}}
+    ).with_object(PAPER.object)
+    scenario = hold.scenario_from_args(parser.parse_args(["hold", "--law", "plan", "--plan-gain", "30"]))
+    assert scenario.law == "plan" and scenario.hold_law.plan_gain == 30.0
+    spec = holding_study.spec_from_args(parser.parse_args(["holding-study", "--arm", "rod", "--law", "plan", "--out",
+                                                                 str(tmp_path / "s.jsonl")]))
+    assert spec.law == "plan"
+    assert _parser().parse_args(["--law", "plan"]).law == "plan"
+
+
+def test_the_plan_gain_under_the_papers_law_is_refused_in_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_core.cli import main
+
+    capsys.readouterr()
+    assert main(["simulate", "--duration", "0.01", "--nodes", "11", "--plan-gain", "30"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "contgrasp simulate: error: --plan-gain does nothing under --law paper: it needs --law hold or plan"]
+    assert main(["simulate", "--duration", "0.01", "--nodes", "11", "--law", "plan", "--plan-gain", "-1"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "contgrasp simulate: error: hold law plan_gain must be >= 0, got -1.0"]
