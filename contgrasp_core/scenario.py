@@ -34,7 +34,7 @@ if TYPE_CHECKING:
 
 __all__ = ["GainSettings", "SensingSettings", "Scenario", "PAPER", "ROD_PARAMETERS", "NODES", "SIMULATOR", "SENSOR",
            "CONTROLLER", "QUALITY", "object_from_parameters", "rod_from_parameters", "motion_from_parameters", "motion_parameters", "rod_system",
-           "check_start", "HOLD_PREFIX"]
+           "check_start", "HOLD_PREFIX", "OBJECT_PARAMETERS"]
 
 SIMULATOR, SENSOR, CONTROLLER, QUALITY = "rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"
 NODES = (SIMULATOR, SENSOR, CONTROLLER, QUALITY)
@@ -47,6 +47,10 @@ ROD_PARAMETERS = ("length", "n_elements", "radius_base", "radius_tip", "density"
                   "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction", "friction_model",
                   "max_muscle_stress", "base_x", "base_y", "base_angle")
 """The rod's parameters (ROS names), shared by the simulator and the controller."""
+
+OBJECT_PARAMETERS = ("object", "object_outline", "object_center", "object_angle")
+"""The object's parameters (ROS names): the simulator's, and a copy in the controller's (the
+planned hold's plan runs on the object)."""
 
 _LOOP_PARAMETERS = ("duration", "control_period", "dt", "settle_speed", "settle_hold", "min_time")
 
@@ -158,8 +162,10 @@ class Scenario:
         """Parameters per node, plain types: ``{"/**": rod, "rod_simulator": object + loop, ...}``
         (the layout of a ROS 2 parameter file; ``/**`` applies to every node). The controller
         takes the ``law``, the holding law's settings as ``hold_<name>``
-        (:class:`~contgrasp_core.control.hold_law.HoldLawSettings`) and the ``control_period`` (the
-        simulator's: the holding law's phases run in time)."""
+        (:class:`~contgrasp_core.control.hold_law.HoldLawSettings`), the ``control_period`` (the
+        simulator's: the holding law's phases run in time) and the simulator's object parameters
+        (``object``, ``object_outline``, ``object_center``, ``object_angle``: the planned hold's
+        plan is computed on it; :meth:`from_ros_parameters` reads the simulator's)."""
         m = self.rod
         rod = {name: _plain(getattr(m, name)) for name in ROD_PARAMETERS if name not in ("base_x", "base_y")}
         rod["base_x"], rod["base_y"] = float(m.base_position[0]), float(m.base_position[1])
@@ -176,6 +182,7 @@ class Scenario:
         ctl = {"mu1": g.mu1, "mu2": g.mu2, "adaptive_mu2": g.adaptive_mu2,
                "object_radius": float(o.radius if g.object_radius is None else g.object_radius),
                "length_unit": g.length_unit, "law": self.law, "control_period": sim["control_period"]}
+        ctl.update({name: list(sim[name]) if isinstance(sim[name], list) else sim[name] for name in OBJECT_PARAMETERS})
         ctl.update({f"{HOLD_PREFIX}{f.name}": float(getattr(self.hold_law, f.name)) for f in fields(HoldLawSettings)})
         s = self.sensing
         ref = self.reference

@@ -79,6 +79,8 @@ def test_the_scenario_builds_the_law_and_its_settings_travel() -> None:
     assert isinstance(law, PlannedHold) and law.gain == 300.0 and law.t == 0.0 and law.phase == "plan"
     params = s.to_ros_parameters()
     assert params["grasp_controller"]["hold_plan_gain"] == 300.0 and params["grasp_controller"]["law"] == "plan"
+    for name in ("object", "object_outline", "object_center", "object_angle"):  # (the controller plans on the object)
+        assert params["grasp_controller"][name] == params["rod_simulator"][name]
     assert Scenario.from_ros_parameters(params) == s
     free = replace(s, dynamics=ObjectDynamics(mode="free"))
     assert Scenario.from_ros_parameters(free.to_ros_parameters()) == free
@@ -148,3 +150,14 @@ def test_the_plan_gain_under_the_papers_law_is_refused_in_one_line(capsys: pytes
     assert main(["simulate", "--duration", "0.01", "--nodes", "11", "--law", "plan", "--plan-gain", "-1"]) == 2
     assert capsys.readouterr().err.splitlines() == [
         "contgrasp simulate: error: hold law plan_gain must be >= 0, got -1.0"]
+
+
+def test_a_launchs_object_reaches_the_controllers_copy() -> None:
+    """``contgrasp-launch --object`` changes the simulator's object and the controller's copy
+    (the plan's) alike."""
+    from contgrasp_ros.launcher.graph import default_params_file, launch_overrides, load_params
+
+    out = launch_overrides(load_params(default_params_file()), ObjectSpec.parse("ellipse", ROD_SCALE), law="plan")
+    for name in ("object", "object_outline", "object_center", "object_angle"):
+        assert out["grasp_controller"][name] == out["rod_simulator"][name]
+    assert out["grasp_controller"]["object"].startswith("ellipse") and out["grasp_controller"]["law"] == "plan"
