@@ -34,7 +34,7 @@ if TYPE_CHECKING:
 
 __all__ = ["GainSettings", "SensingSettings", "Scenario", "PAPER", "ROD_PARAMETERS", "NODES", "SIMULATOR", "SENSOR",
            "CONTROLLER", "QUALITY", "object_from_parameters", "rod_from_parameters", "motion_from_parameters", "motion_parameters", "rod_system",
-           "check_start", "HOLD_PREFIX"]
+           "check_start", "HOLD_PREFIX", "OBJECT_PARAMETERS"]
 
 SIMULATOR, SENSOR, CONTROLLER, QUALITY = "rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality"
 NODES = (SIMULATOR, SENSOR, CONTROLLER, QUALITY)
@@ -47,6 +47,10 @@ ROD_PARAMETERS = ("length", "n_elements", "radius_base", "radius_tip", "density"
                   "drag_normal", "drag_tangential", "contact_stiffness", "contact_damping", "friction", "friction_model",
                   "max_muscle_stress", "base_x", "base_y", "base_angle")
 """The rod's parameters (ROS names), shared by the simulator and the controller."""
+
+OBJECT_PARAMETERS = ("object", "object_outline", "object_center", "object_angle")
+"""The object's parameters (ROS names): the simulator's, and a copy in the controller's (the
+planned hold's plan runs on the object)."""
 
 _LOOP_PARAMETERS = ("duration", "control_period", "dt", "settle_speed", "settle_hold", "min_time")
 
@@ -93,7 +97,8 @@ class Scenario:
     """A closed-loop grasp: rod, object (its shape and how it moves: ``dynamics``, fixed by
     default, as in the paper), loop, gains and sensing (SI units); a scripted ``disturbance``
     on a movable object (None: none); the ``law`` (:data:`~contgrasp_core.control.hold_law.LAWS`:
-    ``paper``, eq. (19), the default, or ``hold``, docs/holding.md (H1)-(H6), with ``hold_law``).
+    ``paper``, eq. (19), the default, ``hold``, docs/holding.md (H1)-(H6), with ``hold_law``, or
+    ``plan``, the holding law planned on the fixed object and played back, with ``hold_law``).
     Its start is checked on construction (:func:`check_start`): the straight arm outside the
     object, the object within its reach."""
 
@@ -128,9 +133,14 @@ class Scenario:
     def controller(self) -> Law:
         """A fresh controller of the scenario's law: the paper's fixed gains
         (:attr:`feedback_gains`), or the holding law's state at its start (the adaptive gain's
-        object radius as the paper's)."""
+        object radius as the paper's), or the planned hold's playback from its start (its plan
+        computed now: :class:`~contgrasp_core.holding.plan.PlannedHold`)."""
         if self.law == "paper":
             return PaperLaw(self.feedback_gains)
+        if self.law == "plan":
+            from contgrasp_core.holding.plan import PlannedHold  # (holding imports the scenario)
+
+            return PlannedHold.from_scenario(self)
         g = self.gains
         return HoldController(self.rod, self.object.radius if g.object_radius is None else g.object_radius,
                               self.hold_law, g.length_unit)
@@ -152,8 +162,10 @@ class Scenario:
         """Parameters per node, plain types: ``{"/**": rod, "rod_simulator": object + loop, ...}``
         (the layout of a ROS 2 parameter file; ``/**`` applies to every node). The controller
         takes the ``law``, the holding law's settings as ``hold_<name>``
-        (:class:`~contgrasp_core.control.hold_law.HoldLawSettings`) and the ``control_period`` (the
-        simulator's: the holding law's phases run in time)."""
+        (:class:`~contgrasp_core.control.hold_law.HoldLawSettings`), the ``control_period`` (the
+        simulator's: the holding law's phases run in time) and the simulator's object parameters
+        (``object``, ``object_outline``, ``object_center``, ``object_angle``: the planned hold's
+        plan is computed on it; :meth:`from_ros_parameters` reads the simulator's)."""
         m = self.rod
         rod = {name: _plain(getattr(m, name)) for name in ROD_PARAMETERS if name not in ("base_x", "base_y")}
         rod["base_x"], rod["base_y"] = float(m.base_position[0]), float(m.base_position[1])
@@ -170,6 +182,7 @@ class Scenario:
         ctl = {"mu1": g.mu1, "mu2": g.mu2, "adaptive_mu2": g.adaptive_mu2,
                "object_radius": float(o.radius if g.object_radius is None else g.object_radius),
                "length_unit": g.length_unit, "law": self.law, "control_period": sim["control_period"]}
+        ctl.update({name: list(sim[name]) if isinstance(sim[name], list) else sim[name] for name in OBJECT_PARAMETERS})
         ctl.update({f"{HOLD_PREFIX}{f.name}": float(getattr(self.hold_law, f.name)) for f in fields(HoldLawSettings)})
         s = self.sensing
         ref = self.reference

@@ -168,7 +168,8 @@ def test_the_controller_steps_the_holding_law_once_per_state_and_afresh_for_a_ne
 
 
 @pytest.mark.parametrize(("parameter", "message"), [
-    ("law:=grip", "law: must be one of 'paper', 'hold', got 'grip'"),
+    ("law:=grip", "law: must be one of 'paper', 'hold', 'plan', got 'grip'"),
+    ("hold_plan_gain:=-1.0", "hold law plan_gain must be >= 0, got -1.0"),
     ("hold_close_gap:=0.01", "hold law close_gap must be in (0, clearance = 0.006) m, got 0.01"),
     ("hold_stiffness_gain:=-1.0", "hold law stiffness_gain must be >= 0, got -1.0"),
     ("hold_depth_gain:=-3.0", "hold law depth_gain must be >= 0, got -3.0"),
@@ -248,3 +249,29 @@ def test_simulate_and_the_launcher_give_the_same_facts_the_same_keys() -> None:
         assert sim[key].keys() == graph[key].keys() == {"x", "y", "angle"}
         np.testing.assert_allclose(list(graph[key].values()), list(sim[key].values()), rtol=1e-6, atol=1e-12)
     assert not {"object_q", "object_v"} & (set(graph) | set(graph["final"]) | set(sim) | set(sim["final"]))
+
+
+def test_the_planned_hold_through_the_graph_equals_the_core_loop_bit_for_bit() -> None:
+    """``contgrasp-launch --law plan --object-mode free``: the controller plans on its copy of the
+    simulator's object at start and plays the plan back; separate node processes in lock-step
+    equal run_sampled of the same scenario bit for bit (arm, object); the controller reports the
+    playback's phase."""
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--law", "plan",
+                           "--object-mode", "free", "--duration", "1.0", "--no-record", "--json"],
+                          capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    summary = json.loads(proc.stdout)
+    p = load_params(default_params_file())
+    p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "plan", "free"
+    p["rod_simulator"]["duration"] = 1.0
+    scenario = Scenario.from_ros_parameters(p)
+    law = scenario.controller()
+    session = run_sampled(scenario, law=law)
+    obs = session.observe()
+    assert obs.body is not None and summary["steps"] == obs.k == 500
+    np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
+    np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
+    assert {k: summary[k] for k in ("object_displacement", "object_velocity")} == motion_summary(obs.body.q, obs.body.v)
+    assert summary["law"] == "plan" and summary["law_phase"] == law.phase == "plan"  # (1 s: the plan still plays)
+    assert summary["missed_deadlines"] == 0

@@ -48,7 +48,8 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("the closed loop's law (docs/holding.md, 'A law that holds')")
     g.add_argument("--law", choices=LAWS, default="paper",
                    help="paper: eq. (19) with rho_d = r (default); hold: cage at a clearance, close, hold the "
-                   "shape and squeeze (beyond the paper)")
+                   "shape and squeeze (beyond the paper); plan: the holding law run first on the object held fixed, "
+                   "its path of shapes played back as held shapes (docs/holding.md)")
     g.add_argument("--clearance", type=float, default=d.clearance,
                    help=f"hold: the cage's gap to the object, m (default {d.clearance:g})")
     g.add_argument("--close-gap", type=float, default=d.close_gap,
@@ -63,13 +64,16 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--dwell", type=float, default=d.dwell,
                    help="hold: stay at the close gap this long, s >= 0, and latch the mean curvature over it "
                    f"(docs/holding.md (H8); default {d.dwell:g}: the one sample at which the gap is reached)")
+    g.add_argument("--plan-gain", type=float, default=d.plan_gain,
+                   help=f"plan: the played-back shapes' stiffness gain G >= 0 (default {d.plan_gain:g})")
 
 
 def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
     """The holding law's parameters of the command line, refused with an input error when out of
     range or given to the paper's law, which ignores them (:func:`~contgrasp_core.control.hold_law.check_law_settings`)."""
     settings = HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
-                               stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell)
+                               stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell,
+                               plan_gain=args.plan_gain)
     check_law_settings(args.law, settings, lambda name: "--hold-gain" if name == "stiffness_gain" else f"--{name.replace('_', '-')}")
     return settings
 

@@ -123,7 +123,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     rod = scenario.rod
     t0 = time.perf_counter()
     progress = None if args.json else (lambda phase: print(f"contgrasp hold: {phase}", file=sys.stderr, flush=True))
-    cage = cage_capacity(scenario, settings.mu).measure if scenario.law == "hold" else None  # (before simulating)
+    cage = cage_capacity(scenario, settings.mu).measure if scenario.law in ("hold", "plan") else None  # (before simulating)
     result = measure_holding(scenario, settings, progress)
     return {"object": scenario.object.text(),
             "base": [float(rod.base_position[0]), float(rod.base_position[1]), float(rod.base_angle)],

@@ -47,7 +47,8 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--duration", type=float, default=d.duration,
                    help=f"longest closed-loop grasp before a pose counts as not settled, s (default {d.duration:g})")
     p.add_argument("--law", choices=LAWS, default=d.law,
-                   help="the closed loop's law: paper (eq. (19)) or hold (docs/holding.md, 'A law that holds')")
+                   help="the closed loop's law: paper (eq. (19)), hold (docs/holding.md, 'A law that holds') or plan "
+                   "(the holding law planned on the fixed object, played back)")
     p.add_argument("--depth-gain", type=float, default=d.depth_gain,
                    help="with --law hold: regulate the mean sensed contact depth to the squeeze after it, integral "
                    f"gain 1/s >= 0 (docs/holding.md (H7); default {d.depth_gain:g}: off)")

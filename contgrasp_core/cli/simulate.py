@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError
-from contgrasp_core.control.hold_law import HoldController, Law
+from contgrasp_core.control.hold_law import Law
 from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.holding.measure import check_reach
 from contgrasp_core.rod import RodModel
@@ -288,7 +288,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     res = run_scenario(scenario, law, args.hold)
     out = summarize(res, scenario.sensing.contact_tolerance, "zoh" if args.hold == "zero-order" else "first-order hold")
     out.update(object=scenario.object.text(), object_mode=scenario.dynamics.mode, law=scenario.law,
-               law_phase=law.phase if isinstance(law, HoldController) else None, friction=scenario.rod.friction)
+               law_phase=getattr(law, "phase", None), friction=scenario.rod.friction)
     warning = validity_warning(out)
     if warning:
         print(f"contgrasp simulate: {warning}", file=sys.stderr)

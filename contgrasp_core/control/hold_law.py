@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
-from typing import ClassVar
+from typing import ClassVar, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,8 +29,9 @@ __all__ = ["LAWS", "HoldLawSettings", "check_law_settings", "ShapeHold", "PaperL
 
 Array = NDArray[np.float64]
 
-LAWS = ("paper", "hold")
-"""The closed loop's laws: the paper's eq. (19) and this module's holding law."""
+LAWS = ("paper", "hold", "plan")
+"""The closed loop's laws: the paper's eq. (19), this module's holding law and its planned
+playback (:class:`contgrasp_core.holding.plan.PlannedHold`, docs/holding.md)."""
 
 
 @dataclass(frozen=True)
@@ -42,7 +43,8 @@ class HoldLawSettings:
     and the ``squeeze_time`` (s) of (H5), the hold's stiffness gain ``stiffness_gain`` (G of
     (H4), dimensionless), the paper's ``mu1``, the ``depth_gain`` (1/s) of the depth
     regulation (H7; 0, the default: none, the squeeze of (H5) as latched) and the ``dwell`` (s)
-    over which the latch averages the cage's curvature (H8; 0, the default: one sample)."""
+    over which the latch averages the cage's curvature (H8; 0, the default: one sample); the
+    ``plan_gain`` (G of the planned hold's playback, law ``plan``, dimensionless)."""
 
     clearance: float = 0.006
     band: float = 0.001
@@ -55,6 +57,7 @@ class HoldLawSettings:
     mu1: float = 1.0
     depth_gain: float = 0.0
     dwell: float = 0.0
+    plan_gain: float = 100.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -64,7 +67,7 @@ class HoldLawSettings:
         for name in ("clearance", "band", "close_rate", "squeeze_time", "mu1"):
             if getattr(self, name) <= 0:
                 raise InvalidParameterError(f"hold law {name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("squeeze", "stiffness_gain", "depth_gain", "dwell"):
+        for name in ("squeeze", "stiffness_gain", "depth_gain", "dwell", "plan_gain"):
             if getattr(self, name) < 0:
                 raise InvalidParameterError(f"hold law {name} must be >= 0, got {getattr(self, name)!r}")
         if not 0 < self.close_gap < self.clearance:
@@ -76,12 +79,13 @@ class HoldLawSettings:
 
 
 def check_law_settings(law: str, settings: HoldLawSettings, name: Callable[[str], str] = str) -> None:
-    """Refuse holding-law ``settings`` other than the defaults under another ``law``, which
-    ignores them (:func:`~contgrasp_core.errors.refuse_ignored`); ``name`` gives a setting's name
-    (and ``law``'s) as the caller knows it, e.g. a command-line option."""
-    if law != "hold":
+    """Refuse holding-law ``settings`` other than the defaults under the paper's ``law``, which
+    ignores them (``hold`` and ``plan``, whose planner is the holding law, use them;
+    :func:`~contgrasp_core.errors.refuse_ignored`); ``name`` gives a setting's name (and
+    ``law``'s) as the caller knows it, e.g. a command-line option."""
+    if law == "paper":
         changed = [name(f.name) for f in fields(settings) if getattr(settings, f.name) != f.default]
-        refuse_ignored(changed, f"under {name('law')} {law}", f"{name('law')} hold")
+        refuse_ignored(changed, f"under {name('law')} {law}", f"{name('law')} hold or plan")
 
 
 def wrap_angle(theta: Array, alpha: Array, band: NDArray[np.bool_]) -> float:
@@ -259,5 +263,16 @@ class HoldController:
         return ShapeHold(self.model, kappa_ref, s.stiffness_gain)
 
 
-Law = PaperLaw | HoldController
-"""A closed loop's law: what :meth:`command` gives for each control period."""
+class Law(Protocol):
+    """A closed loop's law (:class:`PaperLaw`, :class:`HoldController`,
+    :class:`contgrasp_core.holding.plan.PlannedHold`): what :meth:`command` gives for each
+    control period, and whether it is ``holding`` (out of transition)."""
+
+    name: ClassVar[str]
+
+    @property
+    def holding(self) -> bool:
+        """The law is out of its transition: a rest now counts as settled."""
+
+    def command(self, rho: Array, alpha: Array, theta: Array, kappa: Array, period: float) -> FeedbackGains | ShapeHold:
+        """The command for the next ``period`` (s) from what the arm senses."""

@@ -253,7 +253,7 @@ class HoldExperiment:
         self.escape = replace(settings, escape_distance=settings.escape_distance * self.scale)
         self.law = scenario.controller()
         h = scenario.hold_law
-        self.reach = max(scenario.sensing.contact_tolerance, h.clearance + h.band if scenario.law == "hold" else 0.0)
+        self.reach = max(scenario.sensing.contact_tolerance, h.clearance + h.band if scenario.law in ("hold", "plan") else 0.0)
         self.grasped: LoopSession | None = None
         self.released: RodState | None = None
         self.release_reason = ""

@@ -11,7 +11,7 @@ grasp of Sec. III, :func:`cage_capacity` the contact set the holding law will pr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
@@ -188,8 +188,9 @@ def cage_wrap(scenario: Scenario) -> float:
 def check_reach(scenario: Scenario) -> None:
     """Refuse, before simulating, a holding-law scenario whose cage cannot close: its rest at the
     clearance (:func:`cage_wrap`) wraps less of the object than the law's ``wrap_angle``, so the
-    close never starts (the arm hovers; a free object is never held). Other laws pass."""
-    if scenario.law != "hold":
+    close never starts (the arm hovers; a free object is never held). The planned hold's planner
+    is the holding law: its scenarios are checked too. The paper's law passes."""
+    if scenario.law not in ("hold", "plan"):
         return
     wrap, need = cage_wrap(scenario), scenario.hold_law.wrap_angle
     if wrap < need:
@@ -220,7 +221,8 @@ def _cage_rest(scenario: Scenario, gap: str) -> tuple[Any, CageRest]:
     from ..control.rod_feedback import rest_shape
     from ..rod import Obstacle, chain
 
-    law, m = scenario.controller(), scenario.rod
+    # (the planned hold's cage is its planner's: the holding law, without computing the plan)
+    law, m = (replace(scenario, law="hold") if scenario.law == "plan" else scenario).controller(), scenario.rod
     if not isinstance(law, HoldController):
         raise InvalidParameterError(f"the cage is the holding law's; the scenario's law is {scenario.law!r}")
     s = law.settings

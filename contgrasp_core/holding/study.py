@@ -366,7 +366,7 @@ def _before_simulating(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...]
     out = {}
     for key, base, _ in tasks:
         cage = math.nan
-        if spec.law == "hold":
+        if spec.law in ("hold", "plan"):
             try:
                 cage = cage_capacity(pose_scenario(spec, (base[0], base[1], base[2])), spec.hold.mu).measure
             except ContgraspError:

@@ -53,7 +53,8 @@ def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
                                           "deformed[:R,amplitude,lobes,phase] (default: the parameter file's)"),
         DeclareLaunchArgument("outline", default_value="", description="your own object: a CSV outline, rows x, y in metres"),
         DeclareLaunchArgument("law", default_value="", choices=["", *LAWS],
-                              description="the controller's law: paper (eq. (19)) or hold (docs/holding.md) (default: the parameter file's)"),
+                              description="the controller's law: paper (eq. (19)), hold or plan (docs/holding.md) "
+                                          "(default: the parameter file's)"),
         DeclareLaunchArgument("object_mode", default_value="", choices=["", *MODES],
                               description="how the object moves: fixed (the paper), spring or free (default: the parameter file's)"),
         DeclareLaunchArgument("max_muscle_stress", default_value="",

@@ -1,9 +1,10 @@
 """grasp_controller: contact state -> internal couple control u(s) (paper eq. (19), or the
-holding law of docs/holding.md).
+holding law of docs/holding.md, or its planned playback).
 
 A thin wrapper of the core's laws, chosen by the read-only ``law`` parameter: the paper's through
-:func:`contgrasp_core.control.feedback_at_joints`, or
-:class:`contgrasp_core.control.hold_law.HoldController` ((H1)-(H6); ``hold_<name>`` parameters).
+:func:`contgrasp_core.control.feedback_at_joints`,
+:class:`contgrasp_core.control.hold_law.HoldController` ((H1)-(H6); ``hold_<name>`` parameters),
+or :class:`contgrasp_core.holding.plan.PlannedHold` (planned at start on the ``object*`` copy).
 The same functions the core-only loop calls, so a lock-step ROS run reproduces it exactly. A
 state sent twice is answered with the couple already published
 (:class:`~contgrasp_ros.nodes.lockstep.Answered`). docs/ros.md ("Either law").
@@ -11,17 +12,17 @@ state sent twice is answered with the couple already published
 
 from __future__ import annotations
 
-from dataclasses import fields
-from typing import Any
+from dataclasses import fields, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.node import Node
 
 from contgrasp_core.control import FeedbackGains, feedback_at_joints, paper_gains
-from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, ShapeHold
+from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
-from contgrasp_core.scenario import HOLD_PREFIX, PAPER
+from contgrasp_core.scenario import HOLD_PREFIX, OBJECT_PARAMETERS, PAPER
 from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros.plumbing import qos, topics
 from contgrasp_ros.plumbing.cdr import Codec
@@ -40,6 +41,9 @@ from contgrasp_ros.plumbing.runtime import (
     sim_time_by_default,
 )
 
+if TYPE_CHECKING:
+    from contgrasp_core.holding.plan import HoldPlan
+
 GAIN_PARAMETERS = ("mu1", "mu2", "adaptive_mu2", "object_radius", "length_unit")
 MU2_LIMIT = 1e6  # |mu2| in law units, given or adaptive
 
@@ -57,15 +61,18 @@ class GraspController(Node):
         declare(self, "adaptive_mu2", paper["adaptive_mu2"], "use mu2(s) = r(s) - 1/(r_obj + r(s)) (paper App. IV)")
         declare(self, "object_radius", paper["object_radius"], "object radius r_obj for the adaptive mu2 [m]", lo=1e-9, hi=1e3)
         declare(self, "length_unit", paper["length_unit"], "metres per length unit of the law (paper: cm)", lo=1e-9, hi=1e3)
-        self.law_name = declare(self, "law", paper["law"], "the closed loop's law: paper (eq. (19)) or hold (docs/holding.md)",
-                                choices=LAWS, read_only=True)
+        self.law_name = declare(self, "law", paper["law"], "the closed loop's law: paper (eq. (19)), hold or plan "
+                                "(docs/holding.md)", choices=LAWS, read_only=True)
         self.period = declare(self, "control_period", paper["control_period"], "the simulator's control period: the "
                               "holding law's phases run in time [s]", lo=1e-6, hi=10.0, read_only=True)
         self.hold_settings = HoldLawSettings(**{
             f.name: declare(self, f"{HOLD_PREFIX}{f.name}", paper[f"{HOLD_PREFIX}{f.name}"],
                             f"holding law: {f.name} (contgrasp_core.control.hold_law.HoldLawSettings)", read_only=True)
             for f in fields(HoldLawSettings)})
-        self.hold: HoldController | None = None  # (the holding law's state in this run)
+        self.object_parameters = {name: declare(self, name, paper[name], f"the simulator's {name}, copied: law plan "
+                                                "plans on the object", read_only=True) for name in OBJECT_PARAMETERS}
+        self.plan = self._plan() if self.law_name == "plan" else None  # (before the subscription: no state waits on it)
+        self.hold: Law | None = None  # (the holding law's, or the plan's playback's, state in this run)
         self.hold_step = -1  # (the step it answered last)
         self.drops = DropCounter(self)
         self.stamps = StampGate(self)
@@ -132,10 +139,25 @@ class GraspController(Node):
         self.pub.publish(out)
         self.answered.keep(data, out)
 
+    def _plan(self) -> HoldPlan:
+        """The planned hold's plan (:func:`contgrasp_core.holding.plan.plan_hold`) of the scenario
+        this node's parameters describe: its rod, the object copy, its gains and hold settings
+        (the engine imported here, under law plan only)."""
+        from contgrasp_core.holding.plan import plan_hold
+        from contgrasp_core.scenario import GainSettings, object_from_parameters
+
+        p = self.get_parameter
+        o = self.object_parameters
+        obj = object_from_parameters(o["object"], o["object_outline"], o["object_center"], o["object_angle"])
+        gains = GainSettings(mu1=p("mu1").value, mu2=p("mu2").value, adaptive_mu2=p("adaptive_mu2").value,
+                             object_radius=p("object_radius").value, length_unit=p("length_unit").value)
+        return plan_hold(replace(PAPER, rod=self.model, object=obj, gains=gains, law="plan", hold_law=self.hold_settings))
+
     @property
     def law_phase(self) -> str:
-        """The holding law's phase in this run ('' under the paper's law and before the first state)."""
-        return "" if self.hold is None else self.hold.phase
+        """The holding law's (or the plan's playback's) phase in this run ('' under the paper's
+        law and before the first state)."""
+        return "" if self.hold is None else str(getattr(self.hold, "phase", ""))
 
     def _status_values(self) -> tuple[int, str, dict[str, str]]:
         """The status with the law and its phase (``law``, ``law_phase``), what the run summaries report."""
@@ -156,7 +178,12 @@ class GraspController(Node):
                                reason="no arm shape")
         if self.hold is None or c.step <= self.hold_step:  # (step 0 again, or below: the simulator's new run)
             p = self.get_parameter
-            self.hold = HoldController(self.model, p("object_radius").value, self.hold_settings, p("length_unit").value)
+            if self.plan is not None:
+                from contgrasp_core.holding.plan import PlannedHold
+
+                self.hold = PlannedHold(self.model, self.plan, self.hold_settings.plan_gain)
+            else:
+                self.hold = HoldController(self.model, p("object_radius").value, self.hold_settings, p("length_unit").value)
             self.hold_step = c.step - 1
         command = self.hold.command(c.rho, c.alpha, c.theta, c.kappa[:-1], self.period * (c.step - self.hold_step))
         self.hold_step = c.step

@@ -1,0 +1,129 @@
+"""The planned hold, law ``plan`` (docs/holding.md, "A planned path of held shapes holds it").
+
+Before the arm moves, the holding law (:class:`~contgrasp_core.control.hold_law.HoldController`)
+runs on the object held fixed at its scenario pose, in the continuous loop at 10 ms
+(:func:`~contgrasp_core.rod.closed_loop.run_closed_loop`, :data:`PLAN_LOOP`); the arm's joint
+curvature at every step is the plan (:class:`HoldPlan`). :class:`PlannedHold` plays it back
+from t = 0 as held shapes (H4), ``ShapeHold(model, kappa_p(t), plan_gain)``, and keeps the last
+shape once the plan ends. The command is linear in the state, so its first-order hold is
+exact: the sampled loop runs it as the continuous one would.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from contgrasp_core.control.hold_law import ShapeHold
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.rod.closed_loop import ClosedLoopConfig
+from contgrasp_core.rod.model import RodModel
+
+if TYPE_CHECKING:
+    from contgrasp_core.scenario import Scenario
+
+__all__ = ["PLAN_LOOP", "HoldPlan", "PlannedHold", "plan_hold"]
+
+Array = NDArray[np.float64]
+
+PLAN_LOOP = ClosedLoopConfig(duration=20.0, dt=0.01, settle_speed=0.002, settle_hold=0.3, min_time=1.0)
+"""The plan's loop: continuous, steps of 10 ms (whose run of the holding law on the fixed object
+settles in the hold), stopped at settle (the paper scenario's criteria) within 20 s. Its own, not
+the run's: a run shorter than the plan plays the plan's start, and the graph's controller plans
+as the core does without the simulator's loop settings."""
+
+
+@dataclass(frozen=True)
+class HoldPlan:
+    """A path of held shapes: the times ``t`` (s, increasing from 0) and the joint curvature
+    ``kappa`` (len(t), N) at each (1/m)."""
+
+    t: Array
+    kappa: Array
+
+    def __post_init__(self) -> None:
+        t, k = np.asarray(self.t, dtype=float), np.asarray(self.kappa, dtype=float)
+        if t.ndim != 1 or t.size < 1 or k.ndim != 2 or k.shape[0] != t.size:
+            raise InvalidParameterError(f"a plan needs times (n,) and curvatures (n, N), got {t.shape} and {k.shape}")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(k)) and np.all(np.diff(t) > 0)):
+            raise InvalidParameterError("a plan's times must increase and its curvatures be finite")
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "kappa", k)
+
+    @property
+    def end(self) -> float:
+        """The plan's last time (s)."""
+        return float(self.t[-1])
+
+    def at(self, t: float) -> Array:
+        """The planned curvature at ``t`` (s): linear in the recorded times, joint by joint; the
+        first shape before the start and the last after the end."""
+        times = self.t
+        if t <= times[0]:
+            return self.kappa[0].copy()
+        if t >= times[-1]:
+            return self.kappa[-1].copy()
+        i = int(np.searchsorted(times, t, side="right"))  # (times[i - 1] <= t < times[i])
+        w = (t - times[i - 1]) / (times[i] - times[i - 1])
+        return np.asarray((1.0 - w) * self.kappa[i - 1] + w * self.kappa[i], dtype=np.float64)
+
+
+def plan_hold(scenario: Scenario) -> HoldPlan:
+    """The plan of ``scenario``: its holding law (its rod, gains and hold settings) on its object
+    held fixed at its pose, in :data:`PLAN_LOOP`. :class:`InvalidParameterError` when the run
+    never reaches the hold (the plan would not hold anything)."""
+    from contgrasp_core.rod import chain
+    from contgrasp_core.rod.body import ObjectDynamics
+    from contgrasp_core.rod.closed_loop import run_closed_loop
+
+    loop = PLAN_LOOP
+    planner = replace(scenario, law="hold", dynamics=ObjectDynamics(), disturbance=None, loop=loop)
+    law = planner.controller()
+    res = run_closed_loop(planner.system(), planner.feedback_gains, loop, law=law)
+    if not law.holding:
+        raise InvalidParameterError(
+            f"the planned hold has no plan: the holding law on the fixed {scenario.object.text()} did not reach its "
+            f"hold within {loop.duration:g} s (phase {getattr(law, 'phase', '?')}; a longer duration or another pose)")
+    m = scenario.rod
+    kappa = np.array([m.joint_curvature(chain.element_angles(theta)) for theta in res.theta])
+    return HoldPlan(np.asarray(res.t, dtype=float), kappa)
+
+
+class PlannedHold:
+    """The playback of a :class:`HoldPlan` (module docstring): ``phase`` ``plan`` until the plan's
+    end, then ``hold`` (``holding``); :meth:`command` gives the held shape at the law's own time
+    and advances it by the period."""
+
+    name: ClassVar[str] = "plan"
+
+    def __init__(self, model: RodModel, plan: HoldPlan, gain: float) -> None:
+        if plan.kappa.shape[1] != model.n_elements:
+            raise InvalidParameterError(f"the plan has {plan.kappa.shape[1]} joints; the rod has {model.n_elements}")
+        self.model, self.plan, self.gain = model, plan, float(gain)
+        self.t = 0.0
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario, plan: HoldPlan | None = None) -> PlannedHold:
+        """A fresh playback of ``scenario``'s plan (computed by :func:`plan_hold` unless given)
+        at its ``plan_gain``."""
+        return cls(scenario.rod, plan_hold(scenario) if plan is None else plan, scenario.hold_law.plan_gain)
+
+    @property
+    def holding(self) -> bool:
+        """The plan's end is reached: its last shape is held."""
+        return self.t >= self.plan.end
+
+    @property
+    def phase(self) -> str:
+        """``plan`` while the path plays, ``hold`` after."""
+        return "hold" if self.holding else "plan"
+
+    def command(self, rho: Array, alpha: Array, theta: Array, kappa: Array, period: float) -> ShapeHold:
+        """The held shape at the law's time (what is sensed is not used: the plan is the
+        feedback's reference), then the time advances by ``period`` (s)."""
+        out = ShapeHold(self.model, self.plan.at(self.t), self.gain)
+        self.t += period
+        return out

@@ -1,0 +1,163 @@
+"""The planned hold, law ``plan`` (docs/holding.md, "A planned path of held shapes holds it"):
+the plan (the holding law on the fixed object), its playback as held shapes, its settings and
+parameters, and the free circle kept through the sampled loop."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contgrasp_core.control.hold_law import LAWS, HoldLawSettings, ShapeHold, check_law_settings
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.holding import plan as plan_module
+from contgrasp_core.holding.measure import check_reach
+from contgrasp_core.holding.plan import HoldPlan, PlannedHold, plan_hold
+from contgrasp_core.objects import ROD_SCALE, ObjectSpec
+from contgrasp_core.rod import chain
+from contgrasp_core.rod.body import ObjectDynamics
+from contgrasp_core.rod.closed_loop import run_closed_loop
+from contgrasp_core.scenario import PAPER, Scenario
+
+PLAN = replace(PAPER, law="plan")
+
+
+@pytest.fixture(scope="module")
+def paper_plan() -> HoldPlan:
+    return plan_hold(PLAN)
+
+
+def test_the_plan_is_the_holding_law_on_the_fixed_object_to_its_hold(paper_plan: HoldPlan) -> None:
+    """The plan records the holding law's run on the fixed circle (the same loop run by hand) at
+    every 10 ms step, to its settled hold."""
+    planner = replace(PAPER, law="hold")
+    law = planner.controller()
+    res = run_closed_loop(planner.system(), planner.feedback_gains, plan_module.PLAN_LOOP, law=law)
+    assert law.holding and res.settled
+    want = np.array([PAPER.rod.joint_curvature(chain.element_angles(th)) for th in res.theta])
+    np.testing.assert_array_equal(paper_plan.t, res.t)
+    np.testing.assert_array_equal(paper_plan.kappa, want)
+    assert paper_plan.t[0] == 0.0 and np.allclose(np.diff(paper_plan.t), 0.01) and 2.0 < paper_plan.end < 20.0
+
+
+def test_the_playback_commands_the_plan_interpolated_then_its_last_shape(paper_plan: HoldPlan) -> None:
+    """The law's command is the held shape (H4) at the plan's curvature at the law's own time: a
+    recorded time exactly, halfway between two linearly, and the last shape after the end; the
+    phase is ``plan`` until the end, then ``hold``."""
+    law = PlannedHold(PAPER.rod, paper_plan, 100.0)
+    n = PAPER.rod.n_elements
+    z = np.zeros(n + 1)
+    assert law.name == "plan" and law.phase == "plan" and not law.holding
+    first = law.command(z, z, z, z[:-1], 0.05)  # (t = 0)
+    assert isinstance(first, ShapeHold) and first.gain == 100.0
+    np.testing.assert_array_equal(first.kappa_ref, paper_plan.kappa[0])
+    np.testing.assert_array_equal(first.couple, -PAPER.rod.joint_ei * paper_plan.kappa[0])
+    law.t = float(paper_plan.t[37])
+    np.testing.assert_array_equal(law.command(z, z, z, z[:-1], 0.002).kappa_ref, paper_plan.kappa[37])
+    law.t = 0.5 * float(paper_plan.t[40] + paper_plan.t[41])
+    np.testing.assert_allclose(law.command(z, z, z, z[:-1], 0.002).kappa_ref,
+                               0.5 * (paper_plan.kappa[40] + paper_plan.kappa[41]), rtol=1e-12, atol=1e-12)
+    assert law.t == pytest.approx(0.5 * float(paper_plan.t[40] + paper_plan.t[41]) + 0.002)
+    law.t = paper_plan.end + 1.0
+    assert law.holding and law.phase == "hold"
+    np.testing.assert_array_equal(law.command(z, z, z, z[:-1], 0.002).kappa_ref, paper_plan.kappa[-1])
+
+
+def test_the_scenario_builds_the_law_and_its_settings_travel() -> None:
+    """``law plan`` is a law of the scenario: its controller is a fresh playback at ``plan_gain``;
+    the hold settings apply to it (refused only under the paper's law), the reach is checked
+    (its planner is the holding law), ``hold_plan_gain`` is a controller parameter that round
+    trips, and a bad gain is refused in one line."""
+    assert "plan" in LAWS
+    s = replace(PLAN, hold_law=HoldLawSettings(plan_gain=300.0, squeeze=0.0006))
+    law = s.controller()
+    assert isinstance(law, PlannedHold) and law.gain == 300.0 and law.t == 0.0 and law.phase == "plan"
+    params = s.to_ros_parameters()
+    assert params["grasp_controller"]["hold_plan_gain"] == 300.0 and params["grasp_controller"]["law"] == "plan"
+    for name in ("object", "object_outline", "object_center", "object_angle"):  # (the controller plans on the object)
+        assert params["grasp_controller"][name] == params["rod_simulator"][name]
+    assert Scenario.from_ros_parameters(params) == s
+    free = replace(s, dynamics=ObjectDynamics(mode="free"))
+    assert Scenario.from_ros_parameters(free.to_ros_parameters()) == free
+    check_law_settings("plan", HoldLawSettings(plan_gain=30.0))
+    with pytest.raises(InvalidParameterError, match="nothing under law paper: it needs law hold or plan"):
+        check_law_settings("paper", HoldLawSettings(plan_gain=30.0))
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(InvalidParameterError, match="hold law plan_gain") as info:
+            HoldLawSettings(plan_gain=bad)
+        assert "\n" not in str(info.value)
+    too_far = PLAN.with_object(ObjectSpec.parse("circle:0.035", ROD_SCALE))  # (its cage cannot close: docs/holding.md)
+    with pytest.raises(InvalidParameterError, match="cannot close"):
+        check_reach(too_far)
+
+
+def test_a_planner_that_never_reaches_the_hold_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(plan_module, "PLAN_LOOP", replace(plan_module.PLAN_LOOP, duration=0.5))
+    with pytest.raises(InvalidParameterError, match="no plan") as info:
+        PLAN.controller()
+    assert "\n" not in str(info.value)
+
+
+def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop() -> None:
+    """``contgrasp simulate --law plan --object-mode free`` sampled at 2 ms and held to first
+    order, as the graph runs it, 6 s: the paper's circle stays within 10 mm and 0.2 rad of its
+    start, slower than 1 mm/s, the arm outside it (valid), the law in its hold (measured
+    2026-11-28: 3.7 mm, 0.003 rad, 0.67 mm/s, settled, peak couple 0.107 N m)."""
+    proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "simulate", "--law", "plan", "--object-mode",
+                           "free", "--control-period", "0.002", "--hold", "first-order", "--duration", "6", "--json"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout)
+    d, v = out["object_displacement"], out["object_velocity"]
+    assert np.hypot(d["x"], d["y"]) < 0.010 and abs(d["angle"]) < 0.2
+    assert np.hypot(v["x"], v["y"]) < 0.001
+    assert out["validity"]["valid"] and out["law"] == "plan" and out["law_phase"] == "hold"
+
+
+def test_the_commands_take_law_plan_and_its_gain(tmp_path: Path) -> None:
+    """``--law plan`` in simulate, hold, holding-study and the launcher (their choices are the
+    laws); ``--plan-gain`` reaches the scenario as the controller's ``hold_plan_gain``, and is
+    refused under the paper's law in one line."""
+    from contgrasp_core.cli import build_parser, hold, holding_study, simulate
+    from contgrasp_ros.launcher.cli import _parser
+
+    parser = build_parser()
+    args = parser.parse_args(["simulate", "--law", "plan", "--plan-gain", "300", "--object-mode", "free"])
+    assert simulate.scenario_from_args(args) == Scenario.from_ros_parameters(
+        {"grasp_controller": {"law": "plan", "hold_plan_gain": 300.0}, "rod_simulator": {"object_mode": "free",
+                                                                                         "control_period": 0.0, "dt": 0.002}}
+    ).with_object(PAPER.object)
+    scenario = hold.scenario_from_args(parser.parse_args(["hold", "--law", "plan", "--plan-gain", "30"]))
+    assert scenario.law == "plan" and scenario.hold_law.plan_gain == 30.0
+    spec = holding_study.spec_from_args(parser.parse_args(["holding-study", "--arm", "rod", "--law", "plan", "--out",
+                                                                 str(tmp_path / "s.jsonl")]))
+    assert spec.law == "plan"
+    assert _parser().parse_args(["--law", "plan"]).law == "plan"
+
+
+def test_the_plan_gain_under_the_papers_law_is_refused_in_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    from contgrasp_core.cli import main
+
+    capsys.readouterr()
+    assert main(["simulate", "--duration", "0.01", "--nodes", "11", "--plan-gain", "30"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "contgrasp simulate: error: --plan-gain does nothing under --law paper: it needs --law hold or plan"]
+    assert main(["simulate", "--duration", "0.01", "--nodes", "11", "--law", "plan", "--plan-gain", "-1"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "contgrasp simulate: error: hold law plan_gain must be >= 0, got -1.0"]
+
+
+def test_a_launchs_object_reaches_the_controllers_copy() -> None:
+    """``contgrasp-launch --object`` changes the simulator's object and the controller's copy
+    (the plan's) alike."""
+    from contgrasp_ros.launcher.graph import default_params_file, launch_overrides, load_params
+
+    out = launch_overrides(load_params(default_params_file()), ObjectSpec.parse("ellipse", ROD_SCALE), law="plan")
+    for name in ("object", "object_outline", "object_center", "object_angle"):
+        assert out["grasp_controller"][name] == out["rod_simulator"][name]
+    assert out["grasp_controller"]["object"].startswith("ellipse") and out["grasp_controller"]["law"] == "plan"
