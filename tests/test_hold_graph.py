@@ -54,6 +54,16 @@ class _Logged:
         return out
 
 
+
+def launch_json(*args: str) -> dict[str, Any]:
+    """``contgrasp-launch ARGS --json`` on a fresh domain, loopback only: its summary (exit 0 asserted)."""
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), *args, "--json"],
+                          capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout)  # type: ignore[no-any-return]
+
+
 def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_path: Path) -> None:
     """``contgrasp-launch --law hold --object-mode free``: the paper's arm (N = 100, 2 ms), the
     circle free, Coulomb friction 0.5, the dwell (H8) of 0.05 s (25 samples) and the depth regulation (H7) on
@@ -72,13 +82,8 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     data["grasp_controller"]["ros__parameters"].update(hold_depth_gain=10.0, hold_dwell=0.05)
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(data))
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--params", str(params),
-                           "--law", "hold", "--object-mode", "free", "--friction", "0.5", "--bag", str(tmp_path / "bag"),
-                           "--json"],
-                          capture_output=True, text=True, env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    summary = json.loads(proc.stdout)
+    summary = launch_json("--params", str(params), "--law", "hold", "--object-mode", "free", "--friction", "0.5",
+                          "--bag", str(tmp_path / "bag"))
     assert summary["missed_deadlines"] == 0
 
     p = load_params(params)
@@ -193,12 +198,8 @@ def test_bounded_muscles_through_the_graph_equal_the_core_loop_bit_for_bit() -> 
     """``contgrasp-launch --law hold --object-mode free --max-muscle-stress 20000``: the simulator
     saturates the couple as the core loop does (the same arm, object and effort to the bit); the
     couple never exceeds the muscles' bound; the summary reports the effort and the validity."""
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--law", "hold",
-                           "--object-mode", "free", "--max-muscle-stress", "20000", "--duration", "0.8", "--no-record",
-                           "--json"], capture_output=True, text=True, env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    summary = json.loads(proc.stdout)
+    summary = launch_json("--law", "hold", "--object-mode", "free", "--max-muscle-stress", "20000", "--duration", "0.8",
+                          "--no-record")
     p = load_params(default_params_file())
     p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "hold", "free"
     p["rod_simulator"].update(max_muscle_stress=20000.0, duration=0.8)
@@ -235,12 +236,7 @@ def test_simulate_and_the_launcher_give_the_same_facts_the_same_keys() -> None:
     sim = json.loads(subprocess.run([str(BIN / "contgrasp"), "simulate", "--object-mode", "free", "--law", "hold",
                                      "--duration", "0.4", "--control-period", "0.002", "--hold", "first-order", "--json"],
                                     capture_output=True, text=True, check=True, timeout=600).stdout)
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--law", "hold",
-                           "--object-mode", "free", "--duration", "0.4", "--no-record", "--json"],
-                          capture_output=True, text=True, env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    graph = json.loads(proc.stdout)
+    graph = launch_json("--law", "hold", "--object-mode", "free", "--duration", "0.4", "--no-record")
     assert set(SHARED_FACTS) <= set(sim) & set(graph)
     assert sim["law"] == graph["law"] == "hold" and sim["law_phase"] == graph["law_phase"] in ("cage", "close", "hold")
     for key in ("steps", "settled", "settle_time_s"):
@@ -256,12 +252,7 @@ def test_the_planned_hold_through_the_graph_equals_the_core_loop_bit_for_bit() -
     simulator's object at start and plays the plan back; separate node processes in lock-step
     equal run_sampled of the same scenario bit for bit (arm, object); the controller reports the
     playback's phase."""
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    proc = subprocess.run([str(BIN / "contgrasp-launch"), "--domain-id", str(fresh_domain_id()), "--law", "plan",
-                           "--object-mode", "free", "--duration", "1.0", "--no-record", "--json"],
-                          capture_output=True, text=True, env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    summary = json.loads(proc.stdout)
+    summary = launch_json("--law", "plan", "--object-mode", "free", "--duration", "1.0", "--no-record")
     p = load_params(default_params_file())
     p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "plan", "free"
     p["rod_simulator"]["duration"] = 1.0
