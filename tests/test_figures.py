@@ -405,3 +405,12 @@ def test_committed_fig3_shows_the_documented_optimum() -> None:
         assert (opt["base"]["x"], opt["base"]["y"]) == pytest.approx((8.0, 0.0), abs=1e-9)
     ellipse = json.loads((FIGURES_DIR / "fig3_ellipse.json").read_text())
     assert all(0.0 <= opt["psi"] < np.pi for opt in ellipse["optimum"].values())
+
+
+def test_every_law_has_a_figure_title() -> None:
+    """Fig. 4 and its animation name the law that ran: a title for each law of the loop (``--law
+    plan --plot`` once failed with ``KeyError: 'plan'``)."""
+    from contgrasp_core.control.hold_law import LAWS
+    from contgrasp_core.figures.closed_loop import LAW_TITLES
+
+    assert set(LAW_TITLES) == set(LAWS)

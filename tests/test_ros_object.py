@@ -349,3 +349,18 @@ def test_a_push_on_the_wrench_topic_and_a_pulse_from_the_service_are_in_the_reco
     assert w["max_force"] == pytest.approx(0.05) and w["max_torque"] == torque
     assert w["first_t"] == pytest.approx(float(run.rod.t[pushed[0]]))
     assert result["object_motion"]["max_displacement"] >= -o.q[:, 1].min() and result["max_recompute_error"] == 0.0
+
+
+@pytest.mark.parametrize(("args", "needle"), [(["-p", "object:=banana"], "unknown object 'banana'"),
+                                              (["-p", "object_center:=[0.1]"], "object centre must be two numbers")])
+def test_controller_with_a_bad_object_copy_exits_2_with_one_line(capsys: pytest.CaptureFixture[str], args: list[str],
+                                                                 needle: str) -> None:
+    """The controller's copy of the object (law plan plans on it) is checked at start under every
+    law, as the simulator's: nonsense stops the node in one line, exit 2."""
+    from contgrasp_ros.nodes.grasp_controller import GraspController
+    from contgrasp_ros.plumbing.runtime import run_node
+
+    capsys.readouterr()
+    assert run_node(GraspController, args=["grasp_controller", "--ros-args", *args]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("GraspController: error: ")]
+    assert len(err) == 1 and needle in err[0], err

@@ -22,7 +22,7 @@ from rclpy.node import Node
 from contgrasp_core.control import FeedbackGains, feedback_at_joints, paper_gains
 from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
-from contgrasp_core.scenario import HOLD_PREFIX, OBJECT_PARAMETERS, PAPER
+from contgrasp_core.scenario import HOLD_PREFIX, OBJECT_PARAMETERS, PAPER, object_from_parameters
 from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros.plumbing import qos, topics
 from contgrasp_ros.plumbing.cdr import Codec
@@ -69,8 +69,10 @@ class GraspController(Node):
             f.name: declare(self, f"{HOLD_PREFIX}{f.name}", paper[f"{HOLD_PREFIX}{f.name}"],
                             f"holding law: {f.name} (contgrasp_core.control.hold_law.HoldLawSettings)", read_only=True)
             for f in fields(HoldLawSettings)})
-        self.object_parameters = {name: declare(self, name, paper[name], f"the simulator's {name}, copied: law plan "
-                                                "plans on the object", read_only=True) for name in OBJECT_PARAMETERS}
+        o = {name: declare(self, name, paper[name], f"the simulator's {name}, copied: law plan plans on the object",
+                           read_only=True) for name in OBJECT_PARAMETERS}
+        # (checked under every law: a nonsense copy stops the node at start, as the simulator's own)
+        self.object_spec = object_from_parameters(o["object"], o["object_outline"], o["object_center"], o["object_angle"])
         self.plan = self._plan() if self.law_name == "plan" else None  # (before the subscription: no state waits on it)
         self.hold: Law | None = None  # (the holding law's, or the plan's playback's, state in this run)
         self.hold_step = -1  # (the step it answered last)
@@ -144,14 +146,12 @@ class GraspController(Node):
         this node's parameters describe: its rod, the object copy, its gains and hold settings
         (the engine imported here, under law plan only)."""
         from contgrasp_core.holding.plan import plan_hold
-        from contgrasp_core.scenario import GainSettings, object_from_parameters
+        from contgrasp_core.scenario import GainSettings
 
         p = self.get_parameter
-        o = self.object_parameters
-        obj = object_from_parameters(o["object"], o["object_outline"], o["object_center"], o["object_angle"])
         gains = GainSettings(mu1=p("mu1").value, mu2=p("mu2").value, adaptive_mu2=p("adaptive_mu2").value,
                              object_radius=p("object_radius").value, length_unit=p("length_unit").value)
-        return plan_hold(replace(PAPER, rod=self.model, object=obj, gains=gains, law="plan", hold_law=self.hold_settings))
+        return plan_hold(replace(PAPER, rod=self.model, object=self.object_spec, gains=gains, law="plan", hold_law=self.hold_settings))
 
     @property
     def law_phase(self) -> str:
