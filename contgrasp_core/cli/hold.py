@@ -89,8 +89,17 @@ def format_text(out: dict[str, Any]) -> str:
         lines.append(f"  ({c['direction'][0]:+.2f}, {c['direction'][1]:+.2f}, {c['direction'][2]:+.0f}): "
                      f"{c['magnitude']:.4g} ({state})")
     bound = " (a lower bound: that direction held to the ramp's end)" if out["capacity_is_bound"] else ""
-    lines += [f"capacity_min {out['capacity_min']:.4g} N{bound}", *tail]
+    lines += [f"capacity_min {out['capacity_min']:.4g} N{bound}", _ceiling_line(out), *tail]
     return "\n".join(lines)
+
+
+def _ceiling_line(out: dict[str, Any]) -> str:
+    """The muscles' ceiling (M5) of the grasp's rest shape, in words."""
+    if out["muscles_hold_shape"] is False:
+        return "muscle ceiling: the muscles cannot hold this rest shape at all (0 N)"
+    top = out["muscle_ceiling_min"]
+    return ("muscle ceiling: unbounded muscles (no ceiling)" if top is None
+            else f"muscle ceiling of this shape, weakest direction: {top:.4g} N")
 
 
 def scenario_from_args(args: argparse.Namespace) -> Scenario:

@@ -3,6 +3,7 @@
 * :mod:`.experiment` - one grasp loaded on the rod engine: released, probed for its stiffness K
   and ramped for its holding capacity (``contgrasp hold``; "What is measured");
 * :mod:`.measure` - the wrench capacity Q_H of a contact before simulating (eqs. (M1)-(M4));
+* :mod:`.ceiling` - the most any activation within the muscles' bound holds in a shape (M5);
 * :mod:`.study` - Q1-Q3 and Q_H against the measured holding over a quality map's poses
   (``contgrasp holding-study``; "The study").
 

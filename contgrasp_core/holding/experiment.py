@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.errors import InvalidParameterError, RunFailure
+from contgrasp_core.holding.ceiling import MuscleCeiling, muscle_ceiling
 from contgrasp_core.quality import GraspQuality, quality_of_state
 from contgrasp_core.rod.body import BodyState, ObjectDynamics, mass_properties
 from contgrasp_core.rod.integrator import RodState
@@ -124,6 +125,7 @@ class HoldResult:
     pressure_max: float = float("nan")
     friction_bound: tuple[float, ...] = ()
     grasp: dict[str, Any] = field(default_factory=dict)
+    ceiling: MuscleCeiling | None = None
 
     @property
     def capacity_min(self) -> float:
@@ -151,13 +153,17 @@ class HoldResult:
             "stiffness_eigenvalues": None if self.stiffness_eigenvalues is None else self.stiffness_eigenvalues.tolist(),
             "capacity": [{"direction": list(c.direction), "wrench": list(c.wrench), "magnitude": c.magnitude,
                           "held": c.held, "reason": c.reason, "friction_bound": bound,
-                          "bound_ratio": c.magnitude / bound if bound > 0 else None}
-                         for c, bound in zip(self.capacity, self.friction_bound or [float("nan")] * len(self.capacity),
-                                             strict=True)],
+                          "bound_ratio": c.magnitude / bound if bound > 0 else None, "muscle_ceiling": _finite(top)}
+                         for c, bound, top in zip(self.capacity,
+                                                  self.friction_bound or [float("nan")] * len(self.capacity),
+                                                  [float("nan")] * len(self.capacity) if self.ceiling is None
+                                                  else self.ceiling.capacity, strict=True)],
             "pressure_max": self.pressure_max,
             "capacity_min": self.capacity_min,
             "capacity_is_bound": self.capacity_is_bound,
             "capacity_min_reason": self.weakest.reason,
+            "muscle_ceiling_min": None if self.ceiling is None else _finite(float(self.ceiling.capacity.min())),
+            "muscles_hold_shape": None if self.ceiling is None else self.ceiling.holds_shape,
             "Q1": self.Q1, "Q2": self.Q2, "Q3": self.Q3,
             "Q1_force": self.force_weighted.Q1, "Q2_force": self.force_weighted.Q2, "Q3_force": self.force_weighted.Q3,
             "scale_m": self.scale,
@@ -165,6 +171,11 @@ class HoldResult:
             "settle_time_s": self.settle_time,
             **self.grasp,
         }
+
+
+def _finite(value: float) -> float | None:
+    """``value`` for JSON: None for no ceiling (unbounded muscles, ``inf``)."""
+    return None if np.isinf(value) else float(value)
 
 
 def _penetration(rod: RodModel, boundary: Boundary, theta: Array) -> tuple[Any, Array]:
@@ -381,6 +392,9 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
     p_max, bound = friction_bound(scenario.rod, exp.boundary, exp.grasped.state.theta, settings.mu,
                                   wrench_directions(settings.directions), scenario.reference, exp.scale)
     bounds = tuple(float(b) for b in bound)
+    ceiling = muscle_ceiling(scenario.rod, exp.boundary, exp.grasped.state.theta, mu=settings.mu,
+                             directions=wrench_directions(settings.directions), ref=scenario.reference,
+                             scale=exp.scale, tol=scenario.sensing.contact_tolerance)
     health = {"validity": exp.grasped.health.validity(), **exp.grasped.health.effort()}
     if exp.release_reason:
         return HoldResult(stiffness=None, support=np.diag(exp.dynamics.stiffness), stiffness_eigenvalues=None,
@@ -390,7 +404,8 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
                                     for d in wrench_directions(settings.directions)],
                           Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, force_weighted=forced, scale=exp.scale,
                           released_displacement=q0, settle_time=exp.grasped.settle_time, held=False,
-                          release_reason=exp.release_reason, pressure_max=p_max, friction_bound=bounds, grasp=health)
+                          release_reason=exp.release_reason, pressure_max=p_max, friction_bound=bounds, grasp=health,
+                          ceiling=ceiling)
     say("stiffness")
     stiffness, _ = exp.stiffness()
     d = np.diag([1.0, 1.0, 1.0 / exp.scale])
@@ -404,4 +419,4 @@ def measure_holding(scenario: Scenario, settings: HoldSettings = HoldSettings(),
                       capacity=capacity, Q1=quality.Q1, Q2=quality.Q2, Q3=quality.Q3, force_weighted=forced,
                       scale=exp.scale,
                       released_displacement=q0, settle_time=exp.grasped.settle_time,
-                      pressure_max=p_max, friction_bound=bounds, grasp=health)
+                      pressure_max=p_max, friction_bound=bounds, grasp=health, ceiling=ceiling)
