@@ -175,6 +175,7 @@ def test_the_controller_steps_the_holding_law_once_per_state_and_afresh_for_a_ne
 @pytest.mark.parametrize(("parameter", "message"), [
     ("law:=grip", "law: must be one of 'paper', 'hold', 'plan', got 'grip'"),
     ("hold_plan_gain:=-1.0", "hold law plan_gain must be >= 0, got -1.0"),
+    ("hold_plan_damping_time:=0.0", "hold law plan_damping_time must be > 0, got 0.0"),
     ("hold_close_gap:=0.01", "hold law close_gap must be in (0, clearance = 0.006) m, got 0.01"),
     ("hold_stiffness_gain:=-1.0", "hold law stiffness_gain must be >= 0, got -1.0"),
     ("hold_depth_gain:=-3.0", "hold law depth_gain must be >= 0, got -3.0"),

@@ -49,7 +49,7 @@ def test_the_playback_commands_the_plan_interpolated_then_its_last_shape(paper_p
     """The law's command is the held shape (H4) at the plan's curvature at the law's own time: a
     recorded time exactly, halfway between two linearly, and the last shape after the end; the
     phase is ``plan`` until the end, then ``hold``."""
-    law = PlannedHold(PAPER.rod, paper_plan, 100.0)
+    law = PlannedHold(PAPER.rod, paper_plan, replace(HoldLawSettings(), plan_damping=0.0))
     n = PAPER.rod.n_elements
     z = np.zeros(n + 1)
     assert law.name == "plan" and law.phase == "plan" and not law.holding
@@ -68,6 +68,54 @@ def test_the_playback_commands_the_plan_interpolated_then_its_last_shape(paper_p
     np.testing.assert_array_equal(law.command(z, z, z, z[:-1], 0.002).kappa_ref, paper_plan.kappa[-1])
 
 
+def test_the_plans_close_is_when_the_planners_cage_closed(paper_plan: HoldPlan) -> None:
+    """``close`` is the law's time of the first command given in the phase ``close`` (watched
+    from outside the law), within the plan."""
+    planner = replace(PAPER, law="hold")
+    law = planner.controller()
+    seen: list[float] = []
+    command, clock = law.command, [0.0]
+
+    def watched(*args: object) -> object:
+        out = command(*args)  # type: ignore[arg-type]
+        if law.phase == "close" and not seen:
+            seen.append(clock[0])
+        clock[0] += float(args[-1])  # type: ignore[arg-type]
+        return out
+
+    law.command = watched  # type: ignore[method-assign]
+    run_closed_loop(planner.system(), planner.feedback_gains, plan_module.PLAN_LOOP, law=law)
+    assert seen and paper_plan.close == pytest.approx(seen[0], abs=1e-12) and 0.0 < paper_plan.close < paper_plan.end
+
+
+def test_the_damper_is_a_maxwell_element_on_the_deviation_from_the_close_on(paper_plan: HoldPlan) -> None:
+    """(P1): before the close the command is the held shape at G alone, whatever the deviation;
+    from the close a deviation ``E`` held from a relaxed damper gives the couple
+    ``-EI kp + G EI E + D EI E exp(-t / tau)`` (a spring D in series with a dashpot D tau: its
+    step response), exactly at every period."""
+    settings = HoldLawSettings(plan_damping=300.0, plan_damping_time=0.1)
+    law = PlannedHold(PAPER.rod, paper_plan, settings)
+    m, n, period = PAPER.rod, PAPER.rod.n_elements, 0.002
+    z = np.zeros(n + 1)
+    rng = np.random.default_rng(1)
+    while law.t + period <= paper_plan.close:  # (deviations before the close: no damper, the damper relaxed to them)
+        kp = paper_plan.at(law.t)
+        out = law.command(z, z, z, kp + rng.normal(0.0, 5.0, n), period)
+        assert out.gain == settings.plan_gain
+        np.testing.assert_array_equal(out.kappa_ref, kp)
+    law.t, law.xi = paper_plan.close, np.zeros(n)  # (relaxed at zero deviation at the close)
+    step = rng.normal(0.0, 5.0, n)
+    for k in range(40):
+        kp = paper_plan.at(law.t)
+        kappa = kp + step
+        out = law.command(z, z, z, kappa, period)
+        theta = np.cumsum(kappa * m.joint_len) + m.base_angle  # (the element angles whose curvature is kappa)
+        u, _ = out.couple_and_jacobian(theta, jacobian=False)
+        want = -m.joint_ei * kp + m.joint_ei * step * (settings.plan_gain + settings.plan_damping
+                                                       * np.exp(-k * period / settings.plan_damping_time))
+        np.testing.assert_allclose(out.couple + u, want, rtol=1e-9, atol=1e-12)
+
+
 def test_the_scenario_builds_the_law_and_its_settings_travel() -> None:
     """``law plan`` is a law of the scenario: its controller is a fresh playback at ``plan_gain``;
     the hold settings apply to it (refused only under the paper's law), the reach is checked
@@ -77,8 +125,10 @@ def test_the_scenario_builds_the_law_and_its_settings_travel() -> None:
     s = replace(PLAN, hold_law=HoldLawSettings(plan_gain=300.0, squeeze=0.0006))
     law = s.controller()
     assert isinstance(law, PlannedHold) and law.gain == 300.0 and law.t == 0.0 and law.phase == "plan"
+    assert law.damping == s.hold_law.plan_damping and law.damping_time == s.hold_law.plan_damping_time
     params = s.to_ros_parameters()
     assert params["grasp_controller"]["hold_plan_gain"] == 300.0 and params["grasp_controller"]["law"] == "plan"
+    assert params["grasp_controller"]["hold_plan_damping"] == s.hold_law.plan_damping
     for name in ("object", "object_outline", "object_center", "object_angle"):  # (the controller plans on the object)
         assert params["grasp_controller"][name] == params["rod_simulator"][name]
     assert Scenario.from_ros_parameters(params) == s
@@ -87,9 +137,10 @@ def test_the_scenario_builds_the_law_and_its_settings_travel() -> None:
     check_law_settings("plan", HoldLawSettings(plan_gain=30.0))
     with pytest.raises(InvalidParameterError, match="nothing under law paper: it needs law hold or plan"):
         check_law_settings("paper", HoldLawSettings(plan_gain=30.0))
-    for bad in (-1.0, float("nan")):
-        with pytest.raises(InvalidParameterError, match="hold law plan_gain") as info:
-            HoldLawSettings(plan_gain=bad)
+    for name, bad in (("plan_gain", -1.0), ("plan_gain", float("nan")), ("plan_damping", -1.0),
+                      ("plan_damping_time", 0.0), ("plan_damping_time", float("inf"))):
+        with pytest.raises(InvalidParameterError, match=f"hold law {name}") as info:
+            HoldLawSettings(**{name: bad})
         assert "\n" not in str(info.value)
     too_far = PLAN.with_object(ObjectSpec.parse("circle:0.035", ROD_SCALE))  # (its cage cannot close: docs/holding.md)
     with pytest.raises(InvalidParameterError, match="cannot close"):
@@ -105,16 +156,18 @@ def test_a_planner_that_never_reaches_the_hold_is_refused(monkeypatch: pytest.Mo
 
 def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop() -> None:
     """``contgrasp simulate --law plan --object-mode free`` sampled at 2 ms and held to first
-    order, as the graph runs it, 6 s: the paper's circle stays within 10 mm and 0.2 rad of its
-    start, slower than 1 mm/s, the arm outside it (valid), the law in its hold (measured
-    2026-11-28: 3.7 mm, 0.003 rad, 0.67 mm/s, settled, peak couple 0.107 N m)."""
+    order, as the graph runs it, at the default 4 s: the paper's circle settled within 5 mm and
+    0.2 rad of its start, slower than 1 mm/s, the arm outside it (valid), the law in its hold
+    (measured 2026-11-28: settled at 2.862 s, 0.38 mm, 0.000 rad, 0.73 mm/s; without the damper,
+    ``--plan-damping 0``, it rattles in the cage: 3.2 mm, 4.6 mm/s, not settled)."""
     proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "simulate", "--law", "plan", "--object-mode",
-                           "free", "--control-period", "0.002", "--hold", "first-order", "--duration", "6", "--json"],
+                           "free", "--control-period", "0.002", "--hold", "first-order", "--json"],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout)
     d, v = out["object_displacement"], out["object_velocity"]
-    assert np.hypot(d["x"], d["y"]) < 0.010 and abs(d["angle"]) < 0.2
+    assert out["settled"] and out["sim_time_s"] == pytest.approx(4.0)
+    assert np.hypot(d["x"], d["y"]) < 0.005 and abs(d["angle"]) < 0.2
     assert np.hypot(v["x"], v["y"]) < 0.001
     assert out["validity"]["valid"] and out["law"] == "plan" and out["law_phase"] == "hold"
 

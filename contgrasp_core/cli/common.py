@@ -66,6 +66,11 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
                    f"(docs/holding.md (H8); default {d.dwell:g}: the one sample at which the gap is reached)")
     g.add_argument("--plan-gain", type=float, default=d.plan_gain,
                    help=f"plan: the played-back shapes' stiffness gain G >= 0 (default {d.plan_gain:g})")
+    g.add_argument("--plan-damping", type=float, default=d.plan_damping,
+                   help="plan: the stiffness D >= 0 of the damper on the arm's deviation from the plan, from the "
+                   f"planner's close on (default {d.plan_damping:g}; 0: none)")
+    g.add_argument("--plan-damping-time", type=float, default=d.plan_damping_time,
+                   help=f"plan: the damper's relaxation time tau, s > 0 (default {d.plan_damping_time:g})")
 
 
 def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
@@ -73,7 +78,8 @@ def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
     range or given to the paper's law, which ignores them (:func:`~contgrasp_core.control.hold_law.check_law_settings`)."""
     settings = HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
                                stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell,
-                               plan_gain=args.plan_gain)
+                               plan_gain=args.plan_gain, plan_damping=args.plan_damping,
+                               plan_damping_time=args.plan_damping_time)
     check_law_settings(args.law, settings, lambda name: "--hold-gain" if name == "stiffness_gain" else f"--{name.replace('_', '-')}")
     return settings
 

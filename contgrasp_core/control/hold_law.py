@@ -44,7 +44,9 @@ class HoldLawSettings:
     (H4), dimensionless), the paper's ``mu1``, the ``depth_gain`` (1/s) of the depth
     regulation (H7; 0, the default: none, the squeeze of (H5) as latched) and the ``dwell`` (s)
     over which the latch averages the cage's curvature (H8; 0, the default: one sample); the
-    ``plan_gain`` (G of the planned hold's playback, law ``plan``, dimensionless)."""
+    planned hold's playback (law ``plan``): its stiffness ``plan_gain`` (G, dimensionless), the
+    stiffness of its damper ``plan_damping`` (D, dimensionless) and the damper's relaxation time
+    ``plan_damping_time`` (tau, s)."""
 
     clearance: float = 0.006
     band: float = 0.001
@@ -58,16 +60,18 @@ class HoldLawSettings:
     depth_gain: float = 0.0
     dwell: float = 0.0
     plan_gain: float = 100.0
+    plan_damping: float = 300.0
+    plan_damping_time: float = 0.1
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)):
                 raise InvalidParameterError(f"hold law {f.name} must be a finite number, got {v!r}")
-        for name in ("clearance", "band", "close_rate", "squeeze_time", "mu1"):
+        for name in ("clearance", "band", "close_rate", "squeeze_time", "mu1", "plan_damping_time"):
             if getattr(self, name) <= 0:
                 raise InvalidParameterError(f"hold law {name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("squeeze", "stiffness_gain", "depth_gain", "dwell", "plan_gain"):
+        for name in ("squeeze", "stiffness_gain", "depth_gain", "dwell", "plan_gain", "plan_damping"):
             if getattr(self, name) < 0:
                 raise InvalidParameterError(f"hold law {name} must be >= 0, got {getattr(self, name)!r}")
         if not 0 < self.close_gap < self.clearance:
@@ -180,6 +184,8 @@ class HoldController:
         self.model, self.settings, self.length_unit = model, settings, length_unit
         self.object_radius = float(object_radius)
         self.phase = "cage"
+        self.clock = 0.0  # (the law's own time, s, and when its close started)
+        self.closed_at: float | None = None
         self.gap = settings.clearance
         self.progress = 0.0
         self._radius = model.radius(model.s_nodes)
@@ -206,9 +212,10 @@ class HoldController:
         at the N+1 nodes and the curvature ``kappa`` at the N joints: eq. (19)'s gains (cage,
         close) or the hold's :class:`ShapeHold`."""
         s = self.settings
+        now, self.clock = self.clock, self.clock + period
         band = np.asarray(rho, dtype=float) - self._radius <= self.gap + s.band
         if self.phase == "cage" and wrap_angle(theta, alpha, band) >= s.wrap_angle:
-            self.phase = "close"
+            self.phase, self.closed_at = "close", now
         if self.phase == "close":
             self.gap = max(self.gap - s.close_rate * period, s.close_gap)
             if self.gap <= s.close_gap and self._dwell(np.asarray(kappa, dtype=float), band[:-1], period):

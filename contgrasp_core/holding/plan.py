@@ -4,8 +4,9 @@ Before the arm moves, the holding law (:class:`~contgrasp_core.control.hold_law.
 runs on the object held fixed at its scenario pose, in the continuous loop at 10 ms
 (:func:`~contgrasp_core.rod.closed_loop.run_closed_loop`, :data:`PLAN_LOOP`); the arm's joint
 curvature at every step is the plan (:class:`HoldPlan`). :class:`PlannedHold` plays it back
-from t = 0 as held shapes (H4), ``ShapeHold(model, kappa_p(t), plan_gain)``, and keeps the last
-shape once the plan ends. The command is linear in the state, so its first-order hold is
+from t = 0 as held shapes (H4) of stiffness G, with a damper (D, tau: a Maxwell element per
+joint) on the arm's deviation from the plan from the planner's close on (P1), and keeps the
+last shape once the plan ends. The command is linear in the state, so its first-order hold is
 exact: the sampled loop runs it as the continuous one would.
 """
 
@@ -17,7 +18,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from contgrasp_core.control.hold_law import ShapeHold
+from contgrasp_core.control.hold_law import HoldController, HoldLawSettings, ShapeHold
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.model import RodModel
@@ -39,10 +40,12 @@ as the core does without the simulator's loop settings."""
 @dataclass(frozen=True)
 class HoldPlan:
     """A path of held shapes: the times ``t`` (s, increasing from 0) and the joint curvature
-    ``kappa`` (len(t), N) at each (1/m)."""
+    ``kappa`` (len(t), N) at each (1/m); ``close`` (s) when the planner's cage closed (H2): from
+    then on the arm is near the object and the playback damps its deviation."""
 
     t: Array
     kappa: Array
+    close: float
 
     def __post_init__(self) -> None:
         t, k = np.asarray(self.t, dtype=float), np.asarray(self.kappa, dtype=float)
@@ -50,6 +53,8 @@ class HoldPlan:
             raise InvalidParameterError(f"a plan needs times (n,) and curvatures (n, N), got {t.shape} and {k.shape}")
         if not (np.all(np.isfinite(t)) and np.all(np.isfinite(k)) and np.all(np.diff(t) > 0)):
             raise InvalidParameterError("a plan's times must increase and its curvatures be finite")
+        if not (np.isfinite(self.close) and t[0] <= self.close <= t[-1]):
+            raise InvalidParameterError(f"a plan's close must be within its times, got {self.close!r}")
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "kappa", k)
 
@@ -82,34 +87,37 @@ def plan_hold(scenario: Scenario) -> HoldPlan:
     loop = PLAN_LOOP
     planner = replace(scenario, law="hold", dynamics=ObjectDynamics(), disturbance=None, loop=loop)
     law = planner.controller()
+    assert isinstance(law, HoldController)
     res = run_closed_loop(planner.system(), planner.feedback_gains, loop, law=law)
-    if not law.holding:
+    if not law.holding or law.closed_at is None:
         raise InvalidParameterError(
             f"the planned hold has no plan: the holding law on the fixed {scenario.object.text()} did not reach its "
             f"hold within {loop.duration:g} s (phase {getattr(law, 'phase', '?')}; a longer duration or another pose)")
     m = scenario.rod
     kappa = np.array([m.joint_curvature(chain.element_angles(theta)) for theta in res.theta])
-    return HoldPlan(np.asarray(res.t, dtype=float), kappa)
+    return HoldPlan(np.asarray(res.t, dtype=float), kappa, law.closed_at)
 
 
 class PlannedHold:
-    """The playback of a :class:`HoldPlan` (module docstring): ``phase`` ``plan`` until the plan's
-    end, then ``hold`` (``holding``); :meth:`command` gives the held shape at the law's own time
-    and advances it by the period."""
+    """The playback of a :class:`HoldPlan` (module docstring; docs/holding.md (P1)): ``phase``
+    ``plan`` until the plan's end, then ``hold`` (``holding``); :meth:`command` gives the held
+    shape at the law's own time and advances it by the period."""
 
     name: ClassVar[str] = "plan"
 
-    def __init__(self, model: RodModel, plan: HoldPlan, gain: float) -> None:
+    def __init__(self, model: RodModel, plan: HoldPlan, settings: HoldLawSettings) -> None:
         if plan.kappa.shape[1] != model.n_elements:
             raise InvalidParameterError(f"the plan has {plan.kappa.shape[1]} joints; the rod has {model.n_elements}")
-        self.model, self.plan, self.gain = model, plan, float(gain)
+        self.model, self.plan = model, plan
+        self.gain, self.damping, self.damping_time = settings.plan_gain, settings.plan_damping, settings.plan_damping_time
         self.t = 0.0
+        self.xi = np.zeros(model.n_elements)  # (the dampers' own strain, 1/m: relaxed, = the deviation, until the close)
 
     @classmethod
     def from_scenario(cls, scenario: Scenario, plan: HoldPlan | None = None) -> PlannedHold:
         """A fresh playback of ``scenario``'s plan (computed by :func:`plan_hold` unless given)
-        at its ``plan_gain``."""
-        return cls(scenario.rod, plan_hold(scenario) if plan is None else plan, scenario.hold_law.plan_gain)
+        with its hold settings."""
+        return cls(scenario.rod, plan_hold(scenario) if plan is None else plan, scenario.hold_law)
 
     @property
     def holding(self) -> bool:
@@ -122,8 +130,17 @@ class PlannedHold:
         return "hold" if self.holding else "plan"
 
     def command(self, rho: Array, alpha: Array, theta: Array, kappa: Array, period: float) -> ShapeHold:
-        """The held shape at the law's time (what is sensed is not used: the plan is the
-        feedback's reference), then the time advances by ``period`` (s)."""
-        out = ShapeHold(self.model, self.plan.at(self.t), self.gain)
+        """(P1) at the law's time from the sensed curvature ``kappa`` (what else is sensed is not
+        used: the plan is the reference), then the dampers relax over ``period`` (s) and the time
+        advances: ``u = -EI kp + G EI e + D EI (e - xi)``, ``e = kappa - kp``, the held shape
+        ``ShapeHold(kp + D xi / (1 + G + D), G + D)``."""
+        kp = self.plan.at(self.t)
+        e = np.asarray(kappa, dtype=float) - kp
+        d = self.damping if self.t >= self.plan.close else 0.0
+        out = ShapeHold(self.model, kp + d * self.xi / (1.0 + self.gain + d), self.gain + d)
+        if d > 0:
+            self.xi += -np.expm1(-period / self.damping_time) * (e - self.xi)
+        else:
+            self.xi = e
         self.t += period
         return out

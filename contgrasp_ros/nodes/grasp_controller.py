@@ -181,7 +181,7 @@ class GraspController(Node):
             if self.plan is not None:
                 from contgrasp_core.holding.plan import PlannedHold
 
-                self.hold = PlannedHold(self.model, self.plan, self.hold_settings.plan_gain)
+                self.hold = PlannedHold(self.model, self.plan, self.hold_settings)
             else:
                 self.hold = HoldController(self.model, p("object_radius").value, self.hold_settings, p("length_unit").value)
             self.hold_step = c.step - 1
