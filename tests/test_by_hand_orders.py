@@ -29,7 +29,7 @@ same_as_core = by_hand.same_as_core
 BY_HAND_SEED = int(os.environ.get("CONTGRASP_BY_HAND_SEED")
                    or (0 if os.environ.get("HYPOTHESIS_PROFILE") == "ci" else random.SystemRandom().randrange(2**32)))
 BY_HAND_RUNS = int(os.environ.get("CONTGRASP_BY_HAND_RUNS") or 20)
-"""Shuffled starts per test run (CI's second interpreter runs 5: the orders are the same code path)."""
+"""Shuffled starts per test run (CI's second interpreter runs 2: the orders are the same code path)."""
 MAX_GAP_S = 1.5
 
 
