@@ -22,7 +22,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import brentq, minimize
 
 from ._validate import MAX_NODES, instance, integer, real
 from .arm import Arm, BasePose
@@ -164,6 +163,8 @@ def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
     Heading ``theta0 = psi + pi/2``. Requires the origin inside the object (true for the paper's
     objects, which are star-shaped about it).
     """
+    from scipy.optimize import brentq
+
     instance("boundary", boundary, Boundary)
     psi = real("psi", psi)
     d = real("d", d, lo=0.0, lo_open=True)
@@ -401,6 +402,8 @@ def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
     than :data:`TIE_RTOL` (relative); so a circle's optimum is reported at the smallest grid psi,
     on every run.
     """
+    from scipy.optimize import minimize
+
     instance("qm", qm, QualityMap)
     if not isinstance(metric, str) or metric not in METRICS:
         raise InvalidParameterError(f"metric must be one of {METRICS}, got {metric!r}")

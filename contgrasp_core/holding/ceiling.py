@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linprog
 
 from ..errors import InvalidParameterError
 from .measure import wrench_generators
@@ -57,6 +56,8 @@ def muscle_ceiling(rod: RodModel, boundary: Boundary, theta: ArrayLike, *, mu: f
     surface is within ``tol`` (m) of the object touch it (at their feet on the boundary); Coulomb
     ``mu``; ``directions`` (k, 3) in the scaled wrench space (torque about ``ref`` over ``scale``,
     as :func:`~contgrasp_core.holding.experiment.wrench_directions`)."""
+    from scipy.optimize import linprog
+
     from ..rod import chain
 
     th = np.asarray(theta, dtype=float)

@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import minimize
 
 from .._validate import float_array, real
 from ..errors import ContgraspError, InvalidParameterError
@@ -96,6 +95,8 @@ def wrench_capacity(s: ArrayLike, gamma: ArrayLike, phi: ArrayLike, delta: Array
     angles ``phi``, contact depth ``delta``, tolerance ``tol``; Coulomb ``mu``; torques about
     ``ref`` scaled by ``scale`` (m; the object's nominal radius). The minimum over the sphere:
     the best of :data:`SEARCH_DIRECTIONS` directions, the five best refined by Nelder-Mead."""
+    from scipy.optimize import minimize
+
     w = contact_weights(s, delta, tol)
     gen = wrench_generators(gamma, phi, mu, ref, scale)
     if len(gen) != len(w):
