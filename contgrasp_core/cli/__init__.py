@@ -105,8 +105,9 @@ def registrars() -> list[Registrar]:
 def build_parser(extra: Sequence[Registrar] | None = None) -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered: the core's and those of ``extra``
     registrars (default: :func:`registrars`, what installed packages add)."""
-    # (the subcommands import matplotlib and scipy: not at import time, so that the launcher,
-    # which only needs this module's parser class, starts its node processes sooner)
+    # (not at import time, so that the launcher, which only needs this module's parser class,
+    # starts its node processes sooner; the subcommands import scipy and matplotlib only when
+    # they run, so that --version and --help answer at once)
     from . import grasp, hold, holding_study, kinematics, quality, simulate
 
     common = ArgumentParser(add_help=False)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,8 +20,10 @@ from .._validate import MAX_NODES
 from ..errors import InvalidParameterError, WriteError
 from ..objects import FIG2_SCALE, PAPER_OBJECTS, ObjectSpec
 from ..outputs import check_output
-from ..optimal import GraspResult, forward_backward, paper_problem, solve
 from .common import add_object_arguments, object_from_args
+
+if TYPE_CHECKING:
+    from ..optimal import GraspResult
 
 __all__ = ["add_parsers", "run_grasp", "run_figures"]
 
@@ -68,6 +70,8 @@ def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()
 
 
 def _solve(args: argparse.Namespace) -> GraspResult:
+    from ..optimal import forward_backward, paper_problem, solve
+
     # every option is checked, also those the chosen solver ignores (a typo is still an error)
     if not (np.isfinite(args.eta) and args.eta > 0.0):
         raise InvalidParameterError(f"--eta must be a finite number > 0, got {args.eta}")
@@ -112,6 +116,7 @@ def run_figures(args: argparse.Namespace) -> dict[str, Any]:
     compute the three Fig. 3 quality maps (process executor) and save ``fig3_<object>.png`` with
     ``fig3_<object>.json`` beside it (grid, each metric's optimum, the tie rule's tolerance)."""
     from ..figures.grasp import save_grasp_figure
+    from ..optimal import paper_problem, solve
     from ..quality_map import MapSpec
 
     out_dir = check_output(args.out, "--out", folder=True)

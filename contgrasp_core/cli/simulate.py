@@ -17,7 +17,6 @@ import numpy as np
 
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.control.hold_law import Law
-from contgrasp_core.figures.closed_loop import animate, plot_fig4
 from contgrasp_core.holding.measure import check_reach
 from contgrasp_core.rod import RodModel
 from contgrasp_core.rod.body import MODES, ObjectDynamics, motion_summary
@@ -295,8 +294,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     obj = scenario.object
     boundary = obj.boundary()
     if args.plot:
+        from contgrasp_core.figures.closed_loop import plot_fig4
+
         # (the static solution is the paper's law's equilibrium: drawn for it only)
         plot_fig4(res, boundary, args.plot, obj.radius if boundary.kind == "circle" and scenario.law == "paper" else None)
     if args.animate:
+        from contgrasp_core.figures.closed_loop import animate
+
         animate(res, boundary, args.animate)
     return out
