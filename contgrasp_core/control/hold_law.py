@@ -60,8 +60,8 @@ class HoldLawSettings:
     depth_gain: float = 0.0
     dwell: float = 0.0
     plan_gain: float = 100.0
-    plan_damping: float = 300.0
-    plan_damping_time: float = 0.1
+    plan_damping: float = 500.0
+    plan_damping_time: float = 0.05
 
     def __post_init__(self) -> None:
         for f in fields(self):

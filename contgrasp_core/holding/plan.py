@@ -1,7 +1,7 @@
 """The planned hold, law ``plan`` (docs/holding.md, "A planned path of held shapes holds it").
 
 Before the arm moves, the holding law (:class:`~contgrasp_core.control.hold_law.HoldController`)
-runs on the object held fixed at its scenario pose, in the continuous loop at 10 ms
+runs on the object held fixed at its scenario pose, in the continuous loop at 2 ms
 (:func:`~contgrasp_core.rod.closed_loop.run_closed_loop`, :data:`PLAN_LOOP`); the arm's joint
 curvature at every step is the plan (:class:`HoldPlan`). :class:`PlannedHold` plays it back
 from t = 0 as held shapes (H4) of stiffness G, with a damper (D, tau: a Maxwell element per
@@ -30,11 +30,12 @@ __all__ = ["PLAN_LOOP", "HoldPlan", "PlannedHold", "plan_hold"]
 
 Array = NDArray[np.float64]
 
-PLAN_LOOP = ClosedLoopConfig(duration=20.0, dt=0.01, settle_speed=0.002, settle_hold=0.3, min_time=1.0)
-"""The plan's loop: continuous, steps of 10 ms (whose run of the holding law on the fixed object
-settles in the hold), stopped at settle (the paper scenario's criteria) within 20 s. Its own, not
-the run's: a run shorter than the plan plays the plan's start, and the graph's controller plans
-as the core does without the simulator's loop settings."""
+PLAN_LOOP = ClosedLoopConfig(duration=20.0, dt=0.002, settle_speed=0.002, settle_hold=0.3, min_time=1.0)
+"""The plan's loop: continuous, steps of at most 2 ms (the graph's period: a coarser step damps
+numerically, and with bounded muscles its Newton iterations halve the step down to ~0.1 ms),
+stopped at settle (the paper scenario's criteria) within 20 s. Its own, not the run's: a run
+shorter than the plan plays the plan's start, and the graph's controller plans as the core does
+without the simulator's loop settings."""
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The planned hold on the object set (docs/holding.md, "The object set"): each object at the
 default centre, free, 6 s, in the graph's loop (sampled at 2 ms, first-order hold: the graph
 equals it bit for bit), frictionless and at mu = 0.5; or refused before simulating. Prints the
-Markdown table. ``python docs/holding/object_set.py [--workers N]``."""
+Markdown table. ``python docs/holding/object_set.py [--workers N] [--max-muscle-stress PA]``."""
 
 from __future__ import annotations
 
@@ -35,16 +35,18 @@ DURATION, PERIOD = 6.0, 0.002
 HELD = {"distance": 0.010, "angle": 0.2, "speed": 0.001}  # (held: these at the end, settled, valid)
 
 
-def scenario(obj: ObjectSpec, mu: float) -> Scenario:
-    """The planned hold on ``obj``, free, in the graph's loop, with Coulomb ``mu`` (stick-slip)."""
-    rod = replace(PAPER.rod, friction=mu, friction_model="stick") if mu > 0 else PAPER.rod
+def scenario(obj: ObjectSpec, mu: float, stress: float = 0.0) -> Scenario:
+    """The planned hold on ``obj``, free, in the graph's loop, with Coulomb ``mu`` (stick-slip)
+    and muscles of at most ``stress`` (Pa; 0: unbounded)."""
+    rod = replace(PAPER.rod, max_muscle_stress=stress)
+    rod = replace(rod, friction=mu, friction_model="stick") if mu > 0 else rod
     return PAPER.with_object(obj, rod=rod, law="plan", dynamics=ObjectDynamics(mode="free"),
                              loop=replace(PAPER.loop, duration=DURATION, control_period=PERIOD))
 
 
-def run(name: str, mu: float) -> tuple[str, float, str]:
+def run(name: str, mu: float, stress: float = 0.0) -> tuple[str, float, str]:
     """One cell: the outcome and the object's end state, or the refusal."""
-    s = scenario(OBJECTS[name], mu)
+    s = scenario(OBJECTS[name], mu, stress)
     try:
         check_reach(s)
     except InvalidParameterError as err:
@@ -68,8 +70,10 @@ def run(name: str, mu: float) -> tuple[str, float, str]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--max-muscle-stress", type=float, default=0.0, metavar="PA",
+                        help="the muscles' largest stress, Pa (default 0: unbounded)")
     args = parser.parse_args()
-    cells = [(name, mu) for name in OBJECTS for mu in (0.0, 0.5)]
+    cells = [(name, mu, args.max_muscle_stress) for name in OBJECTS for mu in (0.0, 0.5)]
     with ProcessPoolExecutor(args.workers) as pool:
         results = {(n, mu): text for n, mu, text in pool.map(run, *zip(*cells, strict=True))}
     print("| object | cage's wrap at rest (rad) | frictionless | mu = 0.5 |")
