@@ -79,14 +79,13 @@ def muscle_ceiling(rod: RodModel, boundary: Boundary, theta: ArrayLike, *, mu: f
     elastic = rod.joint_ei * rod.joint_curvature(th)
     bound = rod.muscle_bound
     n = len(gen)
+    a_ub, b_ub = None, None  # (the muscles' bound, the same for every direction; none when unbounded)
+    if bound is not None:
+        moments = np.hstack([cols, np.zeros((len(cols), 1))])
+        a_ub, b_ub = np.vstack([moments, -moments]), np.concatenate([bound + elastic, bound - elastic])
     out = np.empty(len(dirs))
     for i, d in enumerate(dirs):  # unknowns: the cone's edge weights (n) and the load c; the arm balances -c d
         a_eq = np.hstack([gen.T, d[:, None]])
-        if bound is None:
-            a_ub, b_ub = None, None
-        else:
-            a_ub = np.vstack([np.hstack([cols, np.zeros((len(cols), 1))]), np.hstack([-cols, np.zeros((len(cols), 1))])])
-            b_ub = np.concatenate([bound + elastic, bound - elastic])
         res = linprog(np.r_[np.zeros(n), -1.0], A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=np.zeros(3), bounds=(0, None),
                       method="highs")
         if res.status == 2:  # infeasible even unloaded: the muscles cannot hold this shape
