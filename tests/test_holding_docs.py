@@ -24,3 +24,10 @@ def test_the_object_set_script_refuses_what_cannot_be_wrapped() -> None:
     spec.loader.exec_module(module)
     name, mu, text = module.run("circle 35 mm", 0.0)
     assert (name, mu) == ("circle 35 mm", 0.0) and text.startswith("refused: the holding law cannot close")
+
+
+def test_the_object_set_script_refuses_nonsense_options_in_one_line() -> None:
+    for bad in (["--workers", "0"], ["--max-muscle-stress", "-1"], ["--max-muscle-stress", "nan"]):
+        proc = subprocess.run([sys.executable, str(DOCS / "object_set.py"), *bad], capture_output=True, text=True,
+                              timeout=120)
+        assert proc.returncode == 2 and proc.stderr.strip().splitlines()[-1].startswith("object_set.py: error:")

@@ -73,6 +73,10 @@ def main() -> None:
     parser.add_argument("--max-muscle-stress", type=float, default=0.0, metavar="PA",
                         help="the muscles' largest stress, Pa (default 0: unbounded)")
     args = parser.parse_args()
+    if args.workers < 1:
+        parser.error(f"--workers must be >= 1, got {args.workers}")
+    if not (np.isfinite(args.max_muscle_stress) and args.max_muscle_stress >= 0):
+        parser.error(f"--max-muscle-stress must be a finite number >= 0, got {args.max_muscle_stress}")
     cells = [(name, mu, args.max_muscle_stress) for name in OBJECTS for mu in (0.0, 0.5)]
     with ProcessPoolExecutor(args.workers) as pool:
         results = {(n, mu): text for n, mu, text in pool.map(run, *zip(*cells, strict=True))}
