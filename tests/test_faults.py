@@ -60,7 +60,11 @@ def alive(pid: int) -> bool:
 
 
 def recorded_steps(bag: Path) -> list[int]:
-    return [m.step for _, m in iter_decoded(open_recording(bag), ["/contgrasp/rod_state"])]
+    """The recorded rod states' steps in the order they were published (as ``load_run`` reads
+    them): a reader that matched the simulator's writer mid-send may receive step 0 after steps
+    1-4 (seen once in CI), so the receive-time log order need not be the publication order."""
+    msgs = iter_decoded(open_recording(bag), ["/contgrasp/rod_state"])
+    return [m.step for _, m in sorted(msgs, key=lambda rm: rm[0].publish_time_ns)]
 
 
 def killed_mid_run(launch: LaunchHandle, node: str) -> tuple[int, dict]:
