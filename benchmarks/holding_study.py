@@ -1,6 +1,6 @@
 """Benchmark: what a pose of the holding study costs, on each executor and without the kernels.
 
-Two poses of `contgrasp holding-study --object circle --law hold --support 0 --arm rod
+Two poses of `contgrasp holding-study --object circle --law reactive --support 0 --arm rod
 --contact-wait 3 --rate 0.25 --ramp-time 8` (grid distances 5 and 9 paper units; the close,
 the free release, the stiffness probes and six capacity ramps: `holding.study.study_pose`),
 run in one process serially, on the process pool with two workers and on a local Dask cluster
@@ -43,7 +43,7 @@ def _run(items: list[Any], executor: str, scheduler: str | None = None) -> tuple
 
 def main() -> None:
     hold = HoldSettings(directions=4, support=0.0, contact_wait=3.0, rate=0.25, ramp_time=8.0)
-    spec = StudySpec(object="circle", law="hold", arm="rod", hold=hold)
+    spec = StudySpec(object="circle", law="reactive", arm="rod", hold=hold)
     items = _poses(spec)
     print(f"load average at start {os.getloadavg()[0]:.2f}")
     _run(items[:1], "serial")  # (kernels compiled and loaded, caches warm)

@@ -118,7 +118,7 @@ def output_error(what: str, exc: BaseException) -> ContgraspError:
 
 def refuse_ignored(names: list[str], where: str, needs: str) -> None:
     """Refuse settings that would pass silently: ``names`` (those given, or changed from their
-    defaults) do nothing ``where`` (``"under --law paper"``) and take ``needs`` (``"--law hold"``).
+    defaults) do nothing ``where`` (``"under --law paper"``) and take ``needs`` (``"--law hold or reactive"``).
     An :class:`InvalidParameterError` in one line naming them all; nothing when ``names`` is empty."""
     if names:
         one = len(names) == 1

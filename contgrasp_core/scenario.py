@@ -97,8 +97,8 @@ class Scenario:
     """A closed-loop grasp: rod, object (its shape and how it moves: ``dynamics``, fixed by
     default, as in the paper), loop, gains and sensing (SI units); a scripted ``disturbance``
     on a movable object (None: none); the ``law`` (:data:`~contgrasp_core.control.hold_law.LAWS`:
-    ``paper``, eq. (19), the default, ``hold``, docs/holding.md (H1)-(H6), with ``hold_law``, or
-    ``plan``, the holding law planned on the fixed object and played back, with ``hold_law``).
+    ``paper``, eq. (19), the default, ``hold``, the planned hold (P1) of docs/holding.md, or
+    ``reactive``, its planner, the holding law (H1)-(H8) on what the arm senses; both with ``hold_law``).
     Its start is checked on construction (:func:`check_start`): the straight arm outside the
     object, the object within its reach."""
 
@@ -132,12 +132,12 @@ class Scenario:
 
     def controller(self) -> Law:
         """A fresh controller of the scenario's law: the paper's fixed gains
-        (:attr:`feedback_gains`), or the holding law's state at its start (the adaptive gain's
-        object radius as the paper's), or the planned hold's playback from its start (its plan
-        computed now: :class:`~contgrasp_core.holding.plan.PlannedHold`)."""
+        (:attr:`feedback_gains`), or the planned hold's playback from its start (its plan computed
+        now: :class:`~contgrasp_core.holding.plan.PlannedHold`), or the reactive holding law's
+        state at its start (the adaptive gain's object radius as the paper's)."""
         if self.law == "paper":
             return PaperLaw(self.feedback_gains)
-        if self.law == "plan":
+        if self.law == "hold":
             from contgrasp_core.holding.plan import PlannedHold  # (holding imports the scenario)
 
             return PlannedHold.from_scenario(self)

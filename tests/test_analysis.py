@@ -293,13 +293,13 @@ def test_summary_builder_reads_the_simulator_status() -> None:
               "missed_deadlines": "3", "max_penetration": "nan?"}
     final = FinalState.of(1000, 2.0, np.array([0.0, 0.1]), [0.0, 0.1], (0.0, 0.0), np.zeros(2))
     s = build_summary(status, final=final, final_quality=FinalQuality.of(np.float64(1.0), 2.0, 0.5, np.bool_(True), 0.1, np.int64(950)),
-                      contact=contact_stats(None), controller={"law": "hold", "law_phase": "close"},
+                      contact=contact_stats(None), controller={"law": "reactive", "law_phase": "close"},
                       object_q=np.array([1e-3, -2e-3, 0.01]), object_v=(0.0, 0.5, -1.0), wall_time_s=4.0)
     d = s.to_dict()
     assert d["simulator_state"] == "finished" and d["settled"] is True and d["settle_time_s"] == 1.5
     assert d["steps"] == 1000 and d["missed_deadlines"] == 3 and d["max_penetration"] is None
     assert d["final"] == {"step": 1000, "t": 2.0, "s": [0.0, 0.1], "x": [0.0, 0.1], "y": [0.0, 0.0], "theta": [0.0, 0.0]}
-    assert d["law"] == "hold" and d["law_phase"] == "close"
+    assert d["law"] == "reactive" and d["law_phase"] == "close"
     assert d["object_displacement"] == {"x": 1e-3, "y": -2e-3, "angle": 0.01}
     assert d["object_velocity"] == {"x": 0.0, "y": 0.5, "angle": -1.0}
     assert d["final_quality"] == {"Q1": 1.0, "Q2": 2.0, "Q3": 0.5, "valid": True, "contact_length": 0.1, "step": 950}

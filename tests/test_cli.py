@@ -68,9 +68,9 @@ def test_bad_input_is_one_line_exit_2(args: list[str], needle: str) -> None:
 
 @pytest.mark.parametrize(("argv", "line"), [
     (["simulate", "--duration", "0.01", "--nodes", "11", "--squeeze", "0.001", "--depth-gain", "5"],
-     "contgrasp simulate: error: --squeeze, --depth-gain do nothing under --law paper: they need --law hold or plan"),
+     "contgrasp simulate: error: --squeeze, --depth-gain do nothing under --law paper: they need --law hold or reactive"),
     (["hold", "--nodes", "11", "--hold-gain", "10"],
-     "contgrasp hold: error: --hold-gain does nothing under --law paper: it needs --law hold or plan"),
+     "contgrasp hold: error: --hold-gain does nothing under --law paper: it needs --law hold or reactive"),
 ])
 def test_the_holding_laws_options_under_the_papers_law_are_refused(argv: list[str], line: str,
                                                                     capsys: pytest.CaptureFixture[str]) -> None:

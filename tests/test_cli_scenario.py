@@ -25,16 +25,16 @@ def _graph(params: dict[str, dict[str, Any]]) -> Scenario:
 
 
 @pytest.mark.parametrize("argv,params", [
-    (["--law", "hold", "--object-mode", "free", "--control-period", "0.002", "--hold", "first-order", "--nodes", "51",
+    (["--law", "reactive", "--object-mode", "free", "--control-period", "0.002", "--hold", "first-order", "--nodes", "51",
       "--friction", "0.3", "--duration", "0.5", "--max-muscle-stress", "2e4", "--contact-tol", "0.001", "--depth-gain", "5"],
      {"/**": {"n_elements": 50, "friction": 0.3, "friction_model": "stick", "max_muscle_stress": 2e4},
       "rod_simulator": {"duration": 0.5, "control_period": 0.002, "object_mode": "free"},
-      "grasp_controller": {"law": "hold", "hold_depth_gain": 5.0}, "boundary_sensor": {"contact_tolerance": 0.001}}),
+      "grasp_controller": {"law": "reactive", "hold_depth_gain": 5.0}, "boundary_sensor": {"contact_tolerance": 0.001}}),
     # the continuous loop: a movable object's steps of 2 ms, a fixed object's 10 ms (the scenario's loop dt)
-    (["--object-mode", "spring", "--law", "hold", "--duration", "0.5"],
+    (["--object-mode", "spring", "--law", "reactive", "--duration", "0.5"],
      {"rod_simulator": {"duration": 0.5, "control_period": 0.0, "dt": 0.002, "object_mode": "spring",
                         "object_stiffness": [50.0, 50.0, 0.05], "object_damping": [1.0, 1.0, 0.001]},
-      "grasp_controller": {"law": "hold"}}),
+      "grasp_controller": {"law": "reactive"}}),
     (["--object", "ellipse", "--damping", "2"],
      {"/**": {"damping": 2.0}, "rod_simulator": {"object": "ellipse:0.03,0.02", "control_period": 0.0, "dt": 0.01}}),
 ])
@@ -47,11 +47,11 @@ def test_simulates_scenario_is_the_graphs(argv: list[str], params: dict[str, dic
 def test_holds_scenario_is_the_graphs() -> None:
     from contgrasp_core.cli import hold
 
-    args = build_parser().parse_args(["hold", "--law", "hold", "--nodes", "51", "--base", "0.01", "0.0", "0.1",
+    args = build_parser().parse_args(["hold", "--law", "reactive", "--nodes", "51", "--base", "0.01", "0.0", "0.1",
                                       "--max-muscle-stress", "1e4", "--clearance", "0.004"])
     assert hold.scenario_from_args(args) == _graph(
         {"/**": {"n_elements": 50, "base_x": 0.01, "base_y": 0.0, "base_angle": 0.1, "max_muscle_stress": 1e4},
-         "grasp_controller": {"law": "hold", "hold_clearance": 0.004}})
+         "grasp_controller": {"law": "reactive", "hold_clearance": 0.004}})
 
 
 def test_a_study_poses_scenario_is_the_graphs(tmp_path: Any) -> None:
@@ -59,16 +59,16 @@ def test_a_study_poses_scenario_is_the_graphs(tmp_path: Any) -> None:
     from contgrasp_core.cli import holding_study
     from contgrasp_core.holding.study import pose_scenario
 
-    args = build_parser().parse_args(["holding-study", "--arm", "rod", "--nodes", "21", "--duration", "3", "--law", "hold",
+    args = build_parser().parse_args(["holding-study", "--arm", "rod", "--nodes", "21", "--duration", "3", "--law", "reactive",
                                       "--dwell", "0.05", "--out", str(tmp_path / "s.jsonl")])
     pose = pose_scenario(holding_study.spec_from_args(args), (-10.0, 0.0, 1.5))
     assert pose == _graph({"/**": {"n_elements": 20, "base_x": 0.03, "base_y": 0.08, "base_angle": 1.5},
-                           "rod_simulator": {"duration": 3.0}, "grasp_controller": {"law": "hold", "hold_dwell": 0.05}})
+                           "rod_simulator": {"duration": 3.0}, "grasp_controller": {"law": "reactive", "hold_dwell": 0.05}})
 
 
 @pytest.mark.parametrize("argv", [
     ["--control-period", "0.002", "--hold", "first-order", "--duration", "0.3", "--nodes", "51"],
-    ["--law", "hold", "--object-mode", "free", "--control-period", "0.002", "--hold", "first-order", "--duration", "0.5",
+    ["--law", "reactive", "--object-mode", "free", "--control-period", "0.002", "--hold", "first-order", "--duration", "0.5",
      "--nodes", "51"],
 ])
 def test_the_sampled_simulate_is_run_sampled_bit_for_bit(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:

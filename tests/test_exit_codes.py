@@ -350,7 +350,7 @@ def launched(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
     return runs
 
 
-@pytest.mark.parametrize("text", ["", "{}\n", "grasp_controller:\n  ros__parameters:\n    law: hold\n",
+@pytest.mark.parametrize("text", ["", "{}\n", "grasp_controller:\n  ros__parameters:\n    law: reactive\n",
                                   "/rod_simulator:\n  ros__parameters: {}\n"])
 def test_launcher_merges_a_partial_parameter_file_over_the_defaults(text: str, tmp_path: Path, launched: list[dict[str, Any]],
                                                                     capsys: pytest.CaptureFixture[str]) -> None:
@@ -362,7 +362,7 @@ def test_launcher_merges_a_partial_parameter_file_over_the_defaults(text: str, t
     assert launcher.main(["--params", str(params), "--no-record", "--json"]) == 0, capsys.readouterr().err
     want = load_params(default_params_file())
     if "law" in text:
-        want["grasp_controller"]["law"] = "hold"
+        want["grasp_controller"]["law"] = "reactive"
     assert launched == [want]
 
 
@@ -579,12 +579,12 @@ def test_a_holding_law_that_cannot_close_is_refused_before_simulating(launched: 
     any simulation, one line, exit 2; the paper's law on the same object runs."""
     from contgrasp_ros.launcher import cli as launcher
 
-    proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "hold", "--law", "hold", "--object", "circle:0.035"],
+    proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "hold", "--law", "reactive", "--object", "circle:0.035"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and proc.stdout == "", proc.stderr
     (line,) = proc.stderr.strip().splitlines()
     assert line.startswith("contgrasp hold: error: the holding law cannot close on circle:0.035 from this base")
-    assert launcher.main(["--no-record", "--law", "hold", "--object", "circle:0.035"]) == 2 and launched == []
+    assert launcher.main(["--no-record", "--law", "reactive", "--object", "circle:0.035"]) == 2 and launched == []
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("contgrasp-launch: error: the holding law cannot close on circle:0.035"), err
     assert launcher.main(["--no-record", "--object", "circle:0.035"]) == 0 and len(launched) == 1

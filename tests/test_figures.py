@@ -125,12 +125,12 @@ def test_fig4_draws_a_moving_object_where_it_is_and_names_the_law(drifting_objec
     from contgrasp_core.figures.closed_loop import fig4_figure, snapshot_indices
 
     res, obj = drifting_object
-    assert res.law == "hold" and res.object_q is not None and res.object_q.shape == (len(res.t), 3)
+    assert res.law == "reactive" and res.object_q is not None and res.object_q.shape == (len(res.t), 3)
     assert res.object_q[-1][:2] == pytest.approx([0.05 * res.t[-1], 0.02 * res.t[-1]], rel=0.05)
     fig = fig4_figure(res, obj.boundary())
     _check_figure(fig)
     arm = _axes(fig)[0]
-    assert arm.get_title().startswith("closed-loop grasp (holding law")
+    assert arm.get_title().startswith("closed-loop grasp (reactive holding law")
     outlines = [ln for ln in arm.get_lines() if ln.get_linestyle() == "--"]
     idx = snapshot_indices(res, 6)
     assert len(outlines) == len(idx)
@@ -408,8 +408,8 @@ def test_committed_fig3_shows_the_documented_optimum() -> None:
 
 
 def test_every_law_has_a_figure_title() -> None:
-    """Fig. 4 and its animation name the law that ran: a title for each law of the loop (``--law
-    plan --plot`` once failed with ``KeyError: 'plan'``)."""
+    """Fig. 4 and its animation name the law that ran: a title for each law of the loop (a new law's
+    ``--plot`` once failed with a ``KeyError`` on its name)."""
     from contgrasp_core.control.hold_law import LAWS
     from contgrasp_core.figures.closed_loop import LAW_TITLES
 

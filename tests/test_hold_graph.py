@@ -65,7 +65,7 @@ def launch_json(*args: str) -> dict[str, Any]:
 
 
 def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_path: Path) -> None:
-    """``contgrasp-launch --law hold --object-mode free``: the paper's arm (N = 100, 2 ms), the
+    """``contgrasp-launch --law reactive --object-mode free``: the paper's arm (N = 100, 2 ms), the
     circle free, Coulomb friction 0.5, the dwell (H8) of 0.05 s (25 samples) and the depth regulation (H7) on
     (gain 10/s), and a 20 mN push along x from 2.801 s, once the hold is complete. Separate node processes in
     lock-step equal run_sampled of the same scenario bit for bit (arm, object pose and velocity),
@@ -82,16 +82,16 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     data["grasp_controller"]["ros__parameters"].update(hold_depth_gain=10.0, hold_dwell=0.05)
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(data))
-    summary = launch_json("--params", str(params), "--law", "hold", "--object-mode", "free", "--friction", "0.5",
+    summary = launch_json("--params", str(params), "--law", "reactive", "--object-mode", "free", "--friction", "0.5",
                           "--bag", str(tmp_path / "bag"))
     assert summary["missed_deadlines"] == 0
 
     p = load_params(params)
-    p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "hold", "free"
+    p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "reactive", "free"
     for node in ("rod_simulator", "grasp_controller"):
         p[node].update(friction=0.5, friction_model="stick")
     scenario = Scenario.from_ros_parameters(p)
-    assert scenario.law == "hold" and scenario.dynamics.mode == "free" and scenario.rod.friction == 0.5
+    assert scenario.law == "reactive" and scenario.dynamics.mode == "free" and scenario.rod.friction == 0.5
     assert scenario.rod.friction_model == "stick"
     law = scenario.controller()
     assert isinstance(law, HoldController) and law.settings.depth_gain == 10.0 and law.settings.dwell == 0.05
@@ -103,7 +103,7 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
     np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
     assert {k: summary[k] for k in ("object_displacement", "object_velocity")} == motion_summary(obs.body.q, obs.body.v)
-    assert summary["law"] == "hold" and summary["law_phase"] == law.phase == "hold"  # (the controller's status)
+    assert summary["law"] == "reactive" and summary["law_phase"] == law.phase == "hold"  # (the controller's status)
 
     rec = open_recording(tmp_path / "bag")
     couples = {int(m.step): (len(m.kappa_ref) > 0, bool(m.transition), float(m.hold_gain))
@@ -149,14 +149,14 @@ def _wrapped_contact(model: Any, step: int, with_shape: bool = True) -> ContactS
 
 
 def test_the_controller_steps_the_holding_law_once_per_state_and_afresh_for_a_new_run(make) -> None:  # type: ignore[no-untyped-def]
-    """law: hold, a close so fast that the hold begins at the first state: the squeeze's
+    """law: reactive, a close so fast that the hold begins at the first state: the squeeze's
     progress grows by one control period per state (steps 0, 1 answer different rest curvatures,
     both in transition), the same state again is answered again without stepping the law, and
     step 0 again (the simulator's reset) starts a fresh law (the first answer again). A contact
     state without the arm's shape is dropped and counted."""
     from contgrasp_ros.nodes.grasp_controller import GraspController
 
-    node = make(GraspController, law="hold", hold_close_rate=10.0)
+    node = make(GraspController, law="reactive", hold_close_rate=10.0)
     node.pub = Sink(CoupleControl)
     first = _wrapped_contact(node.model, 0)
     for msg in (first, _wrapped_contact(node.model, 1), _wrapped_contact(node.model, 1), first):
@@ -173,7 +173,7 @@ def test_the_controller_steps_the_holding_law_once_per_state_and_afresh_for_a_ne
 
 
 @pytest.mark.parametrize(("parameter", "message"), [
-    ("law:=grip", "law: must be one of 'paper', 'hold', 'plan', got 'grip'"),
+    ("law:=grip", "law: must be one of 'paper', 'hold', 'reactive', got 'grip'"),
     ("hold_plan_gain:=-1.0", "hold law plan_gain must be >= 0, got -1.0"),
     ("hold_plan_damping_time:=0.0", "hold law plan_damping_time must be > 0, got 0.0"),
     ("hold_close_gap:=0.01", "hold law close_gap must be in (0, clearance = 0.006) m, got 0.01"),
@@ -196,13 +196,13 @@ def test_the_launcher_refuses_an_unknown_law_in_one_line() -> None:
 
 
 def test_bounded_muscles_through_the_graph_equal_the_core_loop_bit_for_bit() -> None:
-    """``contgrasp-launch --law hold --object-mode free --max-muscle-stress 20000``: the simulator
+    """``contgrasp-launch --law reactive --object-mode free --max-muscle-stress 20000``: the simulator
     saturates the couple as the core loop does (the same arm, object and effort to the bit); the
     couple never exceeds the muscles' bound; the summary reports the effort and the validity."""
-    summary = launch_json("--law", "hold", "--object-mode", "free", "--max-muscle-stress", "20000", "--duration", "0.8",
+    summary = launch_json("--law", "reactive", "--object-mode", "free", "--max-muscle-stress", "20000", "--duration", "0.8",
                           "--no-record")
     p = load_params(default_params_file())
-    p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "hold", "free"
+    p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "reactive", "free"
     p["rod_simulator"].update(max_muscle_stress=20000.0, duration=0.8)
     p["grasp_controller"]["max_muscle_stress"] = 20000.0
     scenario = Scenario.from_ros_parameters(p)
@@ -234,12 +234,12 @@ def test_simulate_and_the_launcher_give_the_same_facts_the_same_keys() -> None:
     every fact both report is under the same key, with the same law, phase, steps and settling;
     the object's motion (``{x, y, angle}``) agrees to rounding (the two sense the object in
     different frames), and nothing else names it."""
-    sim = json.loads(subprocess.run([str(BIN / "contgrasp"), "simulate", "--object-mode", "free", "--law", "hold",
+    sim = json.loads(subprocess.run([str(BIN / "contgrasp"), "simulate", "--object-mode", "free", "--law", "reactive",
                                      "--duration", "0.4", "--control-period", "0.002", "--hold", "first-order", "--json"],
                                     capture_output=True, text=True, check=True, timeout=600).stdout)
-    graph = launch_json("--law", "hold", "--object-mode", "free", "--duration", "0.4", "--no-record")
+    graph = launch_json("--law", "reactive", "--object-mode", "free", "--duration", "0.4", "--no-record")
     assert set(SHARED_FACTS) <= set(sim) & set(graph)
-    assert sim["law"] == graph["law"] == "hold" and sim["law_phase"] == graph["law_phase"] in ("cage", "close", "hold")
+    assert sim["law"] == graph["law"] == "reactive" and sim["law_phase"] == graph["law_phase"] in ("cage", "close", "hold")
     for key in ("steps", "settled", "settle_time_s"):
         assert sim[key] == graph[key], key
     for key in ("object_displacement", "object_velocity"):
@@ -249,13 +249,13 @@ def test_simulate_and_the_launcher_give_the_same_facts_the_same_keys() -> None:
 
 
 def test_the_planned_hold_through_the_graph_equals_the_core_loop_bit_for_bit() -> None:
-    """``contgrasp-launch --law plan --object-mode free``: the controller plans on its copy of the
+    """``contgrasp-launch --law hold --object-mode free``: the controller plans on its copy of the
     simulator's object at start and plays the plan back; separate node processes in lock-step
     equal run_sampled of the same scenario bit for bit (arm, object); the controller reports the
     playback's phase."""
-    summary = launch_json("--law", "plan", "--object-mode", "free", "--duration", "1.0", "--no-record")
+    summary = launch_json("--law", "hold", "--object-mode", "free", "--duration", "1.0", "--no-record")
     p = load_params(default_params_file())
-    p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "plan", "free"
+    p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "hold", "free"
     p["rod_simulator"]["duration"] = 1.0
     scenario = Scenario.from_ros_parameters(p)
     law = scenario.controller()
@@ -265,5 +265,5 @@ def test_the_planned_hold_through_the_graph_equals_the_core_loop_bit_for_bit() -
     np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
     np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
     assert {k: summary[k] for k in ("object_displacement", "object_velocity")} == motion_summary(obs.body.q, obs.body.v)
-    assert summary["law"] == "plan" and summary["law_phase"] == law.phase == "plan"  # (1 s: the plan still plays)
+    assert summary["law"] == "hold" and summary["law_phase"] == law.phase == "plan"  # (1 s: the plan still plays)
     assert summary["missed_deadlines"] == 0

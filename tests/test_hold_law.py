@@ -323,7 +323,7 @@ def test_released_free_the_holding_law_holds_with_a_symmetric_stiffness_and_the_
     is a potential, (H6)). The paper's law, released the same way, lets it go: not held, a result."""
     settings = HoldSettings(support=0.0, hold_time=0.5)
     coarse = replace(PAPER, rod=FREE)
-    exp = HoldExperiment(replace(coarse, law="hold"), settings)
+    exp = HoldExperiment(replace(coarse, law="reactive"), settings)
     exp.grasp()
     q = exp.release()
     assert exp.release_reason == "" and np.hypot(*q[:2]) < 5e-3
@@ -346,15 +346,15 @@ def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
             HoldLawSettings(**bad)
     with pytest.raises(InvalidParameterError, match="unknown law"):
         replace(PAPER, law="grip")
-    hold = replace(PAPER, law="hold", hold_law=HoldLawSettings(squeeze=0.001))  # (the graph's parameters, both ways)
+    hold = replace(PAPER, law="reactive", hold_law=HoldLawSettings(squeeze=0.001))  # (the graph's parameters, both ways)
     assert Scenario.from_ros_parameters(hold.to_ros_parameters()) == hold
     params = hold.to_ros_parameters()
     params["grasp_controller"].update(hold_close_gap=0.007)  # (beyond the clearance)
     with pytest.raises(InvalidParameterError, match="hold law close_gap"):
         Scenario.from_ros_parameters(params)
     cli = [sys.executable, "-m", "contgrasp_core.cli"]
-    for args in (["simulate", "--law", "hold", "--hold-gain", "-1"], ["hold", "--law", "hold", "--squeeze", "-0.001"],
-                 ["simulate", "--law", "hold", "--depth-gain", "-2"], ["hold", "--law", "hold", "--dwell", "-1"],
+    for args in (["simulate", "--law", "reactive", "--hold-gain", "-1"], ["hold", "--law", "reactive", "--squeeze", "-0.001"],
+                 ["simulate", "--law", "reactive", "--depth-gain", "-2"], ["hold", "--law", "reactive", "--dwell", "-1"],
                  ["simulate", "--law", "grip"], ["simulate", "--friction", "-0.5"]):
         proc = subprocess.run(cli + args, capture_output=True, text=True)
         assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, (args, proc.stderr)

@@ -160,7 +160,7 @@ def test_the_cage_of_a_uniform_arm_on_the_parallel_circle_wraps_it_once() -> Non
     for n in (50, 200):
         rod = replace(PAPER.rod, radius_tip=r, length=length, base_position=(base.x, base.y), base_angle=base.theta,
                       n_elements=n)
-        scenario = replace(PAPER, rod=rod, law="hold")
+        scenario = replace(PAPER, rod=rod, law="reactive")
         cap = cage_capacity(scenario, mu)
         s = rod.s_nodes
         ang = np.arctan2(base.y - centre[1], base.x - centre[0]) + s / rho
@@ -188,7 +188,7 @@ def test_the_cage_capacity_of_a_fine_outline_of_the_circle_is_the_circles(tmp_pa
     outline = ObjectSpec.from_outline(path)
     assert outline.center == (0.0, 0.0) and outline.reference == pytest.approx((0.08, 0.08), abs=1e-9)
     assert PAPER.object.reference == PAPER.object.center
-    hold = replace(PAPER, law="hold")
+    hold = replace(PAPER, law="reactive")
     circle = cage_capacity(hold, 0.5).measure
     assert cage_capacity(hold.with_object(outline), 0.5).measure == pytest.approx(circle, rel=2e-3) and circle > 0
 
@@ -202,7 +202,7 @@ def test_the_cages_wrap_is_the_arc_its_band_spans_and_a_cage_that_cannot_close_i
     from contgrasp_core.objects import ROD_SCALE, ObjectSpec
     from contgrasp_core.scenario import PAPER
 
-    hold = replace(PAPER, law="hold")
+    hold = replace(PAPER, law="reactive")
     law, rest = _cage_rest(hold, "clearance")
     m, s = hold.rod, law.settings
     band = np.flatnonzero(rest.signed_distance - m.radius(m.s_nodes) <= s.clearance + s.band)

@@ -287,17 +287,17 @@ def test_ctrl_c_stops_a_study_with_two_workers_at_once(tmp_path: Path) -> None:
 
 
 def test_the_study_takes_the_holding_law_a_free_release_and_a_longer_arm(capsys: pytest.CaptureFixture[str]) -> None:
-    """``--law hold --support 0 --length-fraction F``: the map's arm and the rod's are F
+    """``--law reactive --support 0 --length-fraction F``: the map's arm and the rod's are F
     perimeters long, every pose's scenario runs the holding law, the spec records the options
     (and leaves them out at their defaults, so a file recorded before they existed resumes)."""
     from contgrasp_core.cli import main
     from contgrasp_core.holding.study import _spec_dict
 
-    spec = StudySpec(object="circle", law="hold", length_fraction=1.0, hold=HoldSettings(support=0.0))
+    spec = StudySpec(object="circle", law="reactive", length_fraction=1.0, hold=HoldSettings(support=0.0))
     assert spec.map_spec().length_fraction == 1.0
     scenario = pose_scenario(spec, (0.0, -8.0, 0.0))
-    assert scenario.law == "hold" and scenario.rod.length == pytest.approx(2 * np.pi * 0.025)
-    assert _spec_dict(spec)["law"] == "hold" and _spec_dict(spec)["hold"]["support"] == 0.0
+    assert scenario.law == "reactive" and scenario.rod.length == pytest.approx(2 * np.pi * 0.025)
+    assert _spec_dict(spec)["law"] == "reactive" and _spec_dict(spec)["hold"]["support"] == 0.0
     assert "law" not in _spec_dict(StudySpec()) and "length_fraction" not in _spec_dict(StudySpec())
     with pytest.raises(InvalidParameterError, match="unknown law 'grip'"):
         StudySpec(law="grip")
@@ -316,18 +316,18 @@ def test_the_study_takes_the_depth_regulation_of_the_holding_law(capsys: pytest.
     from contgrasp_core.control.hold_law import HoldLawSettings
     from contgrasp_core.holding.study import _spec_dict
 
-    spec = StudySpec(object="circle", law="hold", arm="rod", depth_gain=10.0)
+    spec = StudySpec(object="circle", law="reactive", arm="rod", depth_gain=10.0)
     assert pose_scenario(spec, (0.0, -8.0, 0.0)).hold_law == HoldLawSettings(depth_gain=10.0)
-    assert _spec_dict(spec)["depth_gain"] == 10.0 and "depth_gain" not in _spec_dict(StudySpec(law="hold"))
-    assert pose_scenario(StudySpec(law="hold"), (0.0, -8.0, 0.0)).hold_law == HoldLawSettings()
-    with pytest.raises(InvalidParameterError, match="needs law hold"):
+    assert _spec_dict(spec)["depth_gain"] == 10.0 and "depth_gain" not in _spec_dict(StudySpec(law="reactive"))
+    assert pose_scenario(StudySpec(law="reactive"), (0.0, -8.0, 0.0)).hold_law == HoldLawSettings()
+    with pytest.raises(InvalidParameterError, match="needs law hold or reactive"):
         StudySpec(depth_gain=10.0)
     for bad in (-1.0, float("nan")):
         with pytest.raises(InvalidParameterError, match="hold law depth_gain"):
-            StudySpec(law="hold", depth_gain=bad)
+            StudySpec(law="reactive", depth_gain=bad)
     capsys.readouterr()
     assert main(["holding-study", "--depth-gain", "5", "--out", "x.jsonl"]) == 2
-    assert "needs law hold" in capsys.readouterr().err
+    assert "needs law hold or reactive" in capsys.readouterr().err
 
 
 def test_the_study_takes_the_dwell_and_measures_the_cage_before_simulating(capsys: pytest.CaptureFixture[str]) -> None:
@@ -340,18 +340,18 @@ def test_the_study_takes_the_dwell_and_measures_the_cage_before_simulating(capsy
     from contgrasp_core.holding.measure import cage_capacity
     from contgrasp_core.holding.study import _before_simulating, _spec_dict
 
-    spec = StudySpec(object="circle", law="hold", arm="rod", depth_gain=10.0, dwell=1.0)
+    spec = StudySpec(object="circle", law="reactive", arm="rod", depth_gain=10.0, dwell=1.0)
     assert pose_scenario(spec, (0.0, -8.0, 0.0)).hold_law == HoldLawSettings(depth_gain=10.0, dwell=1.0)
-    assert _spec_dict(spec)["dwell"] == 1.0 and "dwell" not in _spec_dict(StudySpec(law="hold"))
-    with pytest.raises(InvalidParameterError, match="needs law hold"):
+    assert _spec_dict(spec)["dwell"] == 1.0 and "dwell" not in _spec_dict(StudySpec(law="reactive"))
+    with pytest.raises(InvalidParameterError, match="needs law hold or reactive"):
         StudySpec(dwell=1.0)
     with pytest.raises(InvalidParameterError, match="hold law dwell"):
-        StudySpec(law="hold", dwell=-1.0)
+        StudySpec(law="reactive", dwell=-1.0)
     capsys.readouterr()
     assert main(["holding-study", "--dwell", "1", "--out", "x.jsonl"]) == 2
-    assert "needs law hold" in capsys.readouterr().err
+    assert "needs law hold or reactive" in capsys.readouterr().err
     tasks = [("grid:0,0", (0.0, -8.0, 0.0), (1.0, 1.0, 1.0))]
-    spec = StudySpec(object="circle", law="hold", arm="rod", d_steps=2)
+    spec = StudySpec(object="circle", law="reactive", arm="rod", d_steps=2)
     before = _before_simulating(spec, tasks)
     assert before["grid:0,0"]["cage_QH"] == cage_capacity(pose_scenario(spec, tasks[0][1]), spec.hold.mu).measure > 0
     paper = _before_simulating(replace(spec, law="paper"), tasks)
@@ -365,7 +365,7 @@ def test_the_rod_arm_is_the_rod_scenarios_for_the_map_and_the_rod() -> None:
     its default so older result files resume."""
     from contgrasp_core.holding.study import _spec_dict
 
-    spec = StudySpec(object="ellipse", arm="rod", law="hold")
+    spec = StudySpec(object="ellipse", arm="rod", law="reactive")
     ms = spec.map_spec()
     perimeter = ms.boundary().length
     assert ms.length_fraction * perimeter * spec.scale == pytest.approx(PAPER.rod.length)

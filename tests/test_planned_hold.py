@@ -1,4 +1,4 @@
-"""The planned hold, law ``plan`` (docs/holding.md, "A planned path of held shapes holds it"):
+"""The planned hold, law ``hold`` (docs/holding.md, "A planned path of held shapes holds it"):
 the plan (the holding law on the fixed object), its playback as held shapes, its settings and
 parameters, and the free circle kept through the sampled loop."""
 
@@ -24,7 +24,7 @@ from contgrasp_core.rod.body import ObjectDynamics
 from contgrasp_core.rod.closed_loop import run_closed_loop
 from contgrasp_core.scenario import PAPER, Scenario
 
-PLAN = replace(PAPER, law="plan")
+PLAN = replace(PAPER, law="hold")
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +35,7 @@ def paper_plan() -> HoldPlan:
 def test_the_plan_is_the_holding_law_on_the_fixed_object_to_its_hold(paper_plan: HoldPlan) -> None:
     """The plan records the holding law's run on the fixed circle (the same loop run by hand) at
     every step (at most 2 ms), to its settled hold."""
-    planner = replace(PAPER, law="hold")
+    planner = replace(PAPER, law="reactive")
     law = planner.controller()
     res = run_closed_loop(planner.system(), planner.feedback_gains, plan_module.PLAN_LOOP, law=law)
     assert law.holding and res.settled
@@ -52,7 +52,7 @@ def test_the_playback_commands_the_plan_interpolated_then_its_last_shape(paper_p
     law = PlannedHold(PAPER.rod, paper_plan, replace(HoldLawSettings(), plan_damping=0.0))
     n = PAPER.rod.n_elements
     z = np.zeros(n + 1)
-    assert law.name == "plan" and law.phase == "plan" and not law.holding
+    assert law.name == "hold" and law.phase == "plan" and not law.holding
     first = law.command(z, z, z, z[:-1], 0.05)  # (t = 0)
     assert isinstance(first, ShapeHold) and first.gain == 100.0
     np.testing.assert_array_equal(first.kappa_ref, paper_plan.kappa[0])
@@ -71,7 +71,7 @@ def test_the_playback_commands_the_plan_interpolated_then_its_last_shape(paper_p
 def test_the_plans_close_is_when_the_planners_cage_closed(paper_plan: HoldPlan) -> None:
     """``close`` is the law's time of the first command given in the phase ``close`` (watched
     from outside the law), within the plan."""
-    planner = replace(PAPER, law="hold")
+    planner = replace(PAPER, law="reactive")
     law = planner.controller()
     seen: list[float] = []
     command, clock = law.command, [0.0]
@@ -117,26 +117,31 @@ def test_the_damper_is_a_maxwell_element_on_the_deviation_from_the_close_on(pape
 
 
 def test_the_scenario_builds_the_law_and_its_settings_travel() -> None:
-    """``law plan`` is a law of the scenario: its controller is a fresh playback at ``plan_gain``;
-    the hold settings apply to it (refused only under the paper's law), the reach is checked
-    (its planner is the holding law), ``hold_plan_gain`` is a controller parameter that round
-    trips, and a bad gain is refused in one line."""
-    assert "plan" in LAWS
+    """``law hold`` is a law of the scenario: its controller is a fresh playback at ``plan_gain``;
+    the hold settings apply to it (the playback's refused under the paper's law and the reactive
+    one, which ignore them), the reach is checked (its planner is the reactive law),
+    ``hold_plan_gain`` is a controller parameter that round trips, and a bad gain is refused in
+    one line."""
+    assert LAWS == ("paper", "hold", "reactive")
     s = replace(PLAN, hold_law=HoldLawSettings(plan_gain=300.0, squeeze=0.0006))
     law = s.controller()
     assert isinstance(law, PlannedHold) and law.gain == 300.0 and law.t == 0.0 and law.phase == "plan"
     assert law.damping == s.hold_law.plan_damping and law.damping_time == s.hold_law.plan_damping_time
     params = s.to_ros_parameters()
-    assert params["grasp_controller"]["hold_plan_gain"] == 300.0 and params["grasp_controller"]["law"] == "plan"
+    assert params["grasp_controller"]["hold_plan_gain"] == 300.0 and params["grasp_controller"]["law"] == "hold"
     assert params["grasp_controller"]["hold_plan_damping"] == s.hold_law.plan_damping
     for name in ("object", "object_outline", "object_center", "object_angle"):  # (the controller plans on the object)
         assert params["grasp_controller"][name] == params["rod_simulator"][name]
     assert Scenario.from_ros_parameters(params) == s
     free = replace(s, dynamics=ObjectDynamics(mode="free"))
     assert Scenario.from_ros_parameters(free.to_ros_parameters()) == free
-    check_law_settings("plan", HoldLawSettings(plan_gain=30.0))
-    with pytest.raises(InvalidParameterError, match="nothing under law paper: it needs law hold or plan"):
+    check_law_settings("hold", HoldLawSettings(plan_gain=30.0))
+    with pytest.raises(InvalidParameterError, match="nothing under law paper: it needs law hold$"):
         check_law_settings("paper", HoldLawSettings(plan_gain=30.0))
+    with pytest.raises(InvalidParameterError, match="plan_damping does nothing under law reactive: it needs law hold$"):
+        check_law_settings("reactive", HoldLawSettings(plan_damping=30.0, squeeze=0.001))  # (the squeeze is the planner's)
+    with pytest.raises(InvalidParameterError, match="squeeze, plan_gain do nothing under law paper: they need law hold or reactive$"):
+        check_law_settings("paper", HoldLawSettings(squeeze=0.001, plan_gain=30.0))
     for name, bad in (("plan_gain", -1.0), ("plan_gain", float("nan")), ("plan_damping", -1.0),
                       ("plan_damping_time", 0.0), ("plan_damping_time", float("inf"))):
         with pytest.raises(InvalidParameterError, match=f"hold law {name}") as info:
@@ -155,12 +160,12 @@ def test_a_planner_that_never_reaches_the_hold_is_refused(monkeypatch: pytest.Mo
 
 
 def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop() -> None:
-    """``contgrasp simulate --law plan --object-mode free`` sampled at 2 ms and held to first
+    """``contgrasp simulate --law hold --object-mode free`` sampled at 2 ms and held to first
     order, as the graph runs it, at the default 4 s: the paper's circle settled within 5 mm and
     0.2 rad of its start, slower than 1 mm/s, the arm outside it (valid), the law in its hold
     (measured 2026-11-28: settled at 2.838 s, 0.40 mm, 0.000 rad, 0.21 mm/s; without the damper,
     ``--plan-damping 0``, it rattles in the cage: 2.5 mm, 3.7 mm/s, not settled)."""
-    proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "simulate", "--law", "plan", "--object-mode",
+    proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "simulate", "--law", "hold", "--object-mode",
                            "free", "--control-period", "0.002", "--hold", "first-order", "--json"],
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -169,28 +174,28 @@ def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop() -> No
     assert out["settled"] and out["sim_time_s"] == pytest.approx(4.0)
     assert np.hypot(d["x"], d["y"]) < 0.005 and abs(d["angle"]) < 0.2
     assert np.hypot(v["x"], v["y"]) < 0.001
-    assert out["validity"]["valid"] and out["law"] == "plan" and out["law_phase"] == "hold"
+    assert out["validity"]["valid"] and out["law"] == "hold" and out["law_phase"] == "hold"
 
 
 def test_the_commands_take_law_plan_and_its_gain(tmp_path: Path) -> None:
-    """``--law plan`` in simulate, hold, holding-study and the launcher (their choices are the
+    """``--law hold`` in simulate, hold, holding-study and the launcher (their choices are the
     laws); ``--plan-gain`` reaches the scenario as the controller's ``hold_plan_gain``, and is
     refused under the paper's law in one line."""
     from contgrasp_core.cli import build_parser, hold, holding_study, simulate
     from contgrasp_ros.launcher.cli import _parser
 
     parser = build_parser()
-    args = parser.parse_args(["simulate", "--law", "plan", "--plan-gain", "300", "--object-mode", "free"])
+    args = parser.parse_args(["simulate", "--law", "hold", "--plan-gain", "300", "--object-mode", "free"])
     assert simulate.scenario_from_args(args) == Scenario.from_ros_parameters(
-        {"grasp_controller": {"law": "plan", "hold_plan_gain": 300.0}, "rod_simulator": {"object_mode": "free",
+        {"grasp_controller": {"law": "hold", "hold_plan_gain": 300.0}, "rod_simulator": {"object_mode": "free",
                                                                                          "control_period": 0.0, "dt": 0.002}}
     ).with_object(PAPER.object)
-    scenario = hold.scenario_from_args(parser.parse_args(["hold", "--law", "plan", "--plan-gain", "30"]))
-    assert scenario.law == "plan" and scenario.hold_law.plan_gain == 30.0
-    spec = holding_study.spec_from_args(parser.parse_args(["holding-study", "--arm", "rod", "--law", "plan", "--out",
+    scenario = hold.scenario_from_args(parser.parse_args(["hold", "--law", "hold", "--plan-gain", "30"]))
+    assert scenario.law == "hold" and scenario.hold_law.plan_gain == 30.0
+    spec = holding_study.spec_from_args(parser.parse_args(["holding-study", "--arm", "rod", "--law", "hold", "--out",
                                                                  str(tmp_path / "s.jsonl")]))
-    assert spec.law == "plan"
-    assert _parser().parse_args(["--law", "plan"]).law == "plan"
+    assert spec.law == "hold"
+    assert _parser().parse_args(["--law", "hold"]).law == "hold"
 
 
 def test_the_plan_gain_under_the_papers_law_is_refused_in_one_line(capsys: pytest.CaptureFixture[str]) -> None:
@@ -199,8 +204,8 @@ def test_the_plan_gain_under_the_papers_law_is_refused_in_one_line(capsys: pytes
     capsys.readouterr()
     assert main(["simulate", "--duration", "0.01", "--nodes", "11", "--plan-gain", "30"]) == 2
     assert capsys.readouterr().err.splitlines() == [
-        "contgrasp simulate: error: --plan-gain does nothing under --law paper: it needs --law hold or plan"]
-    assert main(["simulate", "--duration", "0.01", "--nodes", "11", "--law", "plan", "--plan-gain", "-1"]) == 2
+        "contgrasp simulate: error: --plan-gain does nothing under --law paper: it needs --law hold"]
+    assert main(["simulate", "--duration", "0.01", "--nodes", "11", "--law", "hold", "--plan-gain", "-1"]) == 2
     assert capsys.readouterr().err.splitlines() == [
         "contgrasp simulate: error: hold law plan_gain must be >= 0, got -1.0"]
 
@@ -210,7 +215,7 @@ def test_a_launchs_object_reaches_the_controllers_copy() -> None:
     (the plan's) alike."""
     from contgrasp_ros.launcher.graph import default_params_file, launch_overrides, load_params
 
-    out = launch_overrides(load_params(default_params_file()), ObjectSpec.parse("ellipse", ROD_SCALE), law="plan")
+    out = launch_overrides(load_params(default_params_file()), ObjectSpec.parse("ellipse", ROD_SCALE), law="hold")
     for name in ("object", "object_outline", "object_center", "object_angle"):
         assert out["grasp_controller"][name] == out["rod_simulator"][name]
-    assert out["grasp_controller"]["object"].startswith("ellipse") and out["grasp_controller"]["law"] == "plan"
+    assert out["grasp_controller"]["object"].startswith("ellipse") and out["grasp_controller"]["law"] == "hold"

@@ -26,7 +26,7 @@ OBSTACLE = Obstacle(PAPER.object.boundary())
 def _cage(n: int) -> tuple[RodModel, StateFeedback, np.ndarray]:
     """The rod of ``n`` elements at ``BASE``, the cage's law at its close gap, and its rest."""
     sc = PAPER.with_object(PAPER.object, rod=replace(PAPER.rod, n_elements=n, base_position=BASE[:2],
-                                                     base_angle=BASE[2]), law="hold")
+                                                     base_angle=BASE[2]), law="reactive")
     law = sc.controller()
     assert isinstance(law, HoldController)
     gains = cage_gains(sc.rod, law.object_radius, law.settings, law.settings.close_gap, law.length_unit)

@@ -234,13 +234,13 @@ def test_a_movable_object_is_watched_for_the_whole_duration(mode: str) -> None:
 
 
 def test_simulate_watches_a_held_movable_object_until_the_duration(capsys: pytest.CaptureFixture[str]) -> None:
-    """``contgrasp simulate --object-mode spring --law hold --duration 4``: the hold comes to rest
+    """``contgrasp simulate --object-mode spring --law reactive --duration 4``: the hold comes to rest
     before 3.5 s and the run goes on to 4 s (it once stopped there), settled at the end, in steps
     of 2 ms (a movable object's default: coarser steps damp its escape, docs/holding.md). (Free,
     the object escapes at that step: docs/holding.md, "Resolved in time".)"""
     from contgrasp_core.cli import main
 
-    main(["simulate", "--json", "--nodes", "51", "--object-mode", "spring", "--law", "hold", "--duration", "4"])
+    main(["simulate", "--json", "--nodes", "51", "--object-mode", "spring", "--law", "reactive", "--duration", "4"])
     out = json.loads(capsys.readouterr().out)
     assert out["steps"] == 2000 and out["sim_time_s"] == pytest.approx(4.0) and out["control"] == "continuous, steps <= 0.002 s"
     assert out["settled"] and out["settle_time_s"] < 3.5 and out["law_phase"] == "hold"

@@ -355,7 +355,7 @@ def test_a_push_on_the_wrench_topic_and_a_pulse_from_the_service_are_in_the_reco
                                               (["-p", "object_center:=[0.1]"], "object centre must be two numbers")])
 def test_controller_with_a_bad_object_copy_exits_2_with_one_line(capsys: pytest.CaptureFixture[str], args: list[str],
                                                                  needle: str) -> None:
-    """The controller's copy of the object (law plan plans on it) is checked at start under every
+    """The controller's copy of the object (law hold plans on it) is checked at start under every
     law, as the simulator's: nonsense stops the node in one line, exit 2."""
     from contgrasp_ros.nodes.grasp_controller import GraspController
     from contgrasp_ros.plumbing.runtime import run_node

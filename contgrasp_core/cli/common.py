@@ -47,30 +47,31 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
     d = HoldLawSettings()
     g = p.add_argument_group("the closed loop's law (docs/holding.md, 'A law that holds')")
     g.add_argument("--law", choices=LAWS, default="paper",
-                   help="paper: eq. (19) with rho_d = r (default); hold: cage at a clearance, close, hold the "
-                   "shape and squeeze (beyond the paper); plan: the holding law run first on the object held fixed, "
-                   "its path of shapes played back as held shapes (docs/holding.md)")
+                   help="paper: eq. (19) with rho_d = r (default); hold: the reactive law run first on the object "
+                   "held fixed, its path of shapes played back as held shapes with a damper (beyond the paper); "
+                   "reactive: cage at a clearance, close, hold the shape and squeeze on what the arm senses "
+                   "(docs/holding.md)")
     g.add_argument("--clearance", type=float, default=d.clearance,
-                   help=f"hold: the cage's gap to the object, m (default {d.clearance:g})")
+                   help=f"hold, reactive: the cage's gap to the object, m (default {d.clearance:g})")
     g.add_argument("--close-gap", type=float, default=d.close_gap,
-                   help=f"hold: the gap at which the shape is latched, m, below the clearance (default {d.close_gap:g})")
+                   help=f"hold, reactive: the gap at which the shape is latched, m, below the clearance (default {d.close_gap:g})")
     g.add_argument("--squeeze", type=float, default=d.squeeze,
-                   help=f"hold: how deep the held shape presses into the object, m (default {d.squeeze:g})")
+                   help=f"hold, reactive: how deep the held shape presses into the object, m (default {d.squeeze:g})")
     g.add_argument("--hold-gain", type=float, default=d.stiffness_gain,
-                   help=f"hold: the held shape's stiffness gain G >= 0 (default {d.stiffness_gain:g})")
+                   help=f"hold, reactive: the held shape's stiffness gain G >= 0 (default {d.stiffness_gain:g})")
     g.add_argument("--depth-gain", type=float, default=d.depth_gain,
-                   help="hold: after the squeeze, regulate the mean sensed contact depth to --squeeze with this "
+                   help="hold, reactive: after the squeeze, regulate the mean sensed contact depth to --squeeze with this "
                    f"integral gain, 1/s >= 0 (docs/holding.md (H7); default {d.depth_gain:g}: off)")
     g.add_argument("--dwell", type=float, default=d.dwell,
-                   help="hold: stay at the close gap this long, s >= 0, and latch the mean curvature over it "
+                   help="hold, reactive: stay at the close gap this long, s >= 0, and latch the mean curvature over it "
                    f"(docs/holding.md (H8); default {d.dwell:g}: the one sample at which the gap is reached)")
     g.add_argument("--plan-gain", type=float, default=d.plan_gain,
-                   help=f"plan: the played-back shapes' stiffness gain G >= 0 (default {d.plan_gain:g})")
+                   help=f"hold: the played-back shapes' stiffness gain G >= 0 (default {d.plan_gain:g})")
     g.add_argument("--plan-damping", type=float, default=d.plan_damping,
-                   help="plan: the stiffness D >= 0 of the damper on the arm's deviation from the plan, from the "
+                   help="hold: the stiffness D >= 0 of the damper on the arm's deviation from the plan, from the "
                    f"planner's close on (default {d.plan_damping:g}; 0: none)")
     g.add_argument("--plan-damping-time", type=float, default=d.plan_damping_time,
-                   help=f"plan: the damper's relaxation time tau, s > 0 (default {d.plan_damping_time:g})")
+                   help=f"hold: the damper's relaxation time tau, s > 0 (default {d.plan_damping_time:g})")
 
 
 def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ..control.hold_law import HOLDING_LAWS
 from ..errors import InvalidParameterError
 from ..holding import HoldSettings, measure_holding
 from ..holding.measure import cage_capacity, check_reach
@@ -132,7 +133,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     rod = scenario.rod
     t0 = time.perf_counter()
     progress = None if args.json else (lambda phase: print(f"contgrasp hold: {phase}", file=sys.stderr, flush=True))
-    cage = cage_capacity(scenario, settings.mu).measure if scenario.law in ("hold", "plan") else None  # (before simulating)
+    cage = cage_capacity(scenario, settings.mu).measure if scenario.law in HOLDING_LAWS else None  # (before simulating)
     result = measure_holding(scenario, settings, progress)
     return {"object": scenario.object.text(),
             "base": [float(rod.base_position[0]), float(rod.base_position[1]), float(rod.base_angle)],

@@ -47,13 +47,13 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--duration", type=float, default=d.duration,
                    help=f"longest closed-loop grasp before a pose counts as not settled, s (default {d.duration:g})")
     p.add_argument("--law", choices=LAWS, default=d.law,
-                   help="the closed loop's law: paper (eq. (19)), hold (docs/holding.md, 'A law that holds') or plan "
-                   "(the holding law planned on the fixed object, played back)")
+                   help="the closed loop's law: paper (eq. (19)), hold (the planned hold, docs/holding.md (P1)) or "
+                   "reactive (its planner, the holding law (H1)-(H8) on what the arm senses)")
     p.add_argument("--depth-gain", type=float, default=d.depth_gain,
-                   help="with --law hold: regulate the mean sensed contact depth to the squeeze after it, integral "
+                   help="with --law hold or reactive: regulate the mean sensed contact depth to the squeeze after it, integral "
                    f"gain 1/s >= 0 (docs/holding.md (H7); default {d.depth_gain:g}: off)")
     p.add_argument("--dwell", type=float, default=d.dwell,
-                   help="with --law hold: stay at the close gap this long, s >= 0, and latch the mean curvature over "
+                   help="with --law hold or reactive: stay at the close gap this long, s >= 0, and latch the mean curvature over "
                    f"it (docs/holding.md (H8); default {d.dwell:g}: one sample)")
     add_muscle_argument(p)
     p.add_argument("--support", type=float, default=d.hold.support,

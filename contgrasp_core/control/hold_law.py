@@ -24,14 +24,19 @@ from contgrasp_core.control.law import CENTIMETRE, adaptive_mu2
 from contgrasp_core.errors import InvalidParameterError, refuse_ignored
 from contgrasp_core.rod.model import RodModel
 
-__all__ = ["LAWS", "HoldLawSettings", "check_law_settings", "ShapeHold", "PaperLaw", "HoldController", "Law", "wrap_angle",
+__all__ = ["LAWS", "HOLDING_LAWS", "HoldLawSettings", "check_law_settings", "ShapeHold", "PaperLaw", "HoldController", "Law", "wrap_angle",
            "parallel_curvature", "cage_gains"]
 
 Array = NDArray[np.float64]
 
-LAWS = ("paper", "hold", "plan")
-"""The closed loop's laws: the paper's eq. (19), this module's holding law and its planned
-playback (:class:`contgrasp_core.holding.plan.PlannedHold`, docs/holding.md)."""
+LAWS = ("paper", "hold", "reactive")
+"""The closed loop's laws: the paper's eq. (19); ``hold``, the planned hold
+(:class:`contgrasp_core.holding.plan.PlannedHold`: this module's holding law run first on the
+object held fixed, its path of shapes played back, docs/holding.md); ``reactive``, this
+module's holding law on what the arm senses (:class:`HoldController`, its planner)."""
+
+HOLDING_LAWS = ("hold", "reactive")
+"""The laws that hold (docs/holding.md): both take the holding law's settings (``hold`` through its planner)."""
 
 
 @dataclass(frozen=True)
@@ -44,7 +49,7 @@ class HoldLawSettings:
     (H4), dimensionless), the paper's ``mu1``, the ``depth_gain`` (1/s) of the depth
     regulation (H7; 0, the default: none, the squeeze of (H5) as latched) and the ``dwell`` (s)
     over which the latch averages the cage's curvature (H8; 0, the default: one sample); the
-    planned hold's playback (law ``plan``): its stiffness ``plan_gain`` (G, dimensionless), the
+    planned hold's playback (law ``hold``): its stiffness ``plan_gain`` (G, dimensionless), the
     stiffness of its damper ``plan_damping`` (D, dimensionless) and the damper's relaxation time
     ``plan_damping_time`` (tau, s)."""
 
@@ -83,13 +88,15 @@ class HoldLawSettings:
 
 
 def check_law_settings(law: str, settings: HoldLawSettings, name: Callable[[str], str] = str) -> None:
-    """Refuse holding-law ``settings`` other than the defaults under the paper's ``law``, which
-    ignores them (``hold`` and ``plan``, whose planner is the holding law, use them;
-    :func:`~contgrasp_core.errors.refuse_ignored`); ``name`` gives a setting's name (and
-    ``law``'s) as the caller knows it, e.g. a command-line option."""
-    if law == "paper":
-        changed = [name(f.name) for f in fields(settings) if getattr(settings, f.name) != f.default]
-        refuse_ignored(changed, f"under {name('law')} {law}", f"{name('law')} hold or plan")
+    """Refuse holding-law ``settings`` other than the defaults under a ``law`` that ignores them:
+    the paper's ignores all, ``reactive`` the playback's ``plan_*`` (``hold`` uses all: its
+    planner is the reactive law; :func:`~contgrasp_core.errors.refuse_ignored`); ``name`` gives a
+    setting's name (and ``law``'s) as the caller knows it, e.g. a command-line option."""
+    if law in ("paper", "reactive"):
+        changed = [f.name for f in fields(settings) if getattr(settings, f.name) != f.default
+                   and (law == "paper" or f.name.startswith("plan_"))]
+        needs = "hold" if all(c.startswith("plan_") for c in changed) else "hold or reactive"
+        refuse_ignored([name(c) for c in changed], f"under {name('law')} {law}", f"{name('law')} {needs}")
 
 
 def wrap_angle(theta: Array, alpha: Array, band: NDArray[np.bool_]) -> float:
@@ -177,7 +184,7 @@ class HoldController:
     :meth:`command` is called once per control period with what the arm senses; in the dwell
     (H8) the phase is ``close`` at ``gap == close_gap``."""
 
-    name: ClassVar[str] = "hold"
+    name: ClassVar[str] = "reactive"
 
     def __init__(self, model: RodModel, object_radius: float, settings: HoldLawSettings = HoldLawSettings(),
                  length_unit: float = CENTIMETRE) -> None:

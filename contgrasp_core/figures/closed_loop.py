@@ -29,8 +29,8 @@ SNAPSHOT_CMAP = "turbo"
 run figure of the ROS graph: ordered in time, successive snapshots distinguishable."""
 LENGTH_UNIT = "m"
 """Length unit of the plane (x, y) axes of Fig. 4, its animation and the run figure."""
-LAW_TITLES = {"paper": "feedback law eq. (19)", "hold": "holding law, docs/holding.md",
-              "plan": "planned hold, docs/holding.md"}
+LAW_TITLES = {"paper": "feedback law eq. (19)", "hold": "planned hold, docs/holding.md",
+              "reactive": "reactive holding law, docs/holding.md"}
 """How a figure's title names the law that ran (:data:`~contgrasp_core.control.hold_law.LAWS`)."""
 
 

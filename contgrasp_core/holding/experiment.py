@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from contgrasp_core.boundary import Boundary
 from contgrasp_core.contact import ContactState, sense
+from contgrasp_core.control.hold_law import HOLDING_LAWS
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.holding.ceiling import MuscleCeiling, muscle_ceiling
 from contgrasp_core.quality import GraspQuality, quality_of_state
@@ -264,7 +265,7 @@ class HoldExperiment:
         self.escape = replace(settings, escape_distance=settings.escape_distance * self.scale)
         self.law = scenario.controller()
         h = scenario.hold_law
-        self.reach = max(scenario.sensing.contact_tolerance, h.clearance + h.band if scenario.law in ("hold", "plan") else 0.0)
+        self.reach = max(scenario.sensing.contact_tolerance, h.clearance + h.band if scenario.law in HOLDING_LAWS else 0.0)
         self.grasped: LoopSession | None = None
         self.released: RodState | None = None
         self.release_reason = ""

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._validate import float_array, real
+from ..control.hold_law import HOLDING_LAWS
 from ..errors import ContgraspError, InvalidParameterError
 from ..quality import contact_weights
 
@@ -191,7 +192,7 @@ def check_reach(scenario: Scenario) -> None:
     clearance (:func:`cage_wrap`) wraps less of the object than the law's ``wrap_angle``, so the
     close never starts (the arm hovers; a free object is never held). The planned hold's planner
     is the holding law: its scenarios are checked too. The paper's law passes."""
-    if scenario.law not in ("hold", "plan"):
+    if scenario.law not in HOLDING_LAWS:
         return
     wrap, need = cage_wrap(scenario), scenario.hold_law.wrap_angle
     if wrap < need:
@@ -223,7 +224,7 @@ def _cage_rest(scenario: Scenario, gap: str) -> tuple[Any, CageRest]:
     from ..rod import Obstacle, chain
 
     # (the planned hold's cage is its planner's: the holding law, without computing the plan)
-    law, m = (replace(scenario, law="hold") if scenario.law == "plan" else scenario).controller(), scenario.rod
+    law, m = (replace(scenario, law="reactive") if scenario.law == "hold" else scenario).controller(), scenario.rod
     if not isinstance(law, HoldController):
         raise InvalidParameterError(f"the cage is the holding law's; the scenario's law is {scenario.law!r}")
     s = law.settings

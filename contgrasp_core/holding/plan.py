@@ -1,4 +1,4 @@
-"""The planned hold, law ``plan`` (docs/holding.md, "A planned path of held shapes holds it").
+"""The planned hold, law ``hold`` (docs/holding.md, "A planned path of held shapes holds it").
 
 Before the arm moves, the holding law (:class:`~contgrasp_core.control.hold_law.HoldController`)
 runs on the object held fixed at its scenario pose, in the continuous loop at 2 ms
@@ -86,7 +86,7 @@ def plan_hold(scenario: Scenario) -> HoldPlan:
     from contgrasp_core.rod.closed_loop import run_closed_loop
 
     loop = PLAN_LOOP
-    planner = replace(scenario, law="hold", dynamics=ObjectDynamics(), disturbance=None, loop=loop)
+    planner = replace(scenario, law="reactive", dynamics=ObjectDynamics(), disturbance=None, loop=loop)
     law = planner.controller()
     assert isinstance(law, HoldController)
     res = run_closed_loop(planner.system(), planner.feedback_gains, loop, law=law)
@@ -104,7 +104,7 @@ class PlannedHold:
     ``plan`` until the plan's end, then ``hold`` (``holding``); :meth:`command` gives the held
     shape at the law's own time and advances it by the period."""
 
-    name: ClassVar[str] = "plan"
+    name: ClassVar[str] = "hold"
 
     def __init__(self, model: RodModel, plan: HoldPlan, settings: HoldLawSettings) -> None:
         if plan.kappa.shape[1] != model.n_elements:

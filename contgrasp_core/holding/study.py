@@ -24,7 +24,7 @@ from filelock import FileLock, Timeout
 
 from ..arm import BasePose
 from ..errors import ContgraspError, InvalidParameterError, RunFailure, WriteError
-from ..control.hold_law import LAWS, HoldLawSettings, check_law_settings
+from ..control.hold_law import HOLDING_LAWS, LAWS, HoldLawSettings, check_law_settings
 from ..executors import run_tasks
 from .experiment import GraspFailure, HoldSettings, measure_holding
 from ..objects import FIG2_SCALE, OUTLINE, SHAPES, SYNTAX, ObjectSpec
@@ -366,7 +366,7 @@ def _before_simulating(spec: StudySpec, tasks: list[tuple[str, tuple[float, ...]
     out = {}
     for key, base, _ in tasks:
         cage = math.nan
-        if spec.law in ("hold", "plan"):
+        if spec.law in HOLDING_LAWS:
             try:
                 cage = cage_capacity(pose_scenario(spec, (base[0], base[1], base[2])), spec.hold.mu).measure
             except ContgraspError:
@@ -406,11 +406,17 @@ they differ, so a file recorded before them resumes (it holds a study at those d
 
 
 def _spec_dict(spec: StudySpec) -> dict[str, Any]:
+    """The study's specification as recorded; under law ``hold`` with the playback's settings
+    (they change its results; and a file of the reactive law, recorded when it was named
+    ``hold``, lacks them, so it is refused rather than resumed as the planned hold)."""
     d = asdict(spec)
     d["hold"] = asdict(spec.hold)
     for name, default in _LATER_FIELDS.items():
         if d[name] == default:
             del d[name]
+    if spec.law == "hold":
+        law = spec.hold_law()
+        d["playback"] = {k: getattr(law, k) for k in ("plan_gain", "plan_damping", "plan_damping_time")}
     return d
 
 

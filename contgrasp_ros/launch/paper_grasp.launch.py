@@ -1,7 +1,7 @@
 """The paper's closed-loop grasp (Sec. V-C): simulator, boundary sensor, controller, quality node.
 
     ros2 launch contgrasp_ros paper_grasp.launch.py [object:=ellipse] [outline:=mine.csv]
-        [law:=paper|hold] [object_mode:=fixed|spring|free] [max_muscle_stress:=PA] [friction:=MU] [params_file:=FILE] [lockstep:=true|false] [duration:=S] [compose:=true]
+        [law:=paper|hold|reactive] [object_mode:=fixed|spring|free] [max_muscle_stress:=PA] [friction:=MU] [params_file:=FILE] [lockstep:=true|false] [duration:=S] [compose:=true]
         [record:=true] [bag:=bags/mine] [on_finish:=idle|exit] [rviz:=true]
 
 ``--show-args`` lists them. The graph is contgrasp-launch's (contgrasp_ros.launcher.graph); include this

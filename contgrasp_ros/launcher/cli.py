@@ -107,7 +107,7 @@ def _parser() -> argparse.ArgumentParser:
                         "e.g. two arms in one domain (default: none)")
     add_object_arguments(p, ROD_SCALE)
     p.add_argument("--law", choices=LAWS, default=None,
-                   help="the controller's law: paper (eq. (19)), hold or plan (docs/holding.md) (default: the parameter file's)")
+                   help="the controller's law: paper (eq. (19)), hold (the planned hold) or reactive (docs/holding.md) (default: the parameter file's)")
     p.add_argument("--object-mode", choices=MODES, default=None,
                    help="how the object moves: fixed (the paper), spring or free (default: the parameter file's)")
     p.add_argument("--max-muscle-stress", type=float, default=None, metavar="PA",

@@ -53,7 +53,7 @@ def _arguments(lockstep: bool) -> list[DeclareLaunchArgument]:
                                           "deformed[:R,amplitude,lobes,phase] (default: the parameter file's)"),
         DeclareLaunchArgument("outline", default_value="", description="your own object: a CSV outline, rows x, y in metres"),
         DeclareLaunchArgument("law", default_value="", choices=["", *LAWS],
-                              description="the controller's law: paper (eq. (19)), hold or plan (docs/holding.md) "
+                              description="the controller's law: paper (eq. (19)), hold (the planned hold) or reactive (docs/holding.md) "
                                           "(default: the parameter file's)"),
         DeclareLaunchArgument("object_mode", default_value="", choices=["", *MODES],
                               description="how the object moves: fixed (the paper), spring or free (default: the parameter file's)"),

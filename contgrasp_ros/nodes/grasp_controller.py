@@ -7,7 +7,7 @@ A thin wrapper of the core's laws, chosen by the read-only ``law`` parameter: th
 or :class:`contgrasp_core.holding.plan.PlannedHold` (planned at start on the ``object*`` copy).
 The same functions the core-only loop calls, so a lock-step ROS run reproduces it exactly. A
 state sent twice is answered with the couple already published
-(:class:`~contgrasp_ros.nodes.lockstep.Answered`). docs/ros.md ("Either law").
+(:class:`~contgrasp_ros.nodes.lockstep.Answered`). docs/ros.md ("Any law").
 """
 
 from __future__ import annotations
@@ -61,19 +61,19 @@ class GraspController(Node):
         declare(self, "adaptive_mu2", paper["adaptive_mu2"], "use mu2(s) = r(s) - 1/(r_obj + r(s)) (paper App. IV)")
         declare(self, "object_radius", paper["object_radius"], "object radius r_obj for the adaptive mu2 [m]", lo=1e-9, hi=1e3)
         declare(self, "length_unit", paper["length_unit"], "metres per length unit of the law (paper: cm)", lo=1e-9, hi=1e3)
-        self.law_name = declare(self, "law", paper["law"], "the closed loop's law: paper (eq. (19)), hold or plan "
-                                "(docs/holding.md)", choices=LAWS, read_only=True)
+        self.law_name = declare(self, "law", paper["law"], "the closed loop's law: paper (eq. (19)), hold (the "
+                                "planned hold) or reactive (docs/holding.md)", choices=LAWS, read_only=True)
         self.period = declare(self, "control_period", paper["control_period"], "the simulator's control period: the "
                               "holding law's phases run in time [s]", lo=1e-6, hi=10.0, read_only=True)
         self.hold_settings = HoldLawSettings(**{
             f.name: declare(self, f"{HOLD_PREFIX}{f.name}", paper[f"{HOLD_PREFIX}{f.name}"],
                             f"holding law: {f.name} (contgrasp_core.control.hold_law.HoldLawSettings)", read_only=True)
             for f in fields(HoldLawSettings)})
-        o = {name: declare(self, name, paper[name], f"the simulator's {name}, copied: law plan plans on the object",
+        o = {name: declare(self, name, paper[name], f"the simulator's {name}, copied: law hold plans on the object",
                            read_only=True) for name in OBJECT_PARAMETERS}
         # (checked under every law: a nonsense copy stops the node at start, as the simulator's own)
         self.object_spec = object_from_parameters(o["object"], o["object_outline"], o["object_center"], o["object_angle"])
-        self.plan = self._plan() if self.law_name == "plan" else None  # (before the subscription: no state waits on it)
+        self.plan = self._plan() if self.law_name == "hold" else None  # (before the subscription: no state waits on it)
         self.hold: Law | None = None  # (the holding law's, or the plan's playback's, state in this run)
         self.hold_step = -1  # (the step it answered last)
         self.drops = DropCounter(self)
@@ -144,14 +144,14 @@ class GraspController(Node):
     def _plan(self) -> HoldPlan:
         """The planned hold's plan (:func:`contgrasp_core.holding.plan.plan_hold`) of the scenario
         this node's parameters describe: its rod, the object copy, its gains and hold settings
-        (the engine imported here, under law plan only)."""
+        (the engine imported here, under law hold only)."""
         from contgrasp_core.holding.plan import plan_hold
         from contgrasp_core.scenario import GainSettings
 
         p = self.get_parameter
         gains = GainSettings(mu1=p("mu1").value, mu2=p("mu2").value, adaptive_mu2=p("adaptive_mu2").value,
                              object_radius=p("object_radius").value, length_unit=p("length_unit").value)
-        return plan_hold(replace(PAPER, rod=self.model, object=self.object_spec, gains=gains, law="plan", hold_law=self.hold_settings))
+        return plan_hold(replace(PAPER, rod=self.model, object=self.object_spec, gains=gains, law="hold", hold_law=self.hold_settings))
 
     @property
     def law_phase(self) -> str:

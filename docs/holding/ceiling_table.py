@@ -8,7 +8,7 @@ from contgrasp_core.holding import wrench_directions
 from contgrasp_core.holding.ceiling import muscle_ceiling
 from contgrasp_core.holding.plan import plan_hold
 
-s = replace(PAPER, law="plan")
+s = replace(PAPER, law="hold")
 kappa = plan_hold(s).kappa[-1]  # the holding law's rest on the fixed circle (unbounded muscles)
 theta = s.rod.base_angle + np.cumsum(kappa * s.rod.joint_len)
 for stress in (1e4, 2e4, 5e4, 1e5, 0.0):

@@ -40,7 +40,7 @@ def scenario(obj: ObjectSpec, mu: float, stress: float = 0.0) -> Scenario:
     and muscles of at most ``stress`` (Pa; 0: unbounded)."""
     rod = replace(PAPER.rod, max_muscle_stress=stress)
     rod = replace(rod, friction=mu, friction_model="stick") if mu > 0 else rod
-    return PAPER.with_object(obj, rod=rod, law="plan", dynamics=ObjectDynamics(mode="free"),
+    return PAPER.with_object(obj, rod=rod, law="hold", dynamics=ObjectDynamics(mode="free"),
                              loop=replace(PAPER.loop, duration=DURATION, control_period=PERIOD))
 
 
