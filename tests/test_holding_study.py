@@ -438,3 +438,22 @@ def test_a_dask_study_computes_its_quality_map_on_the_cluster(tmp_path: Path, mo
     run_study(spec, tmp_path / "serial.jsonl", executor="serial")
     np.testing.assert_array_equal(maps[1][2].Q, maps[0][2].Q)
     np.testing.assert_array_equal(maps[1][2].valid, maps[0][2].valid)
+
+
+def test_a_reactive_study_recorded_as_law_hold_is_refused_under_the_planned_hold(tmp_path: Path) -> None:
+    """The reactive law was once named ``hold``: a file it wrote says ``"law": "hold"``. Under
+    today's ``hold`` (the planned hold) the study records the playback's settings, so that file
+    differs in them and is refused before anything is computed, never resumed as if planned;
+    and today's reactive study refuses it too (its law differs)."""
+    from contgrasp_core.holding.study import _spec_dict
+
+    reactive = StudySpec(object="circle", law="reactive", arm="rod", nodes=11)
+    planned = replace(reactive, law="hold")
+    assert set(_spec_dict(planned)) - set(_spec_dict(reactive)) == {"playback"}
+    assert _spec_dict(planned)["playback"] == {"plan_gain": 100.0, "plan_damping": 500.0, "plan_damping_time": 0.05}
+    old = tmp_path / "old.jsonl"
+    old.write_text(json.dumps({"key": "spec", **{**_spec_dict(reactive), "law": "hold"}}) + "\n")
+    with pytest.raises(InvalidParameterError, match=r"another specification \(it differs in playback\)"):
+        run_study(planned, old, executor="serial")
+    with pytest.raises(InvalidParameterError, match=r"another specification \(it differs in law\)"):
+        run_study(reactive, old, executor="serial")
