@@ -79,3 +79,28 @@ def test_the_newton_matrix_of_a_saturated_state_feedback_is_exact(method: str) -
     unsaturated = replace(system, model=model)
     _, plain, _ = unsaturated.newton_system(state, w1, dt, replace(loads, feedback=replace(loads.feedback, model=model)), frame)
     assert np.abs(plain - jac).max() > 1e-3 * np.abs(jac).max()  # the saturation changed the matrix
+
+
+def test_a_stiff_held_shape_saturating_part_way_converges_without_halving_to_the_saturated_rest() -> None:
+    """A held shape (H4) of stiffness G = 3000 asks for twice the curvature the muscles can hold
+    over the base half and half of it over the tip half (the muscles scaled so the rest turns the
+    arm by 2/3 rad). Inside the implicit step its couple saturates part-way: at the kink the Newton
+    matrix's rows drop 3000-fold, and a full Newton step across it cycles (the step was halved
+    to 0.1 ms and below). With the backtracking of bounded muscles each 10 ms step converges in a
+    few iterations, and the arm rests at the closed form: EI kappa + u = 0 with u saturated, so
+    kappa = clip(kappa_ref, +-bound / EI)."""
+    from contgrasp_core.control.hold_law import ShapeHold
+    from contgrasp_core.scenario import PAPER
+
+    model = replace(PAPER.rod, n_elements=20, max_muscle_stress=1e4)
+    model = replace(model, max_muscle_stress=1e4 / float(np.sum(model.muscle_bound / model.joint_ei * model.joint_len)))
+    limit = model.muscle_bound / model.joint_ei  # the largest curvature the muscles hold, 1/m
+    kappa_ref = np.where(np.arange(20) < 10, 2.0, 0.5) * limit
+    hold = ShapeHold(model, kappa_ref, 3000.0)
+    system = RodSystem(model)
+    state, substeps, iterations = system.straight_state(), 0, 0
+    for _ in range(1500):
+        state, info = system.step(state, 0.01, RodLoads(couple=hold.couple, feedback=hold))
+        substeps, iterations = substeps + info["substeps"], iterations + info["iterations"]
+    np.testing.assert_allclose(model.joint_curvature(state.theta), np.clip(kappa_ref, -limit, limit), rtol=1e-4)
+    assert substeps <= 1.2 * 1500 and iterations <= 5 * 1500, (substeps, iterations)

@@ -3,7 +3,8 @@
 ``M(theta) theta'' = Q(theta, theta')`` in the element angles (Lagrange; total joint couple
 ``EI kappa + u``, free tip), stepped by backward Euler (``"euler"``, the default) or the implicit
 midpoint rule (``"midpoint"``) with Newton on the exact Newton matrix, assembled in O(N^2)
-(:func:`.chain.gram_form`). :meth:`RodSystem.advance` controls the step (halving, an accuracy
+(:func:`.chain.gram_form`); with bounded muscles each Newton step backtracks on the residual's
+norm (the saturation's kink). :meth:`RodSystem.advance` controls the step (halving, an accuracy
 guard on the rotation per step, a linearly implicit fallback). By default the residual, matrix
 and solve run in the compiled kernels (:mod:`contgrasp_core.rod._kernels`, the structured solve of
 :mod:`.newton_matrix`); ``CONTGRASP_KERNELS=0`` selects the numpy path
@@ -102,6 +103,9 @@ class StepOptions:
                 and self.max_angle_step > 0):
             raise InvalidParameterError(
                 "need tol > 0, max_iter >= 1, max_halvings >= 0, contact_margin >= 0, max_angle_step > 0")
+
+
+LAM_MIN = 2.0**-10
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -593,8 +597,9 @@ class RodSystem:
         opt, n = self.options, len(state.theta)
         prev = np.inf
         scale = 1.0 + np.abs(state.theta).max()
+        damped = self.model.muscle_bound is not None
+        res, jac, ev = self._newton_system(state, w1, dt, loads, frame, self_frame)
         for it in range(1, opt.max_iter + 1):
-            res, jac, ev = self._newton_system(state, w1, dt, loads, frame, self_frame)
             dw = solve(jac, -res)
             if self.body is not None:  # the object's translation in rod lengths, beside the angles
                 dw_scaled = dw.copy()
@@ -605,10 +610,32 @@ class RodSystem:
             if not np.isfinite(size) or (it >= 3 and size > 2.0 * prev):  # diverging: give up early
                 return None, None, it
             prev = size
-            w1 = w1 + dw
-            if size <= opt.tol * (scale + dt * np.abs(w1[:n]).max()):
-                return w1, ev, it
+            if size <= opt.tol * (scale + dt * np.abs(w1[:n] + dw[:n]).max()):
+                return w1 + dw, ev, it
+            if it == opt.max_iter:
+                break
+            if damped:  # (the saturation's kink: a full step may cross it and cycle)
+                w1, (res, jac, ev) = self._damped(state, dt, loads, frame, self_frame, w1, dw, res)
+            else:
+                w1 = w1 + dw
+                res, jac, ev = self._newton_system(state, w1, dt, loads, frame, self_frame)
         return None, None, opt.max_iter
+
+    def _damped(self, state: RodState, dt: float, loads: RodLoads, frame: ContactFrame | None,
+                self_frame: SelfContactFrame | None, w1: np.ndarray, dw: np.ndarray,
+                res: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray | ChainMatrix, _StepEval]]:
+        """The Newton step ``dw`` from ``w1`` shortened until the residual's norm decreases
+        (Armijo backtracking, halving at most four times): with bounded muscles the residual is
+        only piecewise smooth (:func:`.muscle.saturate`), and a full step across a joint's
+        saturation kink can cycle between its two sides. The new iterate and its system."""
+        f0 = float(np.linalg.norm(res))
+        lam = 1.0
+        while True:
+            trial = w1 + lam * dw
+            system = self._newton_system(state, trial, dt, loads, frame, self_frame)
+            if lam <= LAM_MIN or float(np.linalg.norm(system[0])) <= (1.0 - 1e-4 * lam) * f0:
+                return trial, system
+            lam *= 0.5
 
     def _missed(self, state: RodState, new: RodState, self_frame: SelfContactFrame | None, searched: np.ndarray,
                 margin: float) -> SelfContactFrame | None:
