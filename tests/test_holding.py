@@ -89,6 +89,8 @@ def test_hold_command_reports_stiffness_capacity_and_quality() -> None:
     assert out["capacity_is_bound"] is weakest["held"] and out["capacity_min_reason"] == weakest["reason"]
     assert all(("a lower bound" in c["reason"]) == c["held"] for c in out["capacity"])
     assert out["Q1"] > 0 and out["Q2"] > 0 and 0 < out["Q3"] <= 1
+    # (a held run reports its grasp's validity and effort too: tests/test_validity.py, bounded muscles)
+    assert out["held"] is True and out["validity"]["valid"] is True and out["peak_couple"] > 0 and out["peak_couple_ratio"] is None
     # (unbounded muscles: the wrapped rest shape with friction resists every direction, no ceiling)
     assert out["muscles_hold_shape"] is True and out["muscle_ceiling_min"] is None
     assert all(c["muscle_ceiling"] is None for c in out["capacity"])
