@@ -27,12 +27,19 @@ def experiment() -> HoldExperiment:
     return exp
 
 
-def test_the_measured_stiffness_predicts_a_combined_small_load(experiment: HoldExperiment) -> None:
+@pytest.fixture(scope="module")
+def stiffness(experiment: HoldExperiment) -> tuple[np.ndarray, np.ndarray]:
+    """The experiment's (K, C): six probe runs, deterministic, so measured once for the module."""
+    return experiment.stiffness()
+
+
+def test_the_measured_stiffness_predicts_a_combined_small_load(experiment: HoldExperiment,
+                                                               stiffness: tuple[np.ndarray, np.ndarray]) -> None:
     """K comes from single-axis probes; a combined small wrench (never applied to measure it)
     moves the object by C w, to 5 % (measured 0.8 %: the grasp is linear at this load). As in
     the probes, the response is the half difference of +w and -w: it cancels the released
     grasp's slow drift (the closed loop's own, ~1e-3 rad/s without load, checked here)."""
-    _, compliance = experiment.stiffness()
+    _, compliance = stiffness
     w = np.array([1.2e-3, -0.8e-3, 3e-5])
     moved = 0.5 * (experiment.displacement_under(w) - experiment.displacement_under(-w))
     predicted = compliance @ w
@@ -41,11 +48,12 @@ def test_the_measured_stiffness_predicts_a_combined_small_load(experiment: HoldE
     assert np.linalg.norm(drift) < 0.5 * np.linalg.norm(predicted)  # (the load, not the drift, is measured)
 
 
-def test_the_grasp_adds_to_the_support_and_gives_way_under_a_large_load(experiment: HoldExperiment) -> None:
+def test_the_grasp_adds_to_the_support_and_gives_way_under_a_large_load(experiment: HoldExperiment,
+                                                                       stiffness: tuple[np.ndarray, np.ndarray]) -> None:
     """The grasp's own stiffness is positive along x and y (it adds to the support); a ramp
     along +x ends with the object escaped, as a result (no exception), beyond what the support
     alone carries at the escape distance."""
-    k, _ = experiment.stiffness()
+    k, _ = stiffness
     assert k[0, 0] > 0 and k[1, 1] > 0
     cap = experiment.capacity(np.array([1.0, 0.0, 0.0]))
     assert not cap.held and cap.reason in ("moved", "turned", "contact lost") or cap.reason.startswith("simulation failed")
@@ -81,6 +89,8 @@ def test_hold_command_reports_stiffness_capacity_and_quality() -> None:
     assert out["capacity_is_bound"] is weakest["held"] and out["capacity_min_reason"] == weakest["reason"]
     assert all(("a lower bound" in c["reason"]) == c["held"] for c in out["capacity"])
     assert out["Q1"] > 0 and out["Q2"] > 0 and 0 < out["Q3"] <= 1
+    # (a held run reports its grasp's validity and effort too: tests/test_validity.py, bounded muscles)
+    assert out["held"] is True and out["validity"]["valid"] is True and out["peak_couple"] > 0 and out["peak_couple_ratio"] is None
     # (unbounded muscles: the wrapped rest shape with friction resists every direction, no ceiling)
     assert out["muscles_hold_shape"] is True and out["muscle_ceiling_min"] is None
     assert all(c["muscle_ceiling"] is None for c in out["capacity"])

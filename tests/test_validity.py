@@ -75,9 +75,14 @@ def test_a_negative_muscle_stress_is_refused_in_one_line() -> None:
 
 
 def test_hold_reports_the_grasp_s_effort_and_validity() -> None:
-    proc = subprocess.run([*CLI, "hold", "--directions", "1", "--ramp-time", "0.3", "--max-muscle-stress", "50000", "--json"],
-                          capture_output=True, text=True, timeout=600)
+    """The grasp's validity and effort, reported whether or not the released object is held (the
+    same grasp either way; tests/test_holding.py sees them in a held run's report). Here an escape
+    distance of 1e-9 radii lets the object go at the release: the report without the probes and
+    ramps, which measure nothing asserted here (they took ~14 of the run's 17 CPU-s)."""
+    proc = subprocess.run([*CLI, "hold", "--directions", "1", "--ramp-time", "0.3", "--max-muscle-stress", "50000",
+                           "--escape-distance", "1e-9", "--json"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
+    assert out["held"] is False and out["release_reason"] == "moved" and out["settle_time_s"] > 0
     assert out["validity"]["valid"] is True and 0 < out["peak_couple_ratio"] <= 1.0
     assert out["peak_couple"] == pytest.approx(2.0 / 3.0 * 50000 * 0.01**3) and out["peak_couple_arclength"] == 0.0
