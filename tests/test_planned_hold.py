@@ -159,17 +159,20 @@ def test_a_planner_that_never_reaches_the_hold_is_refused(monkeypatch: pytest.Mo
     assert "\n" not in str(info.value)
 
 
-def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop() -> None:
+@pytest.mark.parametrize("stress", ["0", "50000"])
+def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop(stress: str) -> None:
     """``contgrasp simulate --law hold --object-mode free`` sampled at 2 ms and held to first
-    order, as the graph runs it, at the default 4 s: the paper's circle settled within 5 mm and
-    0.2 rad of its start, slower than 1 mm/s, the arm outside it (valid), the law in its hold
-    (measured 2026-11-28: settled at 2.838 s, 0.40 mm, 0.000 rad, 0.21 mm/s; without the damper,
+    order, as the graph runs it, at the default 4 s, unbounded and within 50 kPa muscles: the
+    paper's circle settled within 5 mm and 0.2 rad of its start, slower than 1 mm/s, the arm
+    outside it (valid), the law in its hold (measured 2026-11-28: settled at 2.838 s, 0.40 mm,
+    0.000 rad, 0.21 mm/s; 50 kPa: 2.842 s, 0.21 mm, the base saturated; without the damper,
     ``--plan-damping 0``, it rattles in the cage: 2.5 mm, 3.7 mm/s, not settled)."""
     proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "simulate", "--law", "hold", "--object-mode",
-                           "free", "--control-period", "0.002", "--hold", "first-order", "--json"],
-                          capture_output=True, text=True, timeout=600)
+                           "free", "--control-period", "0.002", "--hold", "first-order", "--max-muscle-stress", stress,
+                           "--json"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout)
+    assert (out["peak_couple_ratio"] == pytest.approx(1.0)) if stress != "0" else out["peak_couple_ratio"] is None
     d, v = out["object_displacement"], out["object_velocity"]
     assert out["settled"] and out["sim_time_s"] == pytest.approx(4.0)
     assert np.hypot(d["x"], d["y"]) < 0.005 and abs(d["angle"]) < 0.2

@@ -288,7 +288,8 @@ class HoldExperiment:
         if not grasp.settled:
             if not contact.in_contact.any():
                 raise GraspFailure("no contact", f"no node touched the object for {wait:g} s (at t = {obs.t:.3g} s, "
-                                   f"the arm moving at up to {obs.max_speed:.3g} m/s); no holding to measure")
+                                   f"the arm moving at up to {obs.max_speed:.3g} m/s); no holding to measure (an arm "
+                                   "still on its way, slowed by bounded muscles say, needs a longer contact_wait)")
             if not grasp.health.valid:
                 raise GraspFailure("invalid", f"the grasp left the model's validity: {'; '.join(grasp.health.broken())}; "
                                    "no holding to measure")
