@@ -1,12 +1,15 @@
 """The planned hold on the object set (docs/holding.md, "The object set"): each object at the
 default centre, free, 6 s, in the graph's loop (sampled at 2 ms, first-order hold: the graph
 equals it bit for bit), frictionless and at mu = 0.5; or refused before simulating. Prints the
-Markdown table. ``python docs/holding/object_set.py [--workers N] [--max-muscle-stress PA]``."""
+Markdown table (each cell on stderr as it ends). ``python docs/holding/object_set.py [--workers N]
+[--max-muscle-stress PA]``."""
 
 from __future__ import annotations
 
 import argparse
-from concurrent.futures import ProcessPoolExecutor
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import replace
 from pathlib import Path
 
@@ -78,8 +81,13 @@ def main() -> None:
     if not (np.isfinite(args.max_muscle_stress) and args.max_muscle_stress >= 0):
         parser.error(f"--max-muscle-stress must be a finite number >= 0, got {args.max_muscle_stress}")
     cells = [(name, mu, args.max_muscle_stress) for name in OBJECTS for mu in (0.0, 0.5)]
+    results = {}
+    start = time.monotonic()
     with ProcessPoolExecutor(args.workers) as pool:
-        results = {(n, mu): text for n, mu, text in pool.map(run, *zip(*cells, strict=True))}
+        for done in as_completed([pool.submit(run, *cell) for cell in cells]):
+            name, mu, text = done.result()
+            results[name, mu] = text
+            print(f"[{time.monotonic() - start:6.0f} s] {name}, mu = {mu:g}: {text}", file=sys.stderr, flush=True)
     print("| object | cage's wrap at rest (rad) | frictionless | mu = 0.5 |")
     print("|---|---|---|---|")
     for name, obj in OBJECTS.items():
