@@ -106,6 +106,9 @@ class StepOptions:
 
 
 LAM_MIN = 2.0**-10
+"""The shortest fraction of a Newton step the backtracking with bounded muscles takes
+(:meth:`RodSystem._damped`): ten halvings (with four, 2.5 s of the reactive grasp at 50 kPa took
+12 CPU-s against 1)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -625,7 +628,7 @@ class RodSystem:
                 self_frame: SelfContactFrame | None, w1: np.ndarray, dw: np.ndarray,
                 res: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray | ChainMatrix, _StepEval]]:
         """The Newton step ``dw`` from ``w1`` shortened until the residual's norm decreases
-        (Armijo backtracking, halving at most four times): with bounded muscles the residual is
+        (Armijo backtracking, down to :data:`LAM_MIN`): with bounded muscles the residual is
         only piecewise smooth (:func:`.muscle.saturate`), and a full step across a joint's
         saturation kink can cycle between its two sides. The new iterate and its system."""
         f0 = float(np.linalg.norm(res))
