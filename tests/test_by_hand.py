@@ -8,6 +8,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -427,7 +428,12 @@ def test_a_monitor_starved_at_the_end_of_the_run_still_hears_it(graph: Graph, pa
         assert "not acknowledged" not in sim_log
     else:
         assert heard["state"] != "finished" and heard["last_step"] != obs.k, heard
-        assert "exiting with messages not acknowledged by every subscriber of" in sim_log and topics.ROD_STATE in sim_log
+        # (which of the monitor's two topics are still unacknowledged at the exit is the
+        # middleware's timing: CI once saw only /diagnostics named; the warning names one or both)
+        warned = re.search(r"exiting with messages not acknowledged by every subscriber of (.*) \(finish_ack_timeout", sim_log)
+        assert warned is not None, sim_log[-2000:]
+        named = warned.group(1).split(", ")
+        assert any(t.endswith("/" + topics.ROD_STATE) or t == topics.DIAGNOSTICS for t in named), warned.group(0)
     assert all(code == 0 for code in graph.close().values())
 
 
