@@ -1,7 +1,9 @@
-"""The graph started by hand in any order: the four installed executables, started in seeded
-shuffled orders with random gaps, never lose step 0, and each run is the core loop's bit for bit
-(the graph, its probe and the reference run are tests/test_by_hand.py's). A file of its own, so
-the test command's two workers share the by-hand runs instead of one worker doing them all."""
+"""The graph started by hand in any order: the four installed executables, started in the
+orders of a Latin square (the rotations of a seeded shuffled order: every node first once and
+last once, every pair in both orders) with random gaps, never lose step 0, and each run is the
+core loop's bit for bit (the graph, its probe and the reference run are tests/test_by_hand.py's).
+A file of its own, so the test command's two workers share the by-hand runs instead of one
+worker doing them all."""
 
 from __future__ import annotations
 
@@ -28,8 +30,8 @@ same_as_core = by_hand.same_as_core
 # property tests' draws).
 BY_HAND_SEED = int(os.environ.get("CONTGRASP_BY_HAND_SEED")
                    or (0 if os.environ.get("HYPOTHESIS_PROFILE") == "ci" else random.SystemRandom().randrange(2**32)))
-BY_HAND_RUNS = int(os.environ.get("CONTGRASP_BY_HAND_RUNS") or 20)
-"""Shuffled starts per test run (CI's second interpreter runs 2: the orders are the same code path)."""
+BY_HAND_RUNS = int(os.environ.get("CONTGRASP_BY_HAND_RUNS") or len(NODES))
+"""Starts per test run: one Latin square of orders (more: further squares, each from the next seeded order)."""
 MAX_GAP_S = 1.5
 
 
@@ -40,9 +42,11 @@ def test_four_nodes_by_hand_in_any_order_with_any_gaps_never_lose_step_0(graph: 
     the core loop's bit for bit with zero missed deadlines, whichever node comes last; every
     node then exits by itself with status 0. (Whole runs: a short one can end before the last
     node is up, and a node that never hears the end never exits by itself.)"""
-    rng = random.Random(f"{BY_HAND_SEED}:{run}")
+    square, turn = divmod(run, len(NODES))
     order = list(NODES)
-    rng.shuffle(order)
+    random.Random(f"{BY_HAND_SEED}:square {square}").shuffle(order)
+    order = order[turn:] + order[:turn]  # (the square's rows: a rotation each)
+    rng = random.Random(f"{BY_HAND_SEED}:{run}")
     starts = list(zip(order, [*(rng.uniform(0.0, MAX_GAP_S) for _ in order[1:]), 0.0], strict=True))  # (node, gap after it)
     plan = f"seed {BY_HAND_SEED} run {run}: " + ", ".join(f"{node} +{gap:.2f} s" for node, gap in starts)
     print(f"by hand, {plan} (replay: CONTGRASP_BY_HAND_SEED={BY_HAND_SEED} -k 'never_lose_step_0 and [{run}]')")
