@@ -450,7 +450,8 @@ def test_a_reactive_study_recorded_as_law_hold_is_refused_under_the_planned_hold
     reactive = StudySpec(object="circle", law="reactive", arm="rod", nodes=11)
     planned = replace(reactive, law="hold")
     assert set(_spec_dict(planned)) - set(_spec_dict(reactive)) == {"playback"}
-    assert _spec_dict(planned)["playback"] == {"plan_gain": 100.0, "plan_damping": 500.0, "plan_damping_time": 0.05}
+    assert _spec_dict(planned)["playback"] == {"plan_gain": 100.0, "plan_damping": 500.0, "plan_damping_time": 0.05,
+                                               "plan_squeeze": 0.1, "plan_squeeze_time": 0.3}
     old = tmp_path / "old.jsonl"
     old.write_text(json.dumps({"key": "spec", **{**_spec_dict(reactive), "law": "hold"}}) + "\n")
     with pytest.raises(InvalidParameterError, match=r"another specification \(it differs in playback\)"):

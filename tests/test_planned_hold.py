@@ -17,11 +17,12 @@ from contgrasp_core.control.hold_law import LAWS, HoldLawSettings, ShapeHold, ch
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.holding import plan as plan_module
 from contgrasp_core.holding.measure import check_reach
-from contgrasp_core.holding.plan import HoldPlan, PlannedHold, plan_hold
+from contgrasp_core.holding.plan import HoldPlan, PlannedHold, balanced_forces, plan_hold
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
 from contgrasp_core.rod import chain
 from contgrasp_core.rod.body import ObjectDynamics
 from contgrasp_core.rod.closed_loop import run_closed_loop
+from contgrasp_core.rod.model import RodModel
 from contgrasp_core.scenario import PAPER, Scenario
 
 PLAN = replace(PAPER, law="hold")
@@ -65,7 +66,60 @@ def test_the_playback_commands_the_plan_interpolated_then_its_last_shape(paper_p
     assert law.t == pytest.approx(0.5 * float(paper_plan.t[40] + paper_plan.t[41]) + 0.002)
     law.t = paper_plan.end + 1.0
     assert law.holding and law.phase == "hold"
-    np.testing.assert_array_equal(law.command(z, z, z, z[:-1], 0.002).kappa_ref, paper_plan.kappa[-1])
+    assert paper_plan.squeeze is not None and law.squeeze_time == 0.3  # (P2: the squeeze ramped in after the end)
+    squeezed = paper_plan.kappa[-1] - paper_plan.squeeze.couple / (101.0 * PAPER.rod.joint_ei)
+    np.testing.assert_allclose(law.command(z, z, z, z[:-1], 0.002).kappa_ref, squeezed, rtol=1e-12, atol=1e-12)
+    law.t = paper_plan.end + 0.1  # (a third of the ramp)
+    np.testing.assert_allclose(law.command(z, z, z, z[:-1], 0.002).kappa_ref,
+                               paper_plan.kappa[-1] + (squeezed - paper_plan.kappa[-1]) / 3.0, rtol=1e-9, atol=1e-9)
+    unsqueezed = PlannedHold(PAPER.rod, replace(paper_plan, squeeze=None), HoldLawSettings())
+    unsqueezed.t = paper_plan.end + 1.0
+    np.testing.assert_array_equal(unsqueezed.command(z, z, z, z[:-1], 0.002).kappa_ref, paper_plan.kappa[-1])
+
+
+def test_balanced_forces_closed_forms() -> None:
+    """(P2)'s programme on normals whose answer is known: three at 120 degrees about a point
+    all at their caps; two opposed at the smaller cap; a pure couple (opposed, offset) and
+    normals within a half-plane balance only at zero."""
+    a = np.radians([90.0, 210.0, 330.0])
+    pts = np.stack([np.cos(a), np.sin(a)], axis=1)
+    np.testing.assert_allclose(balanced_forces(pts, -pts, np.ones(3)), np.ones(3), atol=1e-9)
+    pts2, n2 = np.array([[-1.0, 0.0], [1.0, 0.0]]), np.array([[1.0, 0.0], [-1.0, 0.0]])
+    np.testing.assert_allclose(balanced_forces(pts2, n2, np.array([1.0, 2.0])), [1.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(balanced_forces(np.array([[0.0, 1.0], [0.0, -1.0]]), n2, np.ones(2)), 0.0, atol=1e-9)
+    b = np.radians([200.0, 270.0, 340.0])  # (contact points on the lower half: the normals all point up)
+    lower = np.stack([np.cos(b), np.sin(b)], axis=1)
+    np.testing.assert_allclose(balanced_forces(lower, -lower, np.ones(3)), 0.0, atol=1e-9)
+
+
+def _last_angles(rod: RodModel, plan: HoldPlan) -> np.ndarray:
+    """The element angles of the plan's last shape (its curvature integrated from the base)."""
+    return np.asarray(np.cumsum(plan.kappa[-1] * rod.joint_len) + rod.base_angle, dtype=float)
+
+
+@pytest.mark.parametrize("stress", [0.0, 50000.0])
+def test_the_squeeze_is_balanced_within_the_contact_and_the_muscles(paper_plan: HoldPlan, stress: float) -> None:
+    """The plan's squeeze (P2) on the paper's circle: no net force or torque on the object (at
+    1e-9 of its total), every force within what presses its element in by ``plan_squeeze`` of the
+    radius, a squeeze at all (the wrap spans more than a half-plane), and within 50 kPa muscles
+    no joint's squeeze couple beyond half the headroom between the bound and its shape's couple."""
+    scenario = replace(PLAN, rod=replace(PLAN.rod, max_muscle_stress=stress))
+    plan = paper_plan if stress == 0 else plan_hold(scenario)
+    sq = plan.squeeze
+    assert sq is not None and sq.total > (0.01 if stress else 0.1)  # (measured: 0.30 N; 0.053 N, the muscles' limit)
+    rod, boundary = scenario.rod, scenario.object.boundary()
+    proj = boundary.project(chain.centres(rod, _last_angles(rod, plan)))
+    inward = -proj.normal_out[sq.elements]
+    net = sq.forces @ inward
+    torque = sq.forces @ (proj.foot[sq.elements, 0] * inward[:, 1] - proj.foot[sq.elements, 1] * inward[:, 0])
+    assert np.hypot(*net) < 1e-9 * sq.total and abs(torque) < 1e-9 * sq.total
+    caps = HoldLawSettings().plan_squeeze * rod.r_centres[sq.elements] * rod.h * rod.contact_stiffness
+    assert np.all(sq.forces <= caps * (1 + 1e-9)) and np.all(sq.forces >= -1e-12)
+    if stress:
+        assert rod.muscle_bound is not None
+        elastic = rod.joint_ei * rod.joint_curvature(_last_angles(rod, plan))
+        room = 0.5 * np.maximum(rod.muscle_bound - np.abs(elastic), 0.0)
+        assert np.all(np.abs(sq.couple) <= room * (1 + 1e-9) + 1e-15)
 
 
 def test_the_plans_close_is_when_the_planners_cage_closed(paper_plan: HoldPlan) -> None:
@@ -164,9 +218,11 @@ def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop(stress:
     """``contgrasp simulate --law hold --object-mode free`` sampled at 2 ms and held to first
     order, as the graph runs it, at the default 4 s, unbounded and within 50 kPa muscles: the
     paper's circle settled within 5 mm and 0.2 rad of its start, slower than 1 mm/s, the arm
-    outside it (valid), the law in its hold (measured 2026-11-28: settled at 2.838 s, 0.40 mm,
-    0.000 rad, 0.21 mm/s; 50 kPa: 2.842 s, 0.21 mm, the base saturated; without the damper,
-    ``--plan-damping 0``, it rattles in the cage: 2.5 mm, 3.7 mm/s, not settled)."""
+    outside it (valid), the law in its hold, squeezing (P2): unbounded, the thinnest pressed
+    element in by ``plan_squeeze`` of its radius, as designed (measured 2026-11-28: settled at
+    3.344 s, 0.18 mm, 0.004 rad; 50 kPa: 3.206 s, 0.75 mm, the base saturated; without the
+    squeeze, ``--plan-squeeze 0``, 2.838 s and 2.842 s; without the damper, ``--plan-damping 0``,
+    it rattles in the cage: 2.5 mm, 3.7 mm/s, not settled)."""
     proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "simulate", "--law", "hold", "--object-mode",
                            "free", "--control-period", "0.002", "--hold", "first-order", "--max-muscle-stress", stress,
                            "--json"], capture_output=True, text=True, timeout=600)
@@ -178,6 +234,8 @@ def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop(stress:
     assert np.hypot(d["x"], d["y"]) < 0.005 and abs(d["angle"]) < 0.2
     assert np.hypot(v["x"], v["y"]) < 0.001
     assert out["validity"]["valid"] and out["law"] == "hold" and out["law_phase"] == "hold"
+    if stress == "0":
+        assert out["final_penetration_ratio"] == pytest.approx(HoldLawSettings().plan_squeeze, abs=0.01)
 
 
 def test_the_commands_take_law_plan_and_its_gain(tmp_path: Path) -> None:

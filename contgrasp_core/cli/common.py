@@ -72,6 +72,12 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
                    f"planner's close on (default {d.plan_damping:g}; 0: none)")
     g.add_argument("--plan-damping-time", type=float, default=d.plan_damping_time,
                    help=f"hold: the damper's relaxation time tau, s > 0 (default {d.plan_damping_time:g})")
+    g.add_argument("--plan-squeeze", type=float, default=d.plan_squeeze,
+                   help="hold: after the plan, squeeze the object with the largest balanced normal forces that press "
+                   "no element in deeper than this fraction of its radius, in [0, 0.3) (docs/holding.md (P2); "
+                   f"default {d.plan_squeeze:g}; 0: none)")
+    g.add_argument("--plan-squeeze-time", type=float, default=d.plan_squeeze_time,
+                   help=f"hold: the squeeze's ramp after the plan, s > 0 (default {d.plan_squeeze_time:g})")
 
 
 def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
@@ -80,7 +86,8 @@ def hold_law_from_args(args: argparse.Namespace) -> HoldLawSettings:
     settings = HoldLawSettings(clearance=args.clearance, close_gap=args.close_gap, squeeze=args.squeeze,
                                stiffness_gain=args.hold_gain, depth_gain=args.depth_gain, dwell=args.dwell,
                                plan_gain=args.plan_gain, plan_damping=args.plan_damping,
-                               plan_damping_time=args.plan_damping_time)
+                               plan_damping_time=args.plan_damping_time, plan_squeeze=args.plan_squeeze,
+                               plan_squeeze_time=args.plan_squeeze_time)
     check_law_settings(args.law, settings, lambda name: "--hold-gain" if name == "stiffness_gain" else f"--{name.replace('_', '-')}")
     return settings
 

@@ -23,6 +23,7 @@ from contgrasp_core.control.gains import FeedbackGains
 from contgrasp_core.control.law import CENTIMETRE, adaptive_mu2
 from contgrasp_core.errors import InvalidParameterError, refuse_ignored
 from contgrasp_core.rod.model import RodModel
+from contgrasp_core.rod.validity import PENETRATION_LIMIT
 
 __all__ = ["LAWS", "HOLDING_LAWS", "HoldLawSettings", "check_law_settings", "ShapeHold", "PaperLaw", "HoldController", "Law", "wrap_angle",
            "parallel_curvature", "cage_gains"]
@@ -50,8 +51,10 @@ class HoldLawSettings:
     regulation (H7; 0, the default: none, the squeeze of (H5) as latched) and the ``dwell`` (s)
     over which the latch averages the cage's curvature (H8; 0, the default: one sample); the
     planned hold's playback (law ``hold``): its stiffness ``plan_gain`` (G, dimensionless), the
-    stiffness of its damper ``plan_damping`` (D, dimensionless) and the damper's relaxation time
-    ``plan_damping_time`` (tau, s)."""
+    stiffness of its damper ``plan_damping`` (D, dimensionless), the damper's relaxation time
+    ``plan_damping_time`` (tau, s), the squeeze's depth ``plan_squeeze`` (the deepest it presses
+    an element into the object, a fraction of the element's radius, below the model's 0.3; 0:
+    none) and its ramp ``plan_squeeze_time`` (s) (P2)."""
 
     clearance: float = 0.006
     band: float = 0.001
@@ -67,13 +70,15 @@ class HoldLawSettings:
     plan_gain: float = 100.0
     plan_damping: float = 500.0
     plan_damping_time: float = 0.05
+    plan_squeeze: float = 0.1
+    plan_squeeze_time: float = 0.3
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)):
                 raise InvalidParameterError(f"hold law {f.name} must be a finite number, got {v!r}")
-        for name in ("clearance", "band", "close_rate", "squeeze_time", "mu1", "plan_damping_time"):
+        for name in ("clearance", "band", "close_rate", "squeeze_time", "mu1", "plan_damping_time", "plan_squeeze_time"):
             if getattr(self, name) <= 0:
                 raise InvalidParameterError(f"hold law {name} must be > 0, got {getattr(self, name)!r}")
         for name in ("squeeze", "stiffness_gain", "depth_gain", "dwell", "plan_gain", "plan_damping"):
@@ -82,6 +87,9 @@ class HoldLawSettings:
         if not 0 < self.close_gap < self.clearance:
             raise InvalidParameterError(f"hold law close_gap must be in (0, clearance = {self.clearance!r}) m, "
                                         f"got {self.close_gap!r}")
+        if not 0 <= self.plan_squeeze < PENETRATION_LIMIT:
+            raise InvalidParameterError(f"hold law plan_squeeze must be in [0, {PENETRATION_LIMIT}) (of an element's radius: "
+                                        f"the model holds to {PENETRATION_LIMIT}), got {self.plan_squeeze!r}")
         if not np.pi <= self.wrap_angle < 2 * np.pi:
             raise InvalidParameterError(f"hold law wrap_angle must be in [pi, 2 pi) rad (a cage surrounds more than "
                                         f"half of the object), got {self.wrap_angle!r}")

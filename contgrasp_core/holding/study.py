@@ -416,7 +416,8 @@ def _spec_dict(spec: StudySpec) -> dict[str, Any]:
             del d[name]
     if spec.law == "hold":
         law = spec.hold_law()
-        d["playback"] = {k: getattr(law, k) for k in ("plan_gain", "plan_damping", "plan_damping_time")}
+        d["playback"] = {k: getattr(law, k) for k in ("plan_gain", "plan_damping", "plan_damping_time", "plan_squeeze",
+                                                      "plan_squeeze_time")}
     return d
 
 
