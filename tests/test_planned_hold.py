@@ -26,11 +26,18 @@ from contgrasp_core.rod.model import RodModel
 from contgrasp_core.scenario import PAPER, Scenario
 
 PLAN = replace(PAPER, law="hold")
+GRIP = replace(PLAN, rod=replace(PLAN.rod, friction=0.5, friction_model="stick"))
+"""The paper's scenario under the planned hold with friction (mu = 0.5): the plan squeezes (P2)."""
 
 
 @pytest.fixture(scope="module")
 def paper_plan() -> HoldPlan:
     return plan_hold(PLAN)
+
+
+@pytest.fixture(scope="module")
+def grip_plan() -> HoldPlan:
+    return plan_hold(GRIP)
 
 
 def test_the_plan_is_the_holding_law_on_the_fixed_object_to_its_hold(paper_plan: HoldPlan) -> None:
@@ -65,16 +72,25 @@ def test_the_playback_commands_the_plan_interpolated_then_its_last_shape(paper_p
                                0.5 * (paper_plan.kappa[40] + paper_plan.kappa[41]), rtol=1e-12, atol=1e-12)
     assert law.t == pytest.approx(0.5 * float(paper_plan.t[40] + paper_plan.t[41]) + 0.002)
     law.t = paper_plan.end + 1.0
-    assert law.holding and law.phase == "hold"
-    assert paper_plan.squeeze is not None and law.squeeze_time == 0.3  # (P2: the squeeze ramped in after the end)
-    squeezed = paper_plan.kappa[-1] - paper_plan.squeeze.couple / (101.0 * PAPER.rod.joint_ei)
+    assert law.holding and law.phase == "hold" and paper_plan.squeeze is None  # (frictionless: no squeeze)
+    np.testing.assert_array_equal(law.command(z, z, z, z[:-1], 0.002).kappa_ref, paper_plan.kappa[-1])
+
+
+def test_with_friction_the_squeeze_ramps_in_after_the_plan(grip_plan: HoldPlan) -> None:
+    """(P2): after the plan's end the held shape is the last one less ``C / ((1 + G) EI)``,
+    ramped in linearly over ``plan_squeeze_time``; before the end, the plan as without it."""
+    sq = grip_plan.squeeze
+    assert sq is not None
+    law = PlannedHold(GRIP.rod, grip_plan, replace(HoldLawSettings(), plan_damping=0.0))
+    z = np.zeros(GRIP.rod.n_elements + 1)
+    squeezed = grip_plan.kappa[-1] - sq.couple / (101.0 * GRIP.rod.joint_ei)
+    law.t = grip_plan.end + 1.0
     np.testing.assert_allclose(law.command(z, z, z, z[:-1], 0.002).kappa_ref, squeezed, rtol=1e-12, atol=1e-12)
-    law.t = paper_plan.end + 0.1  # (a third of the ramp)
+    law.t = grip_plan.end + 0.1  # (a third of the 0.3 s ramp)
     np.testing.assert_allclose(law.command(z, z, z, z[:-1], 0.002).kappa_ref,
-                               paper_plan.kappa[-1] + (squeezed - paper_plan.kappa[-1]) / 3.0, rtol=1e-9, atol=1e-9)
-    unsqueezed = PlannedHold(PAPER.rod, replace(paper_plan, squeeze=None), HoldLawSettings())
-    unsqueezed.t = paper_plan.end + 1.0
-    np.testing.assert_array_equal(unsqueezed.command(z, z, z, z[:-1], 0.002).kappa_ref, paper_plan.kappa[-1])
+                               grip_plan.kappa[-1] + (squeezed - grip_plan.kappa[-1]) / 3.0, rtol=1e-9, atol=1e-9)
+    law.t = float(grip_plan.t[-2])
+    np.testing.assert_array_equal(law.command(z, z, z, z[:-1], 0.002).kappa_ref, grip_plan.kappa[-2])
 
 
 def test_balanced_forces_closed_forms() -> None:
@@ -98,13 +114,13 @@ def _last_angles(rod: RodModel, plan: HoldPlan) -> np.ndarray:
 
 
 @pytest.mark.parametrize("stress", [0.0, 50000.0])
-def test_the_squeeze_is_balanced_within_the_contact_and_the_muscles(paper_plan: HoldPlan, stress: float) -> None:
+def test_the_squeeze_is_balanced_within_the_contact_and_the_muscles(grip_plan: HoldPlan, stress: float) -> None:
     """The plan's squeeze (P2) on the paper's circle: no net force or torque on the object (at
     1e-9 of its total), every force within what presses its element in by ``plan_squeeze`` of the
     radius, a squeeze at all (the wrap spans more than a half-plane), and within 50 kPa muscles
     no joint's squeeze couple beyond half the headroom between the bound and its shape's couple."""
-    scenario = replace(PLAN, rod=replace(PLAN.rod, max_muscle_stress=stress))
-    plan = paper_plan if stress == 0 else plan_hold(scenario)
+    scenario = replace(GRIP, rod=replace(GRIP.rod, max_muscle_stress=stress))
+    plan = grip_plan if stress == 0 else plan_hold(scenario)
     sq = plan.squeeze
     assert sq is not None and sq.total > (0.01 if stress else 0.1)  # (measured: 0.30 N; 0.053 N, the muscles' limit)
     rod, boundary = scenario.rod, scenario.object.boundary()
@@ -213,19 +229,19 @@ def test_a_planner_that_never_reaches_the_hold_is_refused(monkeypatch: pytest.Mo
     assert "\n" not in str(info.value)
 
 
-@pytest.mark.parametrize("stress", ["0", "50000"])
-def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop(stress: str) -> None:
+@pytest.mark.parametrize(("stress", "friction"), [("0", "0"), ("50000", "0"), ("0", "0.5")])
+def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop(stress: str, friction: str) -> None:
     """``contgrasp simulate --law hold --object-mode free`` sampled at 2 ms and held to first
-    order, as the graph runs it, at the default 4 s, unbounded and within 50 kPa muscles: the
-    paper's circle settled within 5 mm and 0.2 rad of its start, slower than 1 mm/s, the arm
-    outside it (valid), the law in its hold, squeezing (P2): unbounded, the thinnest pressed
-    element in by ``plan_squeeze`` of its radius, as designed (measured 2026-11-28: settled at
-    3.344 s, 0.18 mm, 0.004 rad; 50 kPa: 3.206 s, 0.75 mm, the base saturated; without the
-    squeeze, ``--plan-squeeze 0``, 2.838 s and 2.842 s; without the damper, ``--plan-damping 0``,
-    it rattles in the cage: 2.5 mm, 3.7 mm/s, not settled)."""
+    order, as the graph runs it, at the default 4 s, unbounded and within 50 kPa muscles,
+    frictionless and at mu = 0.5: the paper's circle settled within 5 mm and 0.2 rad of its
+    start, slower than 1 mm/s, the arm outside it (valid), the law in its hold; with friction
+    squeezing (P2), the thinnest pressed element in by ``plan_squeeze`` of its radius, as
+    designed (measured 2026-11-28: settled at 2.838 s, 0.40 mm, 0.000 rad, 0.21 mm/s; 50 kPa:
+    2.842 s, 0.21 mm, the base saturated; mu = 0.5: 3.266 s, 0.41 mm, 0.011 rad; without the
+    damper, ``--plan-damping 0``, it rattles in the cage: 2.5 mm, 3.7 mm/s, not settled)."""
     proc = subprocess.run([sys.executable, "-m", "contgrasp_core.cli", "simulate", "--law", "hold", "--object-mode",
                            "free", "--control-period", "0.002", "--hold", "first-order", "--max-muscle-stress", stress,
-                           "--json"], capture_output=True, text=True, timeout=600)
+                           "--friction", friction, "--json"], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = json.loads(proc.stdout)
     assert (out["peak_couple_ratio"] == pytest.approx(1.0)) if stress != "0" else out["peak_couple_ratio"] is None
@@ -234,8 +250,10 @@ def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop(stress:
     assert np.hypot(d["x"], d["y"]) < 0.005 and abs(d["angle"]) < 0.2
     assert np.hypot(v["x"], v["y"]) < 0.001
     assert out["validity"]["valid"] and out["law"] == "hold" and out["law_phase"] == "hold"
-    if stress == "0":
+    if friction != "0":
         assert out["final_penetration_ratio"] == pytest.approx(HoldLawSettings().plan_squeeze, abs=0.01)
+    else:
+        assert out["final_penetration_ratio"] < 0.01
 
 
 def test_the_commands_take_law_plan_and_its_gain(tmp_path: Path) -> None:

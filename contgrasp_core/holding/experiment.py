@@ -263,7 +263,7 @@ class HoldExperiment:
                             dynamics=self.dynamics)
         self.system = self.held.system()
         self.escape = replace(settings, escape_distance=settings.escape_distance * self.scale)
-        self.law = scenario.controller()
+        self.law = self.held.controller()  # (planned, law hold, with the friction it grasps with)
         h = scenario.hold_law
         self.reach = max(scenario.sensing.contact_tolerance, h.clearance + h.band if scenario.law in HOLDING_LAWS else 0.0)
         self.grasped: LoopSession | None = None

@@ -6,9 +6,10 @@ runs on the object held fixed at its scenario pose, in the continuous loop at 2 
 curvature at every step is the plan (:class:`HoldPlan`). :class:`PlannedHold` plays it back
 from t = 0 as held shapes (H4) of stiffness G, with a damper (D, tau: a Maxwell element per
 joint) on the arm's deviation from the plan from the planner's close on (P1), and keeps the
-last shape once the plan ends, where it squeezes (P2): the planned shape shifted so that, at
-rest in it, the arm presses the object with the largest balanced set of normal forces the
-penalty contact holds within ``plan_squeeze`` of each element's radius (:func:`balanced_squeeze`).
+last shape once the plan ends, where, with friction, it squeezes (P2): the planned shape
+shifted so that, at rest in it, the arm presses the object with the largest balanced set of
+normal forces the penalty contact holds within ``plan_squeeze`` of the thinnest touching
+element's radius (:func:`balanced_squeeze`).
 The command is linear in the state, so its first-order hold is exact: the sampled loop runs it
 as the continuous one would.
 """
@@ -105,7 +106,7 @@ class HoldPlan:
     """A path of held shapes: the times ``t`` (s, increasing from 0) and the joint curvature
     ``kappa`` (len(t), N) at each (1/m); ``close`` (s) when the planner's cage closed (H2): from
     then on the arm is near the object and the playback damps its deviation; ``squeeze`` the
-    balanced squeeze (P2) at the plan's last shape (None: none)."""
+    balanced squeeze (P2) at the plan's last shape (None: none, as without friction)."""
 
     t: Array
     kappa: Array
@@ -145,8 +146,10 @@ class HoldPlan:
 
 def plan_hold(scenario: Scenario) -> HoldPlan:
     """The plan of ``scenario``: its holding law (its rod, gains and hold settings) on its object
-    held fixed at its pose, in :data:`PLAN_LOOP`. :class:`InvalidParameterError` when the run
-    never reaches the hold (the plan would not hold anything)."""
+    held fixed at its pose, in :data:`PLAN_LOOP`, and with friction its squeeze (P2; without,
+    normal forces resist no slip and, measured, a squeeze turns a frictionless ellipse away).
+    :class:`InvalidParameterError` when the run never reaches the hold (the plan would not hold
+    anything)."""
     from contgrasp_core.rod import chain
     from contgrasp_core.rod.body import ObjectDynamics
     from contgrasp_core.rod.closed_loop import run_closed_loop
@@ -163,7 +166,7 @@ def plan_hold(scenario: Scenario) -> HoldPlan:
             f"hold within {loop.duration:g} s (phase {getattr(law, 'phase', '?')}; a longer duration or another pose)")
     m = scenario.rod
     kappa = np.array([m.joint_curvature(chain.element_angles(theta)) for theta in res.theta])
-    depth = scenario.hold_law.plan_squeeze
+    depth = scenario.hold_law.plan_squeeze if m.friction > 0 else 0.0  # (P2: friction is what a squeeze serves)
     assert system.obstacle is not None
     squeeze = None if depth == 0 else balanced_squeeze(m, system.obstacle.boundary, res.final_state.theta, depth,
                                                        scenario.sensing.contact_tolerance)
