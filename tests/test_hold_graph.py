@@ -18,6 +18,7 @@ import pytest
 import yaml
 
 from contgrasp_core.control.hold_law import HoldController, ShapeHold
+from contgrasp_core.holding.plan import PlannedHold
 from contgrasp_core.rod.body import motion_summary
 from contgrasp_core.scenario import Scenario
 
@@ -248,22 +249,30 @@ def test_simulate_and_the_launcher_give_the_same_facts_the_same_keys() -> None:
     assert not {"object_q", "object_v"} & (set(graph) | set(graph["final"]) | set(sim) | set(sim["final"]))
 
 
-def test_the_planned_hold_through_the_graph_equals_the_core_loop_bit_for_bit() -> None:
+@pytest.mark.parametrize(("friction", "duration", "phase"), [(None, 1.0, "plan"), (0.5, 3.2, "hold")])
+def test_the_planned_hold_through_the_graph_equals_the_core_loop_bit_for_bit(friction: float | None, duration: float,
+                                                                             phase: str) -> None:
     """``contgrasp-launch --law hold --object-mode free``: the controller plans on its copy of the
     simulator's object at start and plays the plan back; separate node processes in lock-step
     equal run_sampled of the same scenario bit for bit (arm, object); the controller reports the
-    playback's phase."""
-    summary = launch_json("--law", "hold", "--object-mode", "free", "--duration", "1.0", "--no-record")
+    playback's phase. With ``--friction 0.5`` the controller plans with it and squeezes after the
+    plan (P2): 3.2 s runs into the squeeze's ramp (the plan ends at 2.84 s)."""
+    extra = () if friction is None else ("--friction", str(friction))
+    summary = launch_json("--law", "hold", "--object-mode", "free", "--duration", str(duration), "--no-record", *extra)
     p = load_params(default_params_file())
     p["grasp_controller"]["law"], p["rod_simulator"]["object_mode"] = "hold", "free"
-    p["rod_simulator"]["duration"] = 1.0
+    p["rod_simulator"]["duration"] = duration
+    if friction is not None:
+        for node in ("rod_simulator", "grasp_controller"):
+            p[node]["friction"], p[node]["friction_model"] = friction, "stick"
     scenario = Scenario.from_ros_parameters(p)
     law = scenario.controller()
+    assert isinstance(law, PlannedHold) and (law.plan.squeeze is None) == (friction is None)
     session = run_sampled(scenario, law=law)
     obs = session.observe()
-    assert obs.body is not None and summary["steps"] == obs.k == 500
+    assert obs.body is not None and summary["steps"] == obs.k == round(duration / 0.002)
     np.testing.assert_array_equal(summary["final"]["x"], obs.x[:, 0])
     np.testing.assert_array_equal(summary["final"]["y"], obs.x[:, 1])
     assert {k: summary[k] for k in ("object_displacement", "object_velocity")} == motion_summary(obs.body.q, obs.body.v)
-    assert summary["law"] == "hold" and summary["law_phase"] == law.phase == "plan"  # (1 s: the plan still plays)
+    assert summary["law"] == "hold" and summary["law_phase"] == law.phase == phase  # (1 s: the plan still plays)
     assert summary["missed_deadlines"] == 0
