@@ -229,6 +229,19 @@ def test_a_planner_that_never_reaches_the_hold_is_refused(monkeypatch: pytest.Mo
     assert "\n" not in str(info.value)
 
 
+def test_a_plan_whose_steps_shrink_is_refused_in_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plan's loop refuses once its rod engine takes more Newton iterations per period than
+    its limit (the paper's plan takes 2.5 per period; a limit of 1.5 trips it, counted from the
+    100th period), in one line naming the count; a limit below 1 is refused."""
+    monkeypatch.setattr(plan_module, "PLAN_LOOP", replace(plan_module.PLAN_LOOP, max_iterations_per_period=1.5))
+    with pytest.raises(InvalidParameterError, match=r"no plan: .* could not be computed \(the rod engine took \d+ Newton "
+                       r"iterations in \d+ steps for 100 control periods .* more than 1.5 per period") as info:
+        PLAN.controller()
+    assert "\n" not in str(info.value)
+    with pytest.raises(InvalidParameterError, match="max_iterations_per_period must be finite and >= 1"):
+        replace(plan_module.PLAN_LOOP, max_iterations_per_period=0.5)
+
+
 @pytest.mark.parametrize(("stress", "friction"), [("0", "0"), ("50000", "0"), ("0", "0.5")])
 def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop(stress: str, friction: str) -> None:
     """``contgrasp simulate --law hold --object-mode free`` sampled at 2 ms and held to first

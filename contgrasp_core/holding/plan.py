@@ -35,12 +35,15 @@ __all__ = ["PLAN_LOOP", "HoldPlan", "PlannedHold", "Squeeze", "balanced_forces",
 
 Array = NDArray[np.float64]
 
-PLAN_LOOP = ClosedLoopConfig(duration=20.0, dt=0.002, settle_speed=0.002, settle_hold=0.3, min_time=1.0)
+PLAN_LOOP = ClosedLoopConfig(duration=20.0, dt=0.002, settle_speed=0.002, settle_hold=0.3, min_time=1.0,
+                             max_iterations_per_period=40.0)
 """The plan's loop: continuous, steps of at most 2 ms (the graph's period: a coarser step damps
 numerically, and with bounded muscles its Newton iterations halve the step down to ~0.1 ms),
-stopped at settle (the paper scenario's criteria) within 20 s. Its own, not the run's: a run
-shorter than the plan plays the plan's start, and the graph's controller plans as the core does
-without the simulator's loop settings."""
+stopped at settle (the paper scenario's criteria) within 20 s, refused once its rod engine needs
+more than 40 Newton iterations per period on average (the object set's plans take 2.5, the
+kidney's 24; the kidney's at 50 kPa more and more, an hour of computing: docs/holding.md). Its own, not the run's:
+a run shorter than the plan plays the plan's start, and the graph's controller plans as the core
+does without the simulator's loop settings."""
 
 
 @dataclass(frozen=True)
@@ -153,13 +156,18 @@ def plan_hold(scenario: Scenario) -> HoldPlan:
     from contgrasp_core.rod import chain
     from contgrasp_core.rod.body import ObjectDynamics
     from contgrasp_core.rod.closed_loop import run_closed_loop
+    from contgrasp_core.rod.integrator import StepFailedError
 
     loop = PLAN_LOOP
     planner = replace(scenario, law="reactive", dynamics=ObjectDynamics(), disturbance=None, loop=loop)
     law = planner.controller()
     assert isinstance(law, HoldController)
     system = planner.system()
-    res = run_closed_loop(system, planner.feedback_gains, loop, law=law)
+    try:
+        res = run_closed_loop(system, planner.feedback_gains, loop, law=law)
+    except StepFailedError as e:
+        raise InvalidParameterError(f"the planned hold has no plan: the holding law on the fixed {scenario.object.text()} "
+                                    f"could not be computed ({e})") from None
     if not law.holding or law.closed_at is None:
         raise InvalidParameterError(
             f"the planned hold has no plan: the holding law on the fixed {scenario.object.text()} did not reach its "

@@ -43,7 +43,11 @@ class ClosedLoopConfig:
     """Run settings (s, m/s): ``duration``; ``control_period`` (None = continuous feedback);
     integrator step ``dt`` (with a control period it must divide it; None = the control period,
     or 0.01 s for continuous feedback); ``record_period`` (None = every control update / step);
-    ``settle_speed``, ``settle_hold``, ``min_time``."""
+    ``settle_speed``, ``settle_hold``, ``min_time``; ``max_iterations_per_period`` (None: no
+    limit): from the 100th period on, a run whose rod engine has taken more Newton iterations
+    than this per period on average stops with
+    :class:`~contgrasp_core.rod.integrator.StepFailedError` (its steps fail and shrink, e.g. with
+    the arm touching itself under bounded muscles, and it would take hours)."""
 
     duration: float = 20.0
     control_period: float | None = None
@@ -52,6 +56,7 @@ class ClosedLoopConfig:
     settle_speed: float = 2e-4
     settle_hold: float = 0.5
     min_time: float = 1.0
+    max_iterations_per_period: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("duration", "settle_speed", "settle_hold", "control_period", "dt", "record_period"):
@@ -62,6 +67,9 @@ class ClosedLoopConfig:
                 raise InvalidParameterError(f"{name} must be finite and > 0, got {v!r}")
         if not (np.isfinite(self.min_time) and self.min_time >= 0):
             raise InvalidParameterError("min_time must be finite and >= 0")
+        if self.max_iterations_per_period is not None and not (np.isfinite(self.max_iterations_per_period)
+                                                               and self.max_iterations_per_period >= 1):
+            raise InvalidParameterError(f"max_iterations_per_period must be finite and >= 1, got {self.max_iterations_per_period!r}")
         if self.control_period is not None and self.dt is not None:
             n = self.control_period / self.dt
             if abs(n - round(n)) > 1e-9 or round(n) < 1:
@@ -196,7 +204,7 @@ def run_closed_loop(system: RodSystem, gains: FeedbackGains, config: ClosedLoopC
 def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: ClosedLoopConfig,
          state: RodState | None, law: Law | None) -> ClosedLoopResult:
     from contgrasp_core.control.hold_law import ShapeHold
-    from contgrasp_core.rod.integrator import RodLoads
+    from contgrasp_core.rod.integrator import RodLoads, StepFailedError
 
     m = system.model
     ei = m.joint_ei
@@ -255,6 +263,11 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         iters += info["iterations"]
         steps += 1
         substeps += info["substeps"]
+        limit = config.max_iterations_per_period
+        if limit is not None and steps >= 100 and iters > limit * steps:
+            raise StepFailedError(f"the rod engine took {iters} Newton iterations in {substeps} steps for {steps} control "
+                                  f"periods by t = {st.t:.3g} s, more than {limit:g} per period: its steps fail and shrink "
+                                  "(the arm touching itself, say)")
     wall = time.perf_counter() - wall0
     arr = {k: np.asarray(v) for k, v in rec.items()}
     return ClosedLoopResult(
