@@ -40,8 +40,9 @@ PLAN_LOOP = ClosedLoopConfig(duration=20.0, dt=0.002, settle_speed=0.002, settle
 """The plan's loop: continuous, steps of at most 2 ms (the graph's period: a coarser step damps
 numerically, and with bounded muscles its Newton iterations halve the step down to ~0.1 ms),
 stopped at settle (the paper scenario's criteria) within 20 s, refused once its rod engine needs
-more than 40 Newton iterations per period on average (the object set's plans take 2.5, the
-kidney's 24; the kidney's at 50 kPa more and more, an hour of computing: docs/holding.md). Its own, not the run's:
+more than 40 Newton iterations per period on average (the set's circles' and ellipse's plans take
+2.5; the kidney's, refused, 47 at its worst unbounded and more and more at 50 kPa, where it took
+hours: docs/holding.md). Its own, not the run's:
 a run shorter than the plan plays the plan's start, and the graph's controller plans as the core
 does without the simulator's loop settings."""
 

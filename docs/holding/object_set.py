@@ -7,6 +7,7 @@ Markdown table (each cell on stderr as it ends). ``python docs/holding/object_se
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -52,9 +53,10 @@ def run(name: str, mu: float, stress: float = 0.0) -> tuple[str, float, str]:
     s = scenario(OBJECTS[name], mu, stress)
     try:
         check_reach(s)
+        law = s.controller()  # (the plan: refused when its planner cannot reach the hold)
     except InvalidParameterError as err:
         return name, mu, f"refused: {err}"
-    res = record_sampled(s)
+    res = record_sampled(s, law=law)
     out = summarize(res, s.sensing.contact_tolerance, "first-order hold")
     d, v = out["object_displacement"], out["object_velocity"]
     dist, speed = float(np.hypot(d["x"], d["y"])), float(np.hypot(v["x"], v["y"]))
@@ -92,11 +94,17 @@ def main() -> None:
     print("|---|---|---|---|")
     for name, obj in OBJECTS.items():
         wrap = cage_wrap(scenario(obj, 0.0))
-        a, b = results[name, 0.0], results[name, 0.5]
-        if a.startswith("refused"):
+        a, b = (cell(results[name, mu]) for mu in (0.0, 0.5))
+        if results[name, 0.0].startswith("refused: the holding law cannot close"):
             print(f"| {name} | {wrap:.2f} | refused before simulating (below wrap_angle {PAPER.hold_law.wrap_angle:.2f}) | |")
         else:
             print(f"| {name} | {wrap:.2f} | {a} | {b} |")
+
+
+def cell(text: str) -> str:
+    """A cell of the table: the outcome, or a plan refused (its planner's engine past its limit) in short."""
+    failed = re.search(r"has no plan: .*by t = ([0-9.]+) s", text)
+    return f"refused: no plan (the planner's rod engine past its iteration limit at t = {failed.group(1)} s)" if failed else text
 
 
 if __name__ == "__main__":
