@@ -9,9 +9,8 @@ joint) on the arm's deviation from the plan from the planner's close on (P1), an
 last shape once the plan ends, where, with friction, it squeezes (P2): the planned shape
 shifted so that, at rest in it, the arm presses the object with the largest balanced set of
 normal forces the penalty contact holds within ``plan_squeeze`` of the thinnest touching
-element's radius (:func:`balanced_squeeze`).
-The command is linear in the state, so its first-order hold is exact: the sampled loop runs it
-as the continuous one would.
+element's radius (:func:`balanced_squeeze`). The command is linear in the state, so its
+first-order hold is exact: the sampled loop runs it as the continuous one would.
 """
 
 from __future__ import annotations
@@ -82,9 +81,10 @@ def balanced_forces(points: Array, normals: Array, caps: Array, a_ub: Array | No
 def balanced_squeeze(rod: RodModel, boundary: Boundary, theta: Array, depth: float, tol: float) -> Squeeze:
     """(P2) The largest balanced squeeze of the rod at rest in the element angles ``theta`` on
     ``boundary``: normal forces at the elements whose surface is within ``tol`` (m) of the object,
-    each at most what presses the penalty contact in by ``depth`` of the element's radius
-    (``depth r_j h k``), with no net wrench on the object; with bounded muscles, no joint asked
-    for more than the bound, or than the shape alone asks where that is more."""
+    each at most what presses the penalty contact in by ``depth`` of the thinnest touching
+    element's radius (``depth r_min h k``), with no net wrench on the object; with bounded
+    muscles, each joint's squeeze couple within half the headroom between the bound and the
+    shape's own couple (none where the shape alone asks for the bound)."""
     from contgrasp_core.holding.ceiling import joint_moments
     from contgrasp_core.rod import chain
 
