@@ -73,7 +73,7 @@ def add_law_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--plan-damping-time", type=float, default=d.plan_damping_time,
                    help=f"hold: the damper's relaxation time tau, s > 0 (default {d.plan_damping_time:g})")
     g.add_argument("--plan-squeeze", type=float, default=d.plan_squeeze,
-                   help="hold: after the plan, squeeze the object with the largest balanced normal forces that press "
+                   help="hold, with friction: after the plan, squeeze the object with the largest balanced normal forces that press "
                    "no element in deeper than this fraction of its radius, in [0, 0.3) (docs/holding.md (P2); "
                    f"default {d.plan_squeeze:g}; 0: none)")
     g.add_argument("--plan-squeeze-time", type=float, default=d.plan_squeeze_time,
