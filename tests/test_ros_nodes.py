@@ -326,7 +326,11 @@ def test_rod_simulator_free_running_steps_with_the_answer_to_each_state_when_it_
     answer[0] = False
     n = len(states)
     assert spin_until(ex, lambda: len(states) >= n + 3, timeout=30)  # (state n - 1 was answered)
-    assert sim.wait.late == 2
+    # every step since state n - 1 went on without its answer, each counted: as many as the states
+    # heard since, less one, or one more when the executor ran the next step before its state's
+    # callback (CI, a loaded machine: 3 where 2 were heard)
+    extra = len(states) - n
+    assert sim.wait.late in (extra - 1, extra), (sim.wait.late, extra)
 
 
 def test_rod_simulator_builds_markers_only_for_a_subscriber(graph, monkeypatch) -> None:  # type: ignore[no-untyped-def]
