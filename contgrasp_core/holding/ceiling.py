@@ -50,6 +50,17 @@ def joint_moments(rod: RodModel, theta: Array, forces: Array) -> Array:
     return np.asarray(np.cumsum(q[::-1])[::-1], dtype=float)
 
 
+def moment_columns(rod: RodModel, theta: Array, elements: NDArray[np.intp], forces: Array) -> Array:
+    """The joint moments (N, n) of each unit force ``forces[j]`` (n, 2) on the arm at the centre
+    of element ``elements[j]`` alone (:func:`joint_moments`, column by column)."""
+    cols = np.empty((rod.n_elements, len(elements)))
+    for j, (element, force) in enumerate(zip(elements, forces, strict=True)):
+        f = np.zeros((rod.n_elements, 2))
+        f[element] = force
+        cols[:, j] = joint_moments(rod, theta, f)
+    return cols
+
+
 def muscle_ceiling(rod: RodModel, boundary: Boundary, theta: ArrayLike, *, mu: float, directions: ArrayLike,
                    ref: tuple[float, float], scale: float, tol: float) -> MuscleCeiling:
     """(M5) of the rod at rest in the element angles ``theta`` on ``boundary``: the elements whose
@@ -71,11 +82,7 @@ def muscle_ceiling(rod: RodModel, boundary: Boundary, theta: ArrayLike, *, mu: f
     proj = boundary.project(chain.centres(rod, th))
     touching = np.flatnonzero(proj.signed_distance - rod.r_centres <= tol)
     gen = wrench_generators(proj.foot[touching], proj.phi[touching], mu, ref, scale).reshape(-1, 3)  # (2n, 3): on the object
-    cols = np.empty((rod.n_elements, len(gen)))
-    for j, g in enumerate(gen):
-        f = np.zeros((rod.n_elements, 2))
-        f[touching[j // 2]] = -g[:2]  # (the object pushes back on the arm)
-        cols[:, j] = joint_moments(rod, th, f)
+    cols = moment_columns(rod, th, touching[np.arange(len(gen)) // 2], -gen[:, :2])  # (the object pushes back on the arm)
     elastic = rod.joint_ei * rod.joint_curvature(th)
     bound = rod.muscle_bound
     n = len(gen)

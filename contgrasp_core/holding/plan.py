@@ -85,17 +85,13 @@ def balanced_squeeze(rod: RodModel, boundary: Boundary, theta: Array, depth: flo
     element's radius (``depth r_min h k``), with no net wrench on the object; with bounded
     muscles, each joint's squeeze couple within half the headroom between the bound and the
     shape's own couple (none where the shape alone asks for the bound)."""
-    from contgrasp_core.holding.ceiling import joint_moments
+    from contgrasp_core.holding.ceiling import moment_columns
     from contgrasp_core.rod import chain
 
     proj = boundary.project(chain.centres(rod, theta))
     touching = np.flatnonzero(proj.signed_distance - rod.r_centres <= tol)
     inward = -proj.normal_out[touching]
-    cols = np.empty((rod.n_elements, len(touching)))
-    for j, (element, n) in enumerate(zip(touching, inward, strict=True)):
-        f = np.zeros((rod.n_elements, 2))
-        f[element] = -n  # (the object pushes back on the arm)
-        cols[:, j] = joint_moments(rod, theta, f)
+    cols = moment_columns(rod, theta, touching, -inward)  # (the object pushes back on the arm)
     a_ub = b_ub = None
     if rod.muscle_bound is not None:  # (the squeeze's couple within half the muscles' headroom over the shape's)
         room = 0.5 * np.maximum(rod.muscle_bound - np.abs(rod.joint_ei * rod.joint_curvature(theta)), 0.0)
