@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 from hypothesis import settings
+from shard import pytest_collection_modifyitems  # noqa: F401 - CI shares the heavy tests out (shard.py)
 
 # CI (.ci/run sets HYPOTHESIS_PROFILE=ci) draws the same examples every run, so a submission's
 # verdict does not depend on the draw; developers' runs keep exploring new random examples.

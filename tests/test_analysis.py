@@ -63,6 +63,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     return bag, summary
 
 
+@pytest.mark.heavy
 def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -> None:
     bag, summary = recording
     r = analyze(bag)
@@ -138,6 +139,7 @@ BLOCKED = ("rclpy", "rosidl_runtime_py", "rosidl_parser", "rosidl_pycommon", "co
            "ament_index_python")
 
 
+@pytest.mark.heavy
 def test_analyze_runs_without_ros(recording: tuple[Path, dict], tmp_path: Path) -> None:
     """With every ROS package made unimportable, the CLI still analyses the recording."""
     bag, summary = recording

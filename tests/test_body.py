@@ -198,6 +198,7 @@ def test_sensing_follows_the_moved_object() -> None:
     assert np.abs(moved.rho - sense(shape, Obstacle(boundary), radius).rho).max() > 1e-3  # (it did move)
 
 
+@pytest.mark.heavy
 def test_the_sampled_loop_pushes_a_free_object_and_holds_a_spring_held_one() -> None:
     """The paper's sampled loop (N = 40 for speed) with the object free, on a spring and fixed:
     the free object is pushed away by the wrapping arm, the spring-held one moves less, the
@@ -220,6 +221,7 @@ def test_the_sampled_loop_pushes_a_free_object_and_holds_a_spring_held_one() -> 
     np.testing.assert_array_equal(fixed.state.theta, reference.state.theta)
 
 
+@pytest.mark.heavy
 def test_simulate_object_mode_reports_the_object_and_rejects_bad_input() -> None:
     """``contgrasp simulate --object-mode`` runs the continuous loop with the object moving and
     reports its motion; a negative mass, a spring of the wrong shape or a NaN is exit 2."""

@@ -117,6 +117,7 @@ def _inside(boundary, q):  # type: ignore[no-untyped-def]
     return Path(pts).contains_points(q)
 
 
+@pytest.mark.heavy
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     coeffs=st.lists(st.floats(-0.08, 0.08), min_size=2, max_size=10),

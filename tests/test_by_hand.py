@@ -138,6 +138,7 @@ def same_as_core(state: RodState, paper_core: Any) -> None:
     np.testing.assert_array_equal(state.theta, obs.theta)
 
 
+@pytest.mark.heavy
 def test_four_nodes_by_hand_without_parameters_give_the_paper_grasp_bitwise(graph: Graph, paper_core: Any) -> None:
     """No parameter file, no launcher, nodes started one after the other in any order, the
     default on_finish (idle): the run waits for its peers, settles as the paper's run does, bit
@@ -169,6 +170,7 @@ def test_four_nodes_by_hand_without_parameters_give_the_paper_grasp_bitwise(grap
     assert all(code == 0 for code in graph.close().values())
 
 
+@pytest.mark.heavy
 def test_by_hand_with_the_parameter_file_exits_when_finished_and_equals_the_launcher(
     graph: Graph, paper_core: Any, tmp_path: Path
 ) -> None:
@@ -196,6 +198,7 @@ def test_by_hand_with_the_parameter_file_exits_when_finished_and_equals_the_laun
     assert out["final"]["x"] == list(graph.last.x) and out["final"]["y"] == list(graph.last.y)
 
 
+@pytest.mark.heavy
 def test_step_0_sent_before_the_controller_existed_still_closes_the_loop(graph: Graph, paper_core: Any) -> None:
     """The loss made certain: step 0 goes out (wait_for_peers:=false) while there is no
     controller, so the sensor's answer reaches nobody; the controller is started only once the
@@ -217,6 +220,7 @@ def test_step_0_sent_before_the_controller_existed_still_closes_the_loop(graph: 
     assert all(code == 0 for code in graph.close().values())
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("node", ["boundary_sensor", "grasp_controller"])
 def test_a_node_killed_mid_run_and_restarted_closes_the_loop_again_without_the_timeout(graph: Graph, paper_core: Any,
                                                                                        node: str) -> None:
@@ -329,6 +333,7 @@ def test_a_state_sent_again_before_the_object_is_no_drop(make: Any) -> None:
     assert [m.step for m in sensor.pub.msgs] == [0] and sensor.sensed == 1
 
 
+@pytest.mark.heavy
 def test_a_failed_run_exits_1_with_on_finish_exit(graph: Graph) -> None:
     """A free object pushed by a scripted force moves in the first step, beyond a kinetic
     energy limit of 1 nJ, so the run fails at once: the simulator and a node watching it exit
@@ -350,6 +355,7 @@ def test_a_failed_run_exits_1_with_on_finish_exit(graph: Graph) -> None:
     assert "the simulator's run failed" in graph.output("boundary_sensor")
 
 
+@pytest.mark.heavy
 def test_the_container_hosts_the_sensor_and_controller_by_hand(graph: Graph, paper_core: Any) -> None:
     """``ros2 run contgrasp_ros container boundary_sensor grasp_controller`` beside the
     simulator: each node reads its own section of the parameter file, the run is the paper's
@@ -384,6 +390,7 @@ def test_the_container_help() -> None:
     assert proc.returncode == 0 and proc.stdout.startswith("usage: container NODE") and "grasp_quality" in proc.stdout
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("ack_timeout", [10.0, 1.0])
 def test_a_monitor_starved_at_the_end_of_the_run_still_hears_it(graph: Graph, paper_core: Any, ack_timeout: float) -> None:
     """A monitor in a process of its own is stopped (SIGSTOP) from the run's first steps until

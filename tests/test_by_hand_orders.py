@@ -35,6 +35,7 @@ BY_HAND_RUNS = int(os.environ.get("CONTGRASP_BY_HAND_RUNS") or len(NODES))
 MAX_GAP_S = 1.5
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("run", range(BY_HAND_RUNS))
 def test_four_nodes_by_hand_in_any_order_with_any_gaps_never_lose_step_0(graph: Graph, paper_core: Any, run: int) -> None:
     """The four executables, no parameter file, started in a shuffled order 0-1.5 s

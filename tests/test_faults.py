@@ -88,6 +88,7 @@ def running(launch: Launch) -> int:
     return i
 
 
+@pytest.mark.heavy
 def test_controller_and_sensor_killed_and_respawned_the_loop_resumes(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     launch = Launch("--params", str(fault_params(tmp_path, duration=2.0)), "--bag", str(bag), "--respawn", "2")
@@ -128,6 +129,7 @@ def test_controller_and_sensor_killed_and_respawned_the_loop_resumes(tmp_path: P
     assert [e["restart"] for e in ev if e["event"] == "resumed"] == [False]
 
 
+@pytest.mark.heavy
 def test_a_killed_container_is_restarted_as_one_process_and_the_loop_resumes(tmp_path: Path) -> None:
     """--compose: the process hosting the sensor and the controller is supervised as one, under
     its composed name: killed, it is restarted with both nodes and the loop closes again."""
@@ -149,6 +151,7 @@ def test_a_killed_container_is_restarted_as_one_process_and_the_loop_resumes(tmp
     assert not any(alive(pid) for pid in out["pids"].values())
 
 
+@pytest.mark.heavy
 def test_a_dead_controller_without_respawn_degrades_to_the_fallback(tmp_path: Path) -> None:
     """(The `zero` fallback: holding the last couple open loop for the rest of the run can make
     the coarse rod's impact on the object fail a Newton step, which the simulator then reports
@@ -193,6 +196,7 @@ def zombie_shm_segments() -> set[str]:
     return found
 
 
+@pytest.mark.heavy
 def test_killed_simulator_stops_the_run_and_the_recording_is_complete(tmp_path: Path) -> None:
     """... and the killed node's shared-memory files do not stay behind in /dev/shm."""
     bag = tmp_path / "bag"
@@ -214,6 +218,7 @@ def test_killed_simulator_stops_the_run_and_the_recording_is_complete(tmp_path: 
     assert not any(alive(pid) for pid in out["pids"].values())
 
 
+@pytest.mark.heavy
 def test_interrupted_launcher_stops_everything_and_finalises_the_recording(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     launch = Launch("--params", str(fault_params(tmp_path, duration=100.0)), "--bag", str(bag))
@@ -231,6 +236,7 @@ def test_interrupted_launcher_stops_everything_and_finalises_the_recording(tmp_p
     assert out["bag"]["received"] == out["bag"]["written"] == out["bag"]["messages"]
 
 
+@pytest.mark.heavy
 def test_nodes_idle_without_a_simulator(tmp_path: Path) -> None:
     """With no simulator the sensing, control and quality nodes wait without burning CPU."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
@@ -273,6 +279,7 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+@pytest.mark.heavy
 def test_killed_simulator_with_respawn_restarts_the_run(tmp_path: Path) -> None:
     """With --respawn the simulator is restarted, starts again from the initial state, is resumed
     by the launcher and the run completes; the recording holds both segments, each gap-free."""
@@ -324,6 +331,7 @@ def test_orphaned_shared_memory_files_are_removed_and_files_in_use_kept(tmp_path
     assert all(p.exists() for p in (locked, lock, mapped, other))
 
 
+@pytest.mark.heavy
 def test_a_recorder_lost_mid_run_leaves_the_run_unrecorded_and_the_launcher_says_so(tmp_path: Path) -> None:
     """The recorder killed mid-run (the launcher checks before the run that the recording can be
     written, so a recording lost later is a fault): the run itself completes and the launcher

@@ -44,6 +44,7 @@ def connect(port: int, timeout: float = 120.0) -> Any:
             time.sleep(0.2)
 
 
+@pytest.mark.heavy
 def test_launcher_serves_the_run_live_to_a_foxglove_client(tmp_path: Path) -> None:
     data = yaml.safe_load(default_params_file().read_text())
     data["/**"]["ros__parameters"]["n_elements"] = 20

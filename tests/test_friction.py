@@ -55,6 +55,7 @@ def wrapped_drum(friction_model: str, mu: float, torque: Callable[[float], float
     return np.array(rows)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("mu", [0.15, 0.5])
 def test_stick_slip_slips_at_the_capstan_limit(mu: float) -> None:
     """A slowly rising torque: the drum starts to turn (rate above 0.05 rad/s, against ~4e-3
@@ -68,6 +69,7 @@ def test_stick_slip_slips_at_the_capstan_limit(mu: float) -> None:
     assert abs(tau_slip / limit - 1.0) < 0.05, (tau_slip, limit)
 
 
+@pytest.mark.heavy
 def test_stick_slip_holds_below_the_limit_where_regularised_friction_creeps() -> None:
     """A steady torque at 60 % of the capstan limit, held for 2 s: with stick-slip friction the
     drum's rate over the last second is below 1e-6 rad/s (measured ~1e-10); the regularised

@@ -65,6 +65,7 @@ def launch_json(*args: str) -> dict[str, Any]:
     return json.loads(proc.stdout)  # type: ignore[no-any-return]
 
 
+@pytest.mark.heavy
 def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_path: Path) -> None:
     """``contgrasp-launch --law reactive --object-mode free``: the paper's arm (N = 100, 2 ms), the
     circle free, Coulomb friction 0.5, the dwell (H8) of 0.05 s (25 samples) and the depth regulation (H7) on
@@ -196,6 +197,7 @@ def test_the_launcher_refuses_an_unknown_law_in_one_line() -> None:
     assert proc.returncode == 2 and "--law: invalid choice: 'grip'" in lines[-1], proc.stderr
 
 
+@pytest.mark.heavy
 def test_bounded_muscles_through_the_graph_equal_the_core_loop_bit_for_bit() -> None:
     """``contgrasp-launch --law reactive --object-mode free --max-muscle-stress 20000``: the simulator
     saturates the couple as the core loop does (the same arm, object and effort to the bit); the
@@ -229,6 +231,7 @@ SHARED_FACTS = ("law", "law_phase", "object_displacement", "object_velocity", "s
 """The facts ``contgrasp simulate --json`` and the launcher's summary (and ``analyze``) both report."""
 
 
+@pytest.mark.heavy
 def test_simulate_and_the_launcher_give_the_same_facts_the_same_keys() -> None:
     """``contgrasp simulate`` and ``contgrasp-launch`` on 0.4 s of the holding law with a free
     object, simulate stepping the sampled loop as the graph does (first-order hold at 2 ms):
@@ -249,6 +252,7 @@ def test_simulate_and_the_launcher_give_the_same_facts_the_same_keys() -> None:
     assert not {"object_q", "object_v"} & (set(graph) | set(graph["final"]) | set(sim) | set(sim["final"]))
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize(("friction", "duration", "phase"), [(None, 1.0, "plan"), (0.5, 3.2, "hold")])
 def test_the_planned_hold_through_the_graph_equals_the_core_loop_bit_for_bit(friction: float | None, duration: float,
                                                                              phase: str) -> None:

@@ -316,6 +316,7 @@ def test_the_paper_law_pushes_the_same_free_object_away() -> None:
     assert np.hypot(*body.q[:2]) > 0.01 and np.hypot(*body.v[:2]) > 0.01
 
 
+@pytest.mark.heavy
 def test_released_free_the_holding_law_holds_with_a_symmetric_stiffness_and_the_paper_law_does_not() -> None:
     """``contgrasp hold``'s experiment with no support (stick-slip friction mu = 0.5): the
     holding law's grasp keeps the released object (in contact, within the escape thresholds, at
@@ -360,6 +361,7 @@ def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
         assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, (args, proc.stderr)
 
 
+@pytest.mark.heavy
 def test_hold_command_reports_the_paper_law_released_free_as_not_holding() -> None:
     """``contgrasp hold --law paper --support 0``: a result (exit 0), held false, capacity 0."""
     cmd = [sys.executable, "-m", "contgrasp_core.cli", "hold", "--law", "paper", "--support", "0",

@@ -16,6 +16,8 @@ from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.holding import HoldExperiment, HoldSettings, wrench_directions
 from contgrasp_core.scenario import PAPER
 
+pytestmark = pytest.mark.heavy(per_module=True)  # (its tests share one grasp released and measured: one shard measures it)
+
 SCENARIO = PAPER  # (a coarser rod's tip strikes the object deeper than the model holds: docs/rod.md, "Validity")
 
 

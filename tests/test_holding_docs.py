@@ -7,9 +7,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "holding"
 
 
+@pytest.mark.heavy
 def test_the_ceiling_table_prints_the_documented_ceiling() -> None:
     out = subprocess.run([sys.executable, str(DOCS / "ceiling_table.py")], capture_output=True, text=True, check=True,
                          timeout=600).stdout
@@ -26,6 +29,7 @@ def test_the_object_set_script_refuses_what_cannot_be_wrapped() -> None:
     assert (name, mu) == ("circle 35 mm", 0.0) and text.startswith("refused: the holding law cannot close")
 
 
+@pytest.mark.heavy
 def test_the_object_set_script_refuses_nonsense_options_in_one_line() -> None:
     for bad in (["--workers", "0"], ["--max-muscle-stress", "-1"], ["--max-muscle-stress", "nan"]):
         proc = subprocess.run([sys.executable, str(DOCS / "object_set.py"), *bad], capture_output=True, text=True,

@@ -120,6 +120,7 @@ def test_a_rotated_base_grasps_the_same_and_expand_symmetric_turns_the_pose() ->
     assert np.allclose(quarter["stiffness"], r @ k @ r.T) and np.allclose(quarter["capacity"][0]["wrench"], [0.0, 0.03, 0.0])
 
 
+@pytest.mark.heavy
 def test_an_arm_that_does_not_touch_the_object_is_a_no_contact_outcome() -> None:
     """Within reach (4.5 cm from the boundary, the arm 7.85 cm long) but pointing away from the
     object: a no-contact outcome. A base out of reach is refused before any run
@@ -136,6 +137,7 @@ def test_an_arm_that_does_not_touch_the_object_is_a_no_contact_outcome() -> None
     assert row["base"] == pytest.approx(list(base_si(spec, (0.0, -40.0, 0.0))))
 
 
+@pytest.mark.heavy
 def test_a_tiny_study_runs_resumes_and_draws(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Two base poses of the circle's map and the three optima, the rod scenario's arm (the map's
     thick uniform arm folds through itself under the paper's law: outcome "invalid"), a coarse rod
@@ -413,6 +415,7 @@ def test_a_malformed_results_line_is_refused_with_its_line_number(tmp_path: Path
         load_results(out)
 
 
+@pytest.mark.heavy
 def test_a_dask_study_computes_its_quality_map_on_the_cluster(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``holding-study --executor dask``: the quality map's columns go to the cluster too (they were
     computed serially on the client), the same map as a serial run's; the poses follow (left out here)."""

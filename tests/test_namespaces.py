@@ -58,6 +58,7 @@ def test_a_node_under_a_namespace_uses_its_names(ros_context) -> None:  # type: 
         node.destroy_node()
 
 
+@pytest.mark.heavy
 def test_two_namespaced_graphs_in_one_domain_each_equal_the_core_loop() -> None:
     """``contgrasp-launch --namespace a`` and ``b`` started together on one domain: each graph
     runs its own loop on its own clock, bit for bit the core loop's, no deadline missed."""

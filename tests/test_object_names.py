@@ -81,6 +81,7 @@ def stub_holding(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr("contgrasp_core.cli.hold.measure_holding", lambda *_: SimpleNamespace(to_dict=dict))
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("kind", OBJECTS)
 @pytest.mark.parametrize("command", list(COMMANDS))
 def test_every_command_prints_the_object_by_its_one_name(command: str, kind: str, tmp_path: Path,

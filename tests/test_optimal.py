@@ -137,6 +137,7 @@ def test_paper_costates_miss_the_shadow_point_term_except_on_the_circle(name, di
 
 
 # ----------------------------------------------------------------------------- solvers
+@pytest.mark.heavy
 def test_fast_solver_and_long_sweep_reach_the_same_optimum():
     """Cross-solver agreement on a small problem; the paper-gradient sweep differs off the circle."""
     for boundary in (circle(5.0), ellipse(8.0, 4.0)):

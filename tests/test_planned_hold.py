@@ -76,6 +76,7 @@ def test_the_playback_commands_the_plan_interpolated_then_its_last_shape(paper_p
     np.testing.assert_array_equal(law.command(z, z, z, z[:-1], 0.002).kappa_ref, paper_plan.kappa[-1])
 
 
+@pytest.mark.heavy
 def test_with_friction_the_squeeze_ramps_in_after_the_plan(grip_plan: HoldPlan) -> None:
     """(P2): after the plan's end the held shape is the last one less ``C / ((1 + G) EI)``,
     ramped in linearly over ``plan_squeeze_time``; before the end, the plan as without it."""
@@ -113,6 +114,7 @@ def _last_angles(rod: RodModel, plan: HoldPlan) -> np.ndarray:
     return np.asarray(np.cumsum(plan.kappa[-1] * rod.joint_len) + rod.base_angle, dtype=float)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("stress", [0.0, 50000.0])
 def test_the_squeeze_is_balanced_within_the_contact_and_the_muscles(grip_plan: HoldPlan, stress: float) -> None:
     """The plan's squeeze (P2) on the paper's circle: no net force or torque on the object (at
@@ -242,6 +244,7 @@ def test_a_plan_whose_steps_shrink_is_refused_in_one_line(monkeypatch: pytest.Mo
         replace(plan_module.PLAN_LOOP, max_iterations_per_period=0.5)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize(("stress", "friction"), [("0", "0"), ("50000", "0"), ("0", "0.5")])
 def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop(stress: str, friction: str) -> None:
     """``contgrasp simulate --law hold --object-mode free`` sampled at 2 ms and held to first

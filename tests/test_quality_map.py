@@ -63,6 +63,7 @@ def test_deformed_circle_map_has_threefold_symmetry_and_invalid_poses_are_marked
     assert all(r == "ok" for i in np.flatnonzero(~concave) for r in qm.reasons[i])
 
 
+@pytest.mark.heavy
 def test_executors_give_identical_maps() -> None:
     distributed = pytest.importorskip("distributed")
     spec = MapSpec("ellipse", psi_steps=4, d_steps=2, **FAST)

@@ -56,6 +56,7 @@ def graph_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
 # ---------------------------------------------------------------- conventions
 
 
+@pytest.mark.heavy
 def test_full_rate_run_is_recorded_completely(graph_bag: tuple[Path, dict]) -> None:
     """Every message the recorder received was written; every simulation step is in the bag."""
     path, summary = graph_bag
@@ -424,6 +425,7 @@ def _recorder(out: Path, env: dict[str, str], *extra: str) -> subprocess.Popen[s
     )
 
 
+@pytest.mark.heavy
 def test_recorder_picks_up_new_topics_and_survives_sigkill(tmp_path: Path) -> None:
     """A topic that appears mid-run is recorded; a recorder killed with SIGKILL leaves an
     incomplete file (clear error) from which every complete chunk is recovered, in order."""
@@ -471,6 +473,7 @@ def test_recorder_with_unwritable_output_exits_1_with_the_reason(tmp_path: Path)
     assert proc.returncode == 1 and "cannot record" in out
 
 
+@pytest.mark.heavy
 def test_replay_reproduces_sequence_and_timing(tmp_path: Path) -> None:
     """`contgrasp replay --rate 2` republishes a recording; a second recorder sees the same
     messages in the same order, spaced by the recorded intervals / 2. (--wait-for-subscribers:

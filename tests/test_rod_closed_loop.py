@@ -233,6 +233,7 @@ def test_a_movable_object_is_watched_for_the_whole_duration(mode: str) -> None:
     assert session.settled and core.settled and session.settle_time == core.settle_time == 0.0
 
 
+@pytest.mark.heavy
 def test_simulate_watches_a_held_movable_object_until_the_duration(capsys: pytest.CaptureFixture[str]) -> None:
     """``contgrasp simulate --object-mode spring --law reactive --duration 4``: the hold comes to rest
     before 3.5 s and the run goes on to 4 s (it once stopped there), settled at the end, in steps

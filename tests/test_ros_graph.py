@@ -60,6 +60,7 @@ def alive(pid: int) -> bool:
     return True
 
 
+@pytest.mark.heavy
 def test_ros2_run_finds_and_runs_the_executables() -> None:
     """The lookup `ros2 run contgrasp_ros <node>` performs: ament index prefix, then lib/<pkg>/<node>."""
     from ament_index_python.packages import get_package_prefix, get_package_share_directory
@@ -81,6 +82,7 @@ def test_ros2_run_finds_and_runs_the_executables() -> None:
     assert proc.wait(timeout=30) == 0
 
 
+@pytest.mark.heavy
 def test_graph_in_process_equals_the_core_loop(tmp_path: Path) -> None:
     params = small_params(tmp_path)
     events = tmp_path / "events.jsonl"
@@ -102,6 +104,7 @@ def test_graph_in_process_equals_the_core_loop(tmp_path: Path) -> None:
     assert out["final_quality"] is not None
 
 
+@pytest.mark.heavy
 def test_graph_as_processes_is_deterministic_and_leaves_nothing_behind(tmp_path: Path) -> None:
     params = small_params(tmp_path)
     runs = []
@@ -122,6 +125,7 @@ def test_graph_as_processes_is_deterministic_and_leaves_nothing_behind(tmp_path:
     assert runs[0]["final"] == runs[1]["final"]
 
 
+@pytest.mark.heavy
 def test_composed_nodes_run_the_same_graph_in_fewer_processes(tmp_path: Path) -> None:
     """--compose: the sensor, the controller and the quality node hosted by one process
     (contgrasp_ros.nodes.container) give the core loop's run bit for bit, the process exits 0 under
@@ -226,6 +230,7 @@ def test_the_discovery_profile_is_used_unless_one_is_named() -> None:
     assert env == {"OTHER": "1"}
 
 
+@pytest.mark.heavy
 def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
     assert launch("--duration", "-1").returncode == 2
     bad = tmp_path / "bad.yaml"

@@ -206,6 +206,7 @@ def test_markers_draw_the_object_where_it_is() -> None:
 
 
 # ------------------------------------------------------------------ (a) lock-step determinism
+@pytest.mark.heavy
 @pytest.mark.parametrize(("mode", "extra"), [
     ("free", {"disturbance_kind": "step", "disturbance_wrench": [0.01, -0.005, 1e-5], "disturbance_start": 0.02}),
     ("spring", {"object_stiffness": [10.0, 10.0, 0.01], "object_damping": [0.05, 0.05, 1e-4], "disturbance_kind": "pulse",
@@ -296,6 +297,7 @@ print(json.dumps({"success": done and future.result().success, "step": future.re
 
 
 # ------------------------------------------------------------------ (b) a push by hand
+@pytest.mark.heavy
 def test_a_push_on_the_wrench_topic_and_a_pulse_from_the_service_are_in_the_recording(tmp_path: Path) -> None:
     """While a spring-held object is grasped, a node of the test pushes it on the wrench topic
     from step 20 on and applies a torque pulse through ~/apply_wrench: the recording holds the

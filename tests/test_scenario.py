@@ -217,6 +217,7 @@ def test_launcher_refuses_a_malformed_outline(tmp_path: Path) -> None:
     assert len(out.stderr.strip().splitlines()) == 1 and "crosses itself" in out.stderr
 
 
+@pytest.mark.heavy
 def test_user_outline_through_the_ros_graph(tmp_path: Path) -> None:
     """contgrasp-launch --outline: the simulator gets the outline through its parameters, the
     sensor and the quality node through the object message; the graph equals the core loop

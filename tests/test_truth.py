@@ -160,6 +160,7 @@ def test_the_shipped_sample_matches_the_code(paper_run: dict[str, Any]) -> None:
     np.testing.assert_allclose(run.rod.theta[-1], obs.theta, rtol=0, atol=1e-12)
 
 
+@pytest.mark.heavy
 def test_the_recipe_reproduces_the_shipped_sample(tmp_path: Path) -> None:
     """bags/README.md's command, run as written (its bash block, into a temporary folder), makes
     the shipped sample again: the same topics and message counts. /diagnostics

@@ -19,6 +19,8 @@ from typing import Any
 import pytest
 import yaml
 
+pytestmark = pytest.mark.heavy(per_module=True)  # (its tests share one recorded paper run: one shard makes it)
+
 pytest.importorskip("rclpy")
 
 from conftest import fresh_domain_id  # noqa: E402

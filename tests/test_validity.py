@@ -74,6 +74,7 @@ def test_a_negative_muscle_stress_is_refused_in_one_line() -> None:
         assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "max_muscle_stress" in proc.stderr
 
 
+@pytest.mark.heavy
 def test_hold_reports_the_grasp_s_effort_and_validity() -> None:
     """The grasp's validity and effort, reported whether or not the released object is held (the
     same grasp either way; tests/test_holding.py sees them in a held run's report). Here an escape

@@ -19,6 +19,8 @@ from typing import Any
 import pytest
 import yaml
 
+pytestmark = pytest.mark.heavy(per_module=True)  # (its tests share one colcon workspace build: one shard builds it)
+
 pytest.importorskip("rclpy")
 pytest.importorskip("contgrasp_msgs.msg")
 if shutil.which("colcon", path=os.pathsep.join([str(Path(sys.prefix) / "bin"), os.environ.get("PATH", "")])) is None:
