@@ -11,7 +11,7 @@ import zlib
 import pytest
 
 
-def _shard() -> tuple[int, int] | None:
+def shard_from_env() -> tuple[int, int] | None:
     """``CONTGRASP_TEST_SHARD=K/N`` (CI: one value per interpreter), or None (every test)."""
     value = os.environ.get("CONTGRASP_TEST_SHARD", "")
     if not value:
@@ -22,20 +22,23 @@ def _shard() -> tuple[int, int] | None:
     return int(m.group(1)), int(m.group(2))
 
 
+def in_shard(item: pytest.Item, shard: tuple[int, int]) -> bool:
+    """Whether ``item`` runs in ``shard`` = (K, N): a test not marked ``heavy`` always; a heavy one
+    when a fixed hash of its id (of its file, for ``heavy(per_module=True)``: a file whose tests
+    share one costly fixture) is K - 1 modulo N, the same whatever else was collected."""
+    mark = item.get_closest_marker("heavy")
+    if mark is None:
+        return True
+    key = item.nodeid.split("::")[0] if mark.kwargs.get("per_module") else item.nodeid
+    return zlib.crc32(key.encode()) % shard[1] == shard[0] - 1
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """With ``CONTGRASP_TEST_SHARD=K/N`` keep the ``heavy`` tests of shard K only (every other test
-    runs in every shard). A test's shard is a fixed hash of its id, or of its file for
-    ``heavy(per_module=True)`` (a module whose tests share one costly fixture), so it is the same
-    whatever else was collected: the N shards together run every test at least once."""
-    shard = _shard()
+    """Keep the tests of this run's shard (:func:`shard_from_env`, :func:`in_shard`)."""
+    shard = shard_from_env()
     if shard is None:
         return
-    k, n = shard
-    keep, drop = [], []
-    for item in items:
-        mark = item.get_closest_marker("heavy")
-        key = item.nodeid.split("::")[0] if mark is not None and mark.kwargs.get("per_module") else item.nodeid
-        (drop if mark is not None and zlib.crc32(key.encode()) % n != k - 1 else keep).append(item)
+    drop = [item for item in items if not in_shard(item, shard)]
     if drop:
         config.hook.pytest_deselected(items=drop)
-        items[:] = keep
+        items[:] = [item for item in items if in_shard(item, shard)]

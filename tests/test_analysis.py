@@ -111,6 +111,7 @@ def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -
     assert summary["bag"]["sim_time_s"] == pytest.approx(summary["sim_time_s"], abs=1e-6)
 
 
+@pytest.mark.heavy
 def test_cli_writes_csv_and_plots(recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag, summary = recording
     out, plot = tmp_path / "csv", tmp_path / "run.png"

@@ -117,6 +117,7 @@ def _angular_momentum(system: RodSystem, state: RodState) -> float:
     return float(rod + body.mass * (x[0] * vb[1] - x[1] * vb[0]) + body.inertia * vb[2])
 
 
+@pytest.mark.heavy
 def test_rod_and_free_object_balance_angular_momentum_about_the_clamp() -> None:
     """No drag, no damping, no applied loads: the only external moment about the clamp is the
     clamp's couple ``-EI_0 kappa_0``, so the angular momentum of rod + free object changes by

@@ -20,6 +20,7 @@ def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([exe, *args], capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("obj", ["circle", "ellipse", "deformed"])
 def test_kinematics_json_and_plot(obj: str, tmp_path) -> None:  # type: ignore[no-untyped-def]
     png = tmp_path / f"{obj}.png"

@@ -66,6 +66,7 @@ def test_a_study_poses_scenario_is_the_graphs(tmp_path: Any) -> None:
                            "rod_simulator": {"duration": 3.0}, "grasp_controller": {"law": "reactive", "hold_dwell": 0.05}})
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("argv", [
     ["--control-period", "0.002", "--hold", "first-order", "--duration", "0.3", "--nodes", "51"],
     ["--law", "reactive", "--object-mode", "free", "--control-period", "0.002", "--hold", "first-order", "--duration", "0.5",

@@ -65,6 +65,7 @@ def test_launcher_usage_errors_are_one_line(argv: list[str]) -> None:
     assert line.count("error:") == 1
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("argv", [["contgrasp", "bag", "info", str(SAMPLE_BAG)], ["contgrasp", "kinematics", "--json"]])
 def test_a_reader_that_closed_stdout_gets_no_traceback(argv: list[str]) -> None:
     """``contgrasp bag info X | head -2``: the reader is gone before the output is; the command
@@ -174,6 +175,7 @@ def _simulate(argv: list[str]) -> subprocess.CompletedProcess[str]:
     return subprocess.run([str(BIN / "contgrasp"), "simulate", *argv, "--json"], capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.heavy
 def test_simulate_warns_once_for_an_unstable_zoh_and_not_for_first_order() -> None:
     zoh = _simulate(["--control-period", "0.002", "--duration", "0.01"])
     assert zoh.returncode == 0, zoh.stderr

@@ -336,6 +336,7 @@ def object_cases(draw: st.DrawFn) -> tuple[dict[str, Any], str | None, bool, Any
     return f, None, True, b
 
 
+@pytest.mark.heavy
 @counting
 def test_object_boundary(outcomes: Counter[str]) -> Callable[[], None]:
     """ObjectBoundary: an analytic kind rebuilds the very boundary boundary_to_msg described

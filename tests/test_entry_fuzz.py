@@ -163,6 +163,7 @@ outlines = st.one_of(
 )
 
 
+@pytest.mark.heavy
 @FAST
 @given(points=outlines, closed=st.booleans(), smoothing=st.one_of(st.just(0.0), num(0.0, 1e-3), st.just(1e-320)))
 def test_from_points(points, closed, smoothing) -> None:  # type: ignore[no-untyped-def]
@@ -404,6 +405,7 @@ def test_sweep_solver(problem, eta, max_iterations, gradient, initial, tol, targ
          target_cost=target_cost, time_budget=time_budget, finite=result_values)
 
 
+@pytest.mark.heavy
 @FAST
 @given(name=st.sampled_from(["circle", "ellipse", "deformed"]), rho0=st.floats(1e-9, 200.0), alpha0=st.floats(1e-9, np.pi - 1e-9),
        s_o0=st.floats(-100.0, 100.0), chi=st.floats(1e-9, 1e9), rho_d=st.one_of(st.none(), st.floats(-5.0, 50.0)),
@@ -785,6 +787,7 @@ CLI_SETTINGS = settings(max_examples=40, deadline=None,
                         suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 
 
+@pytest.mark.heavy
 @CLI_SETTINGS
 @given(data=st.data())
 def test_cli_kinematics(files, capsys, data) -> None:  # type: ignore[no-untyped-def]

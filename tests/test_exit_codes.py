@@ -261,6 +261,7 @@ def test_a_failing_write_exits_1(tmp_path: Path, argv: list[str], needle: str) -
     assert errors[0].startswith(f"contgrasp {command}: error: ") and needle in errors[0] and "File too large" in errors[0]
 
 
+@pytest.mark.heavy
 def test_the_same_commands_succeed_without_the_limit(tmp_path: Path) -> None:
     """Control for the test above: the limit, not the arguments, made them fail."""
     proc = _child(["bag", "recover", str(BAG), str(tmp_path / "rec.mcap"), "--json"])
@@ -513,6 +514,7 @@ def test_node_processes_use_the_lean_executor_whatever_the_environment(monkeypat
     assert run_node(stopping_node, args=[]) == 0
 
 
+@pytest.mark.heavy
 def test_node_with_bad_parameter_exits_2_and_recorder_with_failing_disk_exits_1(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Real node processes: a bad start-up parameter exits 2; a recorder whose writes fail
     (file-size limit) stops with exit 1 and one error line - the FatalNodeError must not be
@@ -571,6 +573,7 @@ def test_launcher_json_stays_clean_when_native_code_writes_to_stdout(monkeypatch
     assert json.loads(out)["settled"] is True and "Failed init_port" in err
 
 
+@pytest.mark.heavy
 def test_a_holding_law_that_cannot_close_is_refused_before_simulating(launched: list[dict[str, Any]],
                                                                       capsys: pytest.CaptureFixture[str]) -> None:
     """A 35 mm circle from the paper's base: the holding law's cage wraps 2.8 rad of it at rest

@@ -5,7 +5,10 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
 
+
+@pytest.mark.heavy
 def test_importing_and_drawing_figures_keeps_the_users_backend(tmp_path) -> None:
     """A notebook's backend survives importing every figure module and saving a figure."""
     code = f"""
@@ -214,6 +217,7 @@ def test_fig2_labels_legend_and_every_curve_inside(name: str) -> None:
     assert kappa_axes.get_ylim()[1] >= float(np.max(result.kappa))
 
 
+@pytest.mark.heavy
 def test_fig3_labels_legend_colour_bar_and_title() -> None:
     from contgrasp_core.figures.quality_map import quality_map_figure
     from contgrasp_core.objects import ObjectSpec
@@ -381,6 +385,7 @@ def test_quality_map_ties_go_to_the_smallest_polar_angle() -> None:
     assert best_grid_pose(grid) == (2, 0)
 
 
+@pytest.mark.heavy
 def test_circle_map_optimum_is_at_the_smallest_polar_angle_on_every_run() -> None:
     """A circle's map is flat along psi up to the solves' last digits: the optimum reported is
     the pose at psi = 0 (the tie rule), not wherever those digits peak."""

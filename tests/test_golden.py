@@ -30,6 +30,7 @@ def close(got: object, want: object, atol: float, rtol: float) -> None:
     np.testing.assert_allclose(g, w, atol=atol, rtol=rtol, equal_nan=True)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("name,atol,rtol", [
     ("lockstep_paper_run", 1e-9, 0.0),        # metres and radians: within 1 nm
     ("closed_loop_continuous", 1e-9, 0.0),

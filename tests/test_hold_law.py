@@ -279,6 +279,7 @@ def test_the_depth_regulation_closes_when_the_contact_is_shallow_and_opens_when_
     assert off.depth_offset == 0.0
 
 
+@pytest.mark.heavy
 def test_with_depth_regulation_the_free_object_rests_pressed_squeeze_deep() -> None:
     """(H7) closed: the free circle caged, closed on and held with the depth regulation (gain
     10/s, stick-slip friction mu = 0.5: without friction a deeper squeeze pushes the circle out
@@ -306,6 +307,7 @@ def test_with_depth_regulation_the_free_object_rests_pressed_squeeze_deep() -> N
     assert np.hypot(*(b1.q[:2] - b0.q[:2])) < 1e-3
 
 
+@pytest.mark.heavy
 def test_the_paper_law_pushes_the_same_free_object_away() -> None:
     """The baseline, measured the same way: the paper's law (rho_d = r) from the same start
     has pushed the free object more than a centimetre within 2 s and it is still moving."""
@@ -339,6 +341,7 @@ def test_released_free_the_holding_law_holds_with_a_symmetric_stiffness_and_the_
     assert paper.release_reason != ""
 
 
+@pytest.mark.heavy
 def test_bad_law_parameters_are_refused_with_one_clear_line() -> None:
     for bad in (dict(stiffness_gain=-1.0), dict(squeeze=-1e-4), dict(clearance=0.0), dict(close_gap=0.007),
                 dict(wrap_angle=2.0), dict(mu1=float("nan")), dict(close_rate=True), dict(depth_gain=-2.0),

@@ -248,6 +248,7 @@ def _children(pid: int) -> list[int]:
     return [int(c) for c in text.split()]
 
 
+@pytest.mark.heavy
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads the process tree from /proc (Linux)")
 def test_ctrl_c_stops_a_study_with_two_workers_at_once(tmp_path: Path) -> None:
     """SIGINT to the study's process group (a terminal's Ctrl-C) while two workers compute:

@@ -199,6 +199,7 @@ def test_read_only_inputs_use_the_compiled_signature() -> None:
     assert after == before
 
 
+@pytest.mark.heavy
 def test_load_sensing_loads_the_signature_the_sensing_uses() -> None:
     """contact.load_sensing (the ROS boundary sensor's start-up) loads the one compiled signature
     that sensing a rod state uses later: a fresh process senses the paper's arm without

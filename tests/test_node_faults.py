@@ -638,6 +638,7 @@ def test_diagnostics_update_publishes_on_a_change_at_once_and_otherwise_a_few_ti
     assert len(published()) == 4
 
 
+@pytest.mark.heavy
 def test_diagnostics_report_drops_by_reason(make) -> None:  # type: ignore[no-untyped-def]
     """The first drop is published at once, later ones at most once per wall second; keys are
     ``dropped_messages`` and ``dropped: <topic>: <reason>``; the simulator keeps its own keys."""

@@ -188,6 +188,7 @@ def test_the_damper_is_a_maxwell_element_on_the_deviation_from_the_close_on(pape
         np.testing.assert_allclose(out.couple + u, want, rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.heavy
 def test_the_scenario_builds_the_law_and_its_settings_travel() -> None:
     """``law hold`` is a law of the scenario: its controller is a fresh playback at ``plan_gain``;
     the hold settings apply to it (the playback's refused under the paper's law and the reactive

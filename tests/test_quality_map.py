@@ -76,6 +76,7 @@ def test_executors_give_identical_maps() -> None:
         np.testing.assert_array_equal(other.Q, serial.Q)
 
 
+@pytest.mark.heavy
 def test_nelder_mead_improves_on_the_grid_within_bounds(tmp_path) -> None:  # type: ignore[no-untyped-def]
     spec = MapSpec("ellipse", psi_steps=6, d_steps=2, **FAST)
     qm = quality_map(spec, executor="serial", optimise=True)

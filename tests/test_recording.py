@@ -519,6 +519,7 @@ def test_replay_reproduces_sequence_and_timing(tmp_path: Path) -> None:
     assert np.median(np.abs(err)) < 0.01 and np.max(np.abs(err)) < 0.1, err
 
 
+@pytest.mark.heavy
 def test_shipped_sample_analysis_reproduces_its_summary() -> None:
     """`contgrasp analyze bags/paper_grasp.mcap --json` gives back what the launcher printed when
     the sample was recorded, and the quality recomputed from the recorded rod states matches the
@@ -647,6 +648,7 @@ def test_recorder_does_not_count_interleaved_publishers_as_loss(ros_context, tmp
             n.destroy_node()
 
 
+@pytest.mark.heavy
 def test_replay_window_and_loop(tmp_path: Path) -> None:
     """--start/--end select a log-time window; --loop starts over until interrupted."""
     path = tmp_path / "small.mcap"
@@ -706,6 +708,7 @@ def _after_300_states(rec: subprocess.Popen[str], env: dict[str, str]) -> Iterat
                 p.wait(timeout=30)
 
 
+@pytest.mark.heavy
 def test_recorder_finalises_through_repeated_ctrl_c(tmp_path: Path) -> None:
     """Ctrl-C under ros2 launch reaches a node twice (the terminal's and the one launch forwards):
     later SIGINTs during the clean-up are ignored, so the node exits 0 with no traceback and the
@@ -724,6 +727,7 @@ def test_recorder_finalises_through_repeated_ctrl_c(tmp_path: Path) -> None:
     assert steps == list(range(300))
 
 
+@pytest.mark.heavy
 def test_recorder_finalises_on_sigterm(tmp_path: Path) -> None:
     """(With a split every 0.2 s: the messages span several files, none lost at the splits.)"""
     env = ros_env(fresh_domain_id())

@@ -143,6 +143,7 @@ def test_composed_nodes_run_the_same_graph_in_fewer_processes(tmp_path: Path) ->
     assert out["final_quality"] is not None
 
 
+@pytest.mark.heavy
 def test_launcher_reports_a_node_that_fails_to_start(tmp_path: Path) -> None:
     """An invalid parameter stops that node at start-up (exit 2); the launcher names it, stops
     the others and exits non-zero with the failing node's code."""
@@ -260,6 +261,7 @@ def test_launcher_rejects_bad_usage(tmp_path: Path) -> None:
         assert proc.returncode == 2 and "--max-bag" in proc.stderr and "Traceback" not in proc.stderr, bad_split
 
 
+@pytest.mark.heavy
 def test_text_summary_reads_like_the_contgrasp_subcommands(tmp_path: Path) -> None:
     """Without --json the launcher prints ``key.sub: value`` lines, floats to 6 significant digits,
     as every ``contgrasp`` subcommand does: no Python dict, no 15-digit float."""

@@ -284,6 +284,7 @@ def test_rod_simulator_free_running_starts_with_the_first_couple_then_runs_on_wa
     assert [m.step for m in states[-3:]] == sorted(m.step for m in states[-3:])
 
 
+@pytest.mark.heavy
 def test_rod_simulator_free_running_steps_with_the_answer_to_each_state_when_it_comes_within_the_wait(graph) -> None:  # type: ignore[no-untyped-def]
     """Free-running with ``couple_wait``: each step waits for the couple answering its own
     state, so a controller that answers in time gives exactly the lock-step run (each state equal
@@ -393,6 +394,7 @@ def test_boundary_sensor_senses_a_state_that_arrived_before_the_object(graph) ->
     np.testing.assert_array_equal(got[0].rho, sense(shape, obj, 0.01).rho)
 
 
+@pytest.mark.heavy
 def test_the_light_nodes_and_the_launcher_import_neither_scipy_nor_the_rod_engine() -> None:
     """Start-up (docs/design.md section 8): only the simulator needs scipy, numba and the rod
     integrator; the sensor, controller and quality processes and the launcher import none of them

@@ -1,73 +1,74 @@
-"""CI's split of the heavy tests (tests/shard.py): the shards together run every test, the heavy
-ones in exactly one shard, the others in all, a file marked per module in one piece."""
+"""CI's split of the heavy tests (tests/shard.py): the shards together run every test, each heavy
+one in exactly one shard, the others in all, a file marked per module in one piece."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-from pathlib import Path
+from dataclasses import dataclass, field
+from typing import Any
 
 import pytest
 
-TESTS = Path(__file__).resolve().parent
-
-FILES = {
-    "test_a.py": """
-import pytest
-
-def test_light():
-    pass
-
-@pytest.mark.heavy
-@pytest.mark.parametrize("i", range(12))
-def test_heavy(i):
-    pass
-""",
-    "test_b.py": """
-import pytest
-
-pytestmark = pytest.mark.heavy(per_module=True)
-
-@pytest.mark.parametrize("i", range(12))
-def test_together(i):
-    pass
-""",
-}
+from shard import in_shard, pytest_collection_modifyitems, shard_from_env
 
 
-def collected(tmp_path: Path, shard: str | None) -> subprocess.CompletedProcess[str]:
-    env = {k: v for k, v in os.environ.items() if k != "CONTGRASP_TEST_SHARD"}
-    env["PYTHONPATH"] = os.pathsep.join([str(TESTS), env.get("PYTHONPATH", "")])
-    if shard is not None:
-        env["CONTGRASP_TEST_SHARD"] = shard
-    return subprocess.run([sys.executable, "-m", "pytest", "-p", "shard", "-p", "no:cacheprovider", "--collect-only", "-q",
-                           "-o", "markers=heavy", "--rootdir", str(tmp_path), str(tmp_path)],
-                          capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
+@dataclass
+class Item:
+    """What the shard reads of a collected test: its id and its closest ``heavy`` mark."""
+
+    nodeid: str
+    mark: Any = None
+
+    def get_closest_marker(self, name: str) -> Any:
+        return self.mark if name == "heavy" else None
 
 
-def ids(proc: subprocess.CompletedProcess[str]) -> set[str]:
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return {line for line in proc.stdout.splitlines() if "::" in line}
+@dataclass
+class Config:
+    deselected: list[Any] = field(default_factory=list)
+
+    @property
+    def hook(self) -> Any:
+        return self
+
+    def pytest_deselected(self, items: list[Any]) -> None:
+        self.deselected += items
 
 
-@pytest.mark.parametrize("n", [2, 3])
-def test_the_shards_together_run_every_test_and_each_heavy_one_once(tmp_path: Path, n: int) -> None:
-    for name, text in FILES.items():
-        (tmp_path / name).write_text(text)
-    every = ids(collected(tmp_path, None))
-    assert len(every) == 25
-    shards = [ids(collected(tmp_path, f"{k}/{n}")) for k in range(1, n + 1)]
-    assert set().union(*shards) == every
+def items() -> list[Item]:
+    light = [Item(f"tests/test_a.py::test_light_{i}") for i in range(5)]
+    heavy = [Item(f"tests/test_a.py::test_heavy[{i}]", pytest.mark.heavy.mark) for i in range(40)]
+    together = [Item(f"tests/test_b.py::test_together[{i}]", pytest.mark.heavy(per_module=True).mark) for i in range(6)]
+    return light + heavy + together
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_the_shards_together_run_every_test_and_each_heavy_one_once(monkeypatch: pytest.MonkeyPatch, n: int) -> None:
+    every = items()
+    shards = []
+    for k in range(1, n + 1):
+        monkeypatch.setenv("CONTGRASP_TEST_SHARD", f"{k}/{n}")
+        kept, config = items(), Config()
+        pytest_collection_modifyitems(config, kept)  # type: ignore[arg-type]
+        assert {i.nodeid for i in kept} | {i.nodeid for i in config.deselected} == {i.nodeid for i in every}
+        shards.append({i.nodeid for i in kept})
     for test in every:
-        runs = sum(test in s for s in shards)
-        assert runs == (n if test.endswith("test_light") else 1), test
-    assert sum(any("test_heavy" in t for t in s) for s in shards) >= 2  # (twelve heavy tests are spread out)
+        runs = sum(test.nodeid in s for s in shards)
+        assert runs == (n if test.mark is None else 1), test
+    heavy_per_shard = [sum("test_heavy" in t for t in s) for s in shards]
+    assert all(c > 0 for c in heavy_per_shard)  # (forty heavy tests are spread over every shard)
     assert sum(any("test_b.py" in t for t in s) for s in shards) == 1  # (a file marked per module stays in one piece)
 
 
-@pytest.mark.parametrize("bad", ["0/2", "3/2", "a/b"])
-def test_a_malformed_shard_is_a_usage_error(tmp_path: Path, bad: str) -> None:
-    (tmp_path / "test_a.py").write_text(FILES["test_a.py"])
-    proc = collected(tmp_path, bad)
-    assert proc.returncode == 4 and "CONTGRASP_TEST_SHARD must be K/N with 1 <= K <= N" in proc.stderr, proc.stderr
+def test_without_a_shard_every_test_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("CONTGRASP_TEST_SHARD", raising=False)
+    kept, config = items(), Config()
+    pytest_collection_modifyitems(config, kept)  # type: ignore[arg-type]
+    assert len(kept) == len(items()) and not config.deselected
+    assert in_shard(Item("tests/test_x.py::test_light"), (2, 2))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("bad", ["0/2", "3/2", "a/b", "1"])
+def test_a_malformed_shard_is_a_usage_error(monkeypatch: pytest.MonkeyPatch, bad: str) -> None:
+    monkeypatch.setenv("CONTGRASP_TEST_SHARD", bad)
+    with pytest.raises(pytest.UsageError, match=r"CONTGRASP_TEST_SHARD must be K/N with 1 <= K <= N"):
+        shard_from_env()

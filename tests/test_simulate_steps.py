@@ -23,6 +23,7 @@ def test_simulate_json_reports_steps_and_wall_time(capsys: pytest.CaptureFixture
     assert isinstance(out["wall_time_s"], float) and out["wall_time_s"] > 0.0
 
 
+@pytest.mark.heavy
 def test_the_first_order_loop_senses_a_free_object_where_it_is() -> None:
     """``simulate --hold first-order`` with a free object steps the loop as the ROS graph does:
     the arm sensed against the object where it is at each state (it once sensed the start pose:

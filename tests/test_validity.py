@@ -45,6 +45,7 @@ def _simulate(*args: str) -> tuple[dict, str]:
     return json.loads(proc.stdout), proc.stderr
 
 
+@pytest.mark.heavy
 def test_a_coil_round_a_small_pin_keeps_apart_and_is_not_settled_inside_the_pin() -> None:
     """The paper's law round a 2 mm pin: the turns keep apart (the final shape's smallest gap
     between parts that are not neighbours above -0.5 mm); the 1 mm tip is driven into the pin
@@ -56,6 +57,7 @@ def test_a_coil_round_a_small_pin_keeps_apart_and_is_not_settled_inside_the_pin(
     assert len(err.strip().splitlines()) == 1 and "left the model's validity" in err
 
 
+@pytest.mark.heavy
 def test_the_paper_run_is_valid_and_reports_its_effort() -> None:
     out, err = _simulate()
     assert out["settled"] and out["validity"] == {"valid": True, "broken": [], "max_penetration_ratio": out["max_penetration_ratio"],
