@@ -161,7 +161,8 @@ run_tests() {
         echo "contgrasp.sh: CONTGRASP_TEST_WORKERS must be a whole number, got '$workers'" >&2
         return 2
     fi
-    "$py" -m pytest -n "$workers" --dist loadfile "$@"
+    # (the files in the order tests/shard.py gives them: the heaviest first)
+    "$py" -m pytest -n "$workers" --dist loadfile --no-loadscope-reorder "$@"
 }
 
 cmd="${1:-}"

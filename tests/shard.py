@@ -1,12 +1,14 @@
-"""CI's split of the heavy tests between its interpreters (a pytest plugin; tests/conftest.py
-loads its hook): with ``CONTGRASP_TEST_SHARD=K/N`` a test marked ``heavy`` runs in shard K only,
-every other test in every shard; without it every test runs (docs/install.md)."""
+"""The heavy tests' place in a run (a pytest plugin; tests/conftest.py loads its hook): with
+``CONTGRASP_TEST_SHARD=K/N`` (CI: one shard per interpreter) a test marked ``heavy`` runs in shard
+K only, every other test in every shard; and the files with the most heavy tests go first, so
+that two workers do not end on one long file (docs/install.md)."""
 
 from __future__ import annotations
 
 import os
 import re
 import zlib
+from collections import Counter
 
 import pytest
 
@@ -33,12 +35,21 @@ def in_shard(item: pytest.Item, shard: tuple[int, int]) -> bool:
     return zlib.crc32(key.encode()) % shard[1] == shard[0] - 1
 
 
+def heavy_first(items: list[pytest.Item]) -> list[pytest.Item]:
+    """``items`` with the files holding the most heavy tests first, each file's own order kept
+    (the longest jobs first: pytest-xdist then hands out whole files in this order, with
+    ``--no-loadscope-reorder``; a file marked per module counts each of its tests as heavy)."""
+    heavy = Counter(item.nodeid.split("::")[0] for item in items if item.get_closest_marker("heavy") is not None)
+    return sorted(items, key=lambda item: -heavy[item.nodeid.split("::")[0]])
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Keep the tests of this run's shard (:func:`shard_from_env`, :func:`in_shard`)."""
+    """Keep the tests of this run's shard (:func:`shard_from_env`, :func:`in_shard`), heaviest
+    files first (:func:`heavy_first`)."""
     shard = shard_from_env()
-    if shard is None:
-        return
-    drop = [item for item in items if not in_shard(item, shard)]
-    if drop:
-        config.hook.pytest_deselected(items=drop)
-        items[:] = [item for item in items if in_shard(item, shard)]
+    if shard is not None:
+        drop = [item for item in items if not in_shard(item, shard)]
+        if drop:
+            config.hook.pytest_deselected(items=drop)
+            items[:] = [item for item in items if in_shard(item, shard)]
+    items[:] = heavy_first(items)

@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from shard import in_shard, pytest_collection_modifyitems, shard_from_env
+from shard import heavy_first, in_shard, pytest_collection_modifyitems, shard_from_env
 
 
 @dataclass
@@ -72,3 +72,17 @@ def test_a_malformed_shard_is_a_usage_error(monkeypatch: pytest.MonkeyPatch, bad
     monkeypatch.setenv("CONTGRASP_TEST_SHARD", bad)
     with pytest.raises(pytest.UsageError, match=r"CONTGRASP_TEST_SHARD must be K/N with 1 <= K <= N"):
         shard_from_env()
+
+
+def test_the_files_with_the_most_heavy_tests_go_first_each_in_its_own_order() -> None:
+    heavy, per_module = pytest.mark.heavy.mark, pytest.mark.heavy(per_module=True).mark
+    collected = [Item("tests/test_z.py::test_1"), Item("tests/test_z.py::test_2"),
+                 Item("tests/test_x.py::test_1"), Item("tests/test_x.py::test_2", heavy), Item("tests/test_x.py::test_3"),
+                 Item("tests/test_y.py::test_1", heavy), Item("tests/test_y.py::test_2", heavy),
+                 Item("tests/test_w.py::test_1", per_module), Item("tests/test_w.py::test_2", per_module),
+                 Item("tests/test_w.py::test_3", per_module)]
+    order = [i.nodeid for i in heavy_first(collected)]  # type: ignore[arg-type]
+    assert order == ["tests/test_w.py::test_1", "tests/test_w.py::test_2", "tests/test_w.py::test_3",
+                     "tests/test_y.py::test_1", "tests/test_y.py::test_2",
+                     "tests/test_x.py::test_1", "tests/test_x.py::test_2", "tests/test_x.py::test_3",
+                     "tests/test_z.py::test_1", "tests/test_z.py::test_2"]
