@@ -342,3 +342,4 @@ def test_a_recorder_lost_mid_run_leaves_the_run_unrecorded_and_the_launcher_says
     assert code == 1 and out["exit_codes"]["mcap_recorder"] == -9, "".join(launch.lines[-40:])
     assert out["simulator_state"] == "finished" and out["steps"] > 0
     assert out["error"] == "the recorder exited with code -9: the run is not recorded (--allow-unrecorded accepts that)"
+    assert f"contgrasp-launch: error: {out['error']}\n" in launch.lines  # (the failure in one line on stderr too)

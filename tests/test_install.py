@@ -102,7 +102,8 @@ def test_the_core_subcommands_run(library: dict[str, object]) -> None:
 
 
 @pytest.mark.parametrize("argv", [["contgrasp", "analyze", "x.mcap"], ["contgrasp", "bag", "info", str(BAG)],
-                                  ["contgrasp-launch", "--no-record"], ["contgrasp-simulator"]])
+                                  ["contgrasp-launch", "--no-record"], ["contgrasp-simulator"],
+                                  ["../lib/contgrasp_ros/rod_simulator"]])  # (the last: what `ros2 run` runs)
 def test_a_ros_command_says_what_to_install(library: dict[str, object], argv: list[str]) -> None:
     out = _run(library, *argv)
     assert out.returncode == 2, out.stderr

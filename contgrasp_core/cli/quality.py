@@ -73,9 +73,11 @@ def format_text(out: dict[str, Any]) -> str:
     if not out["optimum"]:
         lines.append("optimum: not computed (--no-optimise) or no valid pose")
     lines.append(f"wall_time_s: {out['wall_time_s']:.3g} ({out['n_solves']} solves, executor {out['executor']})")
-    for key in ("saved", "plot"):
-        if out.get(key):
-            lines.append(f"{key}: {out[key]}")
+    if out.get("saved"):  # (save_map writes the arrays and the metadata beside them)
+        saved = Path(out["saved"])
+        lines.append(f"saved: {saved.with_suffix('.npz')} and {saved.with_suffix('.json')}")
+    if out.get("plot"):
+        lines.append(f"plot: {out['plot']}")
     lines.append("(in --json only: psi, d, Q1, Q2, Q3, valid, optimum arm shapes, spec)")
     return "\n".join(lines)
 

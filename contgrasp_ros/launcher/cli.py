@@ -334,6 +334,8 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
                 "final_quality", "bag", "restarts", "faults", "exit_codes", "error")
         lines, _ = summary_lines({key: summary[key] for key in keys if key in summary})
         print("\n".join(lines))
+    if code != 0 and summary.get("error"):  # (a failed run says so in one line on stderr too, as every command does)
+        print(f"contgrasp-launch: error: {summary['error']}", file=sys.stderr)
     return code
 
 

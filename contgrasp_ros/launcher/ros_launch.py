@@ -99,6 +99,8 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[GroupAction | N
     arg = {name: LaunchConfiguration(name).perform(context) for name in
            ("params_file", "object", "outline", "law", "object_mode", "max_muscle_stress", "friction", "lockstep", "duration", "compose",
             "record", "bag", "on_finish", "namespace")}
+    if LaunchConfiguration("rviz").perform(context) == "true":
+        _require_rviz()
     params_file = Path(arg["params_file"])
     params = load_params(params_file)
     record = arg["record"] == "true"
@@ -141,6 +143,18 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[GroupAction | N
     if not arg["namespace"].strip("/"):
         return graph
     return [GroupAction([PushRosNamespace(arg["namespace"]), SetRemap(topics.CLOCK, topics.namespace_clock(arg["namespace"])), *graph])]
+
+
+def _require_rviz() -> None:
+    """``rviz:=true`` needs RViz 2 (a desktop install's ``rviz2``): refused before any node starts,
+    where ``launch`` would start the nodes, then fail on RViz and leave them running."""
+    from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+
+    try:
+        get_package_prefix("rviz2")
+    except PackageNotFoundError:
+        raise InvalidParameterError("rviz:=true needs RViz 2, the package rviz2 (apt install ros-jazzy-rviz2), "
+                                    "which is not installed: launch with rviz:=false") from None
 
 
 def _override_path() -> Path:
