@@ -3,7 +3,7 @@
 The library (:mod:`contgrasp_core`) installs anywhere with ``pip install contgrasp``; this layer
 adds the recording stack (extra ``ros``: mcap, foxglove-sdk) and runs on ROS 2 Jazzy, either a
 ROS install (its rclpy) or the pinned PyPI wheels (extra ``ros-wheels``, Linux x86_64), plus the
-``contgrasp_msgs`` interface package built for it (README, "Install").
+``contgrasp_msgs`` interface package built for it (docs/install.md).
 """
 
 from __future__ import annotations
@@ -36,11 +36,11 @@ def missing(exc: ModuleNotFoundError) -> MissingDependencyError | None:
     if top == "contgrasp_msgs":
         return MissingDependencyError(
             "needs the contgrasp_msgs interface package: colcon build in a ROS 2 workspace, "
-            "or python msgs_schema/build_into_venv.py in this environment (README, 'Install')")
+            "or python msgs_schema/build_into_venv.py in this environment (docs/install.md)")
     if _is_ros(top):
         return MissingDependencyError(
             f"needs ROS 2 Jazzy (module {top!r} is missing): source a ROS 2 Jazzy install, "
-            "or on Linux x86_64 pip install 'contgrasp[ros,ros-wheels]' (README, 'Install')")
+            "or on Linux x86_64 pip install 'contgrasp[ros,ros-wheels]' (docs/install.md)")
     return None
 
 
