@@ -47,6 +47,7 @@ IMPORT_KEYS = {
     "contgrasp_msgs": "contgrasp_msgs",
     "launch": "launch",
     "launch_ros": "launch_ros",
+    "ament_index_python": "ament_index_python",
 }
 """Top-level module imported -> the rosdep key that installs it."""
 
