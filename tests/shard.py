@@ -48,8 +48,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     files first (:func:`heavy_first`)."""
     shard = shard_from_env()
     if shard is not None:
-        drop = [item for item in items if not in_shard(item, shard)]
+        keep: list[pytest.Item] = []
+        drop: list[pytest.Item] = []
+        for item in items:
+            (keep if in_shard(item, shard) else drop).append(item)
         if drop:
             config.hook.pytest_deselected(items=drop)
-            items[:] = [item for item in items if in_shard(item, shard)]
+        items[:] = keep
     items[:] = heavy_first(items)

@@ -220,6 +220,7 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
     rec: dict[str, list] = {k: [] for k in ("t", "x", "theta", "rho", "alpha", "couple", "pen", "ratio", "speed", "q")}
     iters = 0
     steps = substeps = 0
+    limit = config.max_iterations_per_period
     dt_next = dt
     settle = SettleDetector(config.settle_speed, config.settle_hold, config.min_time)
     stop_at_settle = stops_at_settle(system)
@@ -263,7 +264,6 @@ def _run(system: RodSystem, obstacle: Obstacle, gains: FeedbackGains, config: Cl
         iters += info["iterations"]
         steps += 1
         substeps += info["substeps"]
-        limit = config.max_iterations_per_period
         if limit is not None and steps >= 100 and iters > limit * steps:
             raise StepFailedError(f"the rod engine took {iters} Newton iterations in {substeps} steps for {steps} control "
                                   f"periods by t = {st.t:.3g} s, more than {limit:g} per period: its steps fail and shrink "

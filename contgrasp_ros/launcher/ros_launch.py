@@ -98,8 +98,8 @@ def _nodes(context: LaunchContext, nodes: Sequence[str]) -> list[GroupAction | N
     ``/clock`` remapped to the namespace's clock on every node of the group)."""
     arg = {name: LaunchConfiguration(name).perform(context) for name in
            ("params_file", "object", "outline", "law", "object_mode", "max_muscle_stress", "friction", "lockstep", "duration", "compose",
-            "record", "bag", "on_finish", "namespace")}
-    if LaunchConfiguration("rviz").perform(context) == "true":
+            "record", "bag", "on_finish", "namespace", "rviz")}
+    if arg["rviz"] == "true":
         _require_rviz()
     params_file = Path(arg["params_file"])
     params = load_params(params_file)
