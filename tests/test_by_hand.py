@@ -393,7 +393,7 @@ def test_the_container_help() -> None:
 @pytest.mark.heavy
 @pytest.mark.parametrize("ack_timeout", [10.0, 1.0])
 def test_a_monitor_starved_at_the_end_of_the_run_still_hears_it(graph: Graph, paper_core: Any, ack_timeout: float) -> None:
-    """A monitor in a process of its own is stopped (SIGSTOP) from the run's first steps until
+    """A monitor in a process of its own is stopped (SIGSTOP) from past the run's middle until
     3 s after the run finished: longer than the 1 s the nodes wait before exiting, so what it
     lost while stopped is repaired only if the writers still exist when it resumes. With
     ``on_finish:=exit`` every node waits for its subscribers' acknowledgements
@@ -408,7 +408,10 @@ def test_a_monitor_starved_at_the_end_of_the_run_still_hears_it(graph: Graph, pa
             graph.start(node, "--ros-args", "-p", "on_finish:=exit", "-p", f"finish_ack_timeout:={ack_timeout}",
                         *(("-p", "min_subscribers:=4") if node == "rod_simulator" else ()))
         assert probe.stdout is not None and probe.stdout.readline() == "ready\n"  # (it hears both topics)
-        assert graph.spin_until(lambda: graph.status.get("state") is not None, timeout=60), graph.post_mortem()
+        # (stopped past step 600 of 1097, not from the first steps: a process stopped longer than
+        # the DDS participant lease, 20 s, is dropped by the writers, whose acknowledgements then
+        # no longer wait for it; under load the run alone once took 21 s)
+        assert graph.spin_until(lambda: int(graph.status.get("step") or 0) >= 600, timeout=240), graph.post_mortem()
         probe.send_signal(signal.SIGSTOP)
         assert graph.status["state"] == "running", graph.status  # (stopped before the run's end)
         assert graph.spin_until(lambda: graph.status.get("state") == "finished", timeout=240), graph.post_mortem()
