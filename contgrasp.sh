@@ -65,6 +65,7 @@ py="$venv/bin/python"
 stamp="$venv/.contgrasp-setup"
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+user_ros_log_dir="${ROS_LOG_DIR:-}"
 export ROS_LOG_DIR="${ROS_LOG_DIR:-$here/results/ros_log}"
 export MPLBACKEND=Agg
 # the ament index search path (what sourcing a ROS 2 setup script provides): this venv
@@ -91,12 +92,12 @@ setup() {
     if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
         echo "== installing contgrasp and its dependencies into ${venv#"$here"/}"
         # (pip's own messages, the build backend's warnings among them, are kept in the venv's
-        # pip-install.log and shown only when the install fails; --no-compile: the byte code of the
-        # few modules a run imports is written at their first import, not that of every module of
-        # every dependency: ~18 CPU-s less per fresh venv, a CI leg's)
+        # pip-install.log and shown only when the install fails; pip writes the dependencies' byte
+        # code, which Python does not where PYTHONDONTWRITEBYTECODE is set: without it every
+        # process would compile numpy, scipy and rclpy again, ~1 CPU-s for each node started)
         local log="$venv/pip-install.log"
         if ! { "$py" -m pip install --quiet --upgrade pip &&
-            "$py" -m pip install --quiet --no-compile -e ".[ros,ros-wheels,test,msgs,bench]"; } >"$log" 2>&1; then
+            "$py" -m pip install --quiet -e ".[ros,ros-wheels,test,msgs,bench]"; } >"$log" 2>&1; then
             cat "$log" >&2
             echo "contgrasp.sh: installing the project failed (log: $log)" >&2
             exit 1
@@ -114,6 +115,8 @@ setup() {
     fi
     "$py" msgs_schema/build_into_venv.py
     "$py" -m contgrasp_ros.install_resources >/dev/null  # editable installs skip data files
+    # the project's own byte code too (an editable install compiles none; only what changed)
+    "$py" -m compileall -q -j 0 contgrasp_core contgrasp_ros tests >/dev/null
     # Compile the rod engine's numba kernels once (a tiny simulation; numba caches the machine code
     # in contgrasp_core/rod/__pycache__), so the first real run does not pay ~10-17 s of compilation;
     # when the cache is current this only loads it (under a second).
@@ -152,6 +155,8 @@ run_checks() {
 
 run_tests() {
     run_checks || return 1
+    # the tests' ROS logs go to a temporary directory (tests/conftest.py), not results/, unless set
+    [ -n "$user_ros_log_dir" ] || unset ROS_LOG_DIR
     # A distinct DDS domain per test run keeps concurrent runs apart (ROS tests pick their own too).
     export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-$(( ($$ % 90) + 10 ))}"
     # Two worker processes (pytest-xdist; CONTGRASP_TEST_WORKERS=1 for one, 0 for none), each

@@ -26,6 +26,7 @@ __all__ = [
     "refuse_ignored",
     "one_line",
     "exit_code",
+    "interruption",
 ]
 
 
@@ -33,6 +34,23 @@ def one_line(exc: BaseException) -> str:
     """The exception's message on one line (a parser's multi-line message joined with ' | '),
     as the command-line tools print it."""
     return " | ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+
+
+def interruption(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C behind ``exc``: the KeyboardInterrupt in its chain of causes, or None.
+
+    A SIGINT handled while a compiled (numba) function boxes its result is not raised by the
+    call: it comes out as ``SystemError("CPUDispatcher(...) returned a result with an exception
+    set")`` caused by the KeyboardInterrupt (seen when ``frames_nodes`` was interrupted). That is
+    a stop, not a failure of the computation."""
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return None
 
 
 class ContgraspError(Exception):

@@ -14,9 +14,12 @@ from typing import ParamSpec, TypeVar
 
 from contgrasp_core.errors import MissingDependencyError
 
-__all__ = ["missing", "guarded"]
+__all__ = ["INTERFACES", "missing", "guarded"]
 
 RECORDING = frozenset({"mcap", "mcap_ros2", "zstandard", "lz4", "foxglove"})
+INTERFACES = frozenset({"builtin_interfaces", "rcl_interfaces", "std_msgs", "std_srvs", "rosgraph_msgs",
+                        "diagnostic_msgs", "geometry_msgs", "visualization_msgs", "contgrasp_msgs"})
+"""The interface packages this layer imports (each an exec_depend of package.xml)."""
 
 P = ParamSpec("P")
 R = TypeVar("R")

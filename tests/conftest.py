@@ -13,7 +13,13 @@ from typing import Any
 
 import pytest
 from hypothesis import settings
-from shard import pytest_collection_modifyitems  # noqa: F401 - CI shares the heavy tests out (shard.py)
+from shard import (  # noqa: F401 - CI shares the heavy tests out (shard.py)
+    pytest_addoption,
+    pytest_collection_modifyitems,
+    pytest_runtest_logreport,
+    shard_from_env,
+    store_durations,
+)
 
 # CI (.ci/run sets HYPOTHESIS_PROFILE=ci) draws the same examples every run, so a submission's
 # verdict does not depend on the draw; developers' runs keep exploring new random examples.
@@ -34,17 +40,21 @@ _domains = itertools.count()
 # a benchmark's, say) rarely share a domain, and graphs on different domains cannot cross-talk
 _BASE = random.SystemRandom().randint(0, 100)
 # pytest-xdist's workers (bash contgrasp.sh test runs two) each take the domains of their own
-# residue class: worker i of W uses only the domains congruent to i + 1 mod W, never another's
+# residue class, and so do the shards CI runs at once (.ci/run): worker i of W in shard K of N
+# uses only the domains congruent to (K - 1) W + i + 1 modulo N W, never another's
+_SHARD, _SHARDS = shard_from_env() or (1, 1)
 _WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
-_WORKER = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw"))
+_CLASSES = _SHARDS * _WORKERS
+_CLASS = (_SHARD - 1) * _WORKERS + int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw"))
 
 
 def fresh_domain_id() -> int:
-    """A ROS_DOMAIN_ID in 1..101 for one test: distinct within this run, across its workers too."""
-    return ((_BASE + next(_domains)) % (101 // _WORKERS)) * _WORKERS + _WORKER + 1
+    """A ROS_DOMAIN_ID in 1..101 for one test: distinct within this run, across its workers and
+    concurrent shards too."""
+    return ((_BASE + next(_domains)) % (101 // _CLASSES)) * _CLASSES + _CLASS + 1
 
 
-if _WORKERS > 1:
+if _CLASSES > 1:
     # what a test inherits when it picks no domain (the launcher's default, `ros2` commands):
     # this worker's own, never another worker's
     os.environ["ROS_DOMAIN_ID"] = str(fresh_domain_id())
@@ -115,7 +125,9 @@ class Sink:
 
 
 def pytest_sessionfinish(session, exitstatus):  # type: ignore[no-untyped-def]
-    """Leave no Fast DDS shared-memory files of killed test processes in /dev/shm."""
+    """Store the heavy tests' durations when asked (shard.py); leave no Fast DDS shared-memory
+    files of killed test processes in /dev/shm."""
+    store_durations(session)
     try:
         from contgrasp_ros.launcher.processes import clean_shared_memory
     except ImportError:  # (a core-only environment)

@@ -25,6 +25,8 @@ from contgrasp_ros.bag.reader import iter_decoded, iter_raw, open_recording
 from contgrasp_ros.bag.writer import BagWriter
 from contgrasp_ros.launcher.summary import ContactStats, FinalQuality, FinalState, RunSummary, build_summary, contact_stats
 
+pytestmark = pytest.mark.heavy(per_module=True)  # (its tests share one recorded graph run: one shard makes it)
+
 BIN = Path(sys.executable).parent
 ROOT = Path(__file__).resolve().parents[1]
 ROD, CONTACT, COUPLE, QUALITY = "/contgrasp/rod_state", "/contgrasp/contact", "/contgrasp/couple", "/contgrasp/quality"
@@ -63,7 +65,6 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     return bag, summary
 
 
-@pytest.mark.heavy
 def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -> None:
     bag, summary = recording
     r = analyze(bag)
@@ -111,7 +112,6 @@ def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -
     assert summary["bag"]["sim_time_s"] == pytest.approx(summary["sim_time_s"], abs=1e-6)
 
 
-@pytest.mark.heavy
 def test_cli_writes_csv_and_plots(recording: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag, summary = recording
     out, plot = tmp_path / "csv", tmp_path / "run.png"
@@ -140,7 +140,6 @@ BLOCKED = ("rclpy", "rosidl_runtime_py", "rosidl_parser", "rosidl_pycommon", "co
            "ament_index_python")
 
 
-@pytest.mark.heavy
 def test_analyze_runs_without_ros(recording: tuple[Path, dict], tmp_path: Path) -> None:
     """With every ROS package made unimportable, the CLI still analyses the recording."""
     bag, summary = recording

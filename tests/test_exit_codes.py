@@ -514,6 +514,58 @@ def test_node_processes_use_the_lean_executor_whatever_the_environment(monkeypat
     assert run_node(stopping_node, args=[]) == 0
 
 
+def test_a_ctrl_c_inside_a_compiled_kernel_is_an_interruption(monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """contgrasp's commands end a Ctrl-C with one line and the shell's code 130, also when it
+    lands inside a compiled kernel and comes out as the SystemError it causes; an error with no
+    interrupt in its chain is none."""
+    from contgrasp_core.cli import main, simulate
+    from contgrasp_core.errors import interruption
+    from test_node_faults import kernel_interrupted
+
+    err = kernel_interrupted()
+    assert isinstance(interruption(err), KeyboardInterrupt) and interruption(KeyboardInterrupt()) is not None
+    cycle = RuntimeError("a")
+    cycle.__context__ = ValueError("b")
+    cycle.__context__.__context__ = cycle
+    assert interruption(cycle) is None and interruption(SystemError("x")) is None
+
+    def interrupted(*args: Any, **kwargs: Any) -> None:
+        raise kernel_interrupted()
+
+    monkeypatch.setattr(simulate, "run_scenario", interrupted)  # (where the stepping happens)
+    capsys.readouterr()
+    assert main(["simulate", "--duration", "0.01"]) == 130
+    assert capsys.readouterr().err.splitlines() == ["contgrasp simulate: interrupted"]
+
+
+def test_run_node_joins_rclpy_signal_thread_before_destroying_anything(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An interrupted node process: rclpy's signal thread triggers guard conditions and shuts the
+    context down while the main thread cleans up, so the clean-up first joins that thread
+    (uninstalling rclpy's handlers) and only then destroys the node and shuts rclpy down (a
+    node once crashed on shutdown under load, exit -11)."""
+    import rclpy
+
+    from contgrasp_ros.plumbing import runtime
+
+    order: list[str] = []
+    monkeypatch.setattr(runtime, "uninstall_signal_handlers",
+                        lambda: (order.append("joined"), rclpy.signals.uninstall_signal_handlers()))
+
+    def interrupted_node() -> Any:
+        node: Any = rclpy.create_node("interrupted_node")
+        destroy = node.destroy_node
+        node.destroy_node = lambda: (order.append("destroyed"), destroy())
+
+        def interrupt() -> None:
+            raise KeyboardInterrupt  # (what the first SIGINT raises in the spinning main thread)
+
+        node.create_timer(0.001, interrupt)
+        return node
+
+    assert runtime.run_node(interrupted_node, args=[]) == 0
+    assert order[:2] == ["joined", "destroyed"] and not rclpy.ok()
+
 @pytest.mark.heavy
 def test_node_with_bad_parameter_exits_2_and_recorder_with_failing_disk_exits_1(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Real node processes: a bad start-up parameter exits 2; a recorder whose writes fail

@@ -101,8 +101,15 @@ def test_rviz_runs_in_the_graphs_namespace(launch_ros: None, tmp_path: Path, nam
     which the simulator there publishes (RViz was outside the group, on ``/contgrasp/markers``,
     which a namespaced graph does not publish)."""
     args = ["rviz:=true", *([f"namespace:={namespace}"] if namespace else [])]
+    # (the description only, nothing runs: an ament index entry stands in for RViz where it is not
+    # installed, which the launch file checks for)
+    marker = tmp_path / "prefix" / "share" / "ament_index" / "resource_index" / "packages" / "rviz2"
+    marker.parent.mkdir(parents=True)
+    marker.touch()
+    env = dict(_env(), ROS_LOG_DIR=str(tmp_path), AMENT_PREFIX_PATH=os.pathsep.join(
+        [os.environ.get("AMENT_PREFIX_PATH", ""), str(tmp_path / "prefix")]).lstrip(os.pathsep))
     out = subprocess.run([sys.executable, "-c", _LAUNCH_NODES, str(PACKAGE_DIR / "launch" / "paper_grasp.launch.py"), *args],
-                         env=dict(_env(), ROS_LOG_DIR=str(tmp_path)), capture_output=True, text=True, timeout=120)
+                         env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-3000:]
     nodes = {node["executable"]: node for node in json.loads(out.stdout)}
     assert sorted(nodes) == ["boundary_sensor", "grasp_controller", "grasp_quality", "rod_simulator", "rviz2"]
@@ -114,6 +121,23 @@ def test_rviz_runs_in_the_graphs_namespace(launch_ros: None, tmp_path: Path, nam
     topic = next(d["Topic"]["Value"] for d in cfg["Visualization Manager"]["Displays"]
                  if d["Class"] == "rviz_default_plugins/MarkerArray")
     assert topics.resolve(topic, rviz["namespace"]) == topics.resolve(topics.MARKERS, simulator["namespace"])
+
+
+def test_rviz_without_rviz2_is_refused_before_any_node(launch_ros: None, tmp_path: Path) -> None:
+    """``rviz:=true`` where RViz 2 is not installed: refused with what to install before any node
+    is described (launch used to start the nodes, fail on RViz and leave them running)."""
+    from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+
+    try:
+        get_package_prefix("rviz2")
+        pytest.skip("RViz 2 is installed here")
+    except PackageNotFoundError:
+        pass
+    out = subprocess.run([sys.executable, "-c", _LAUNCH_NODES, str(PACKAGE_DIR / "launch" / "paper_grasp.launch.py"), "rviz:=true"],
+                         env=dict(_env(), ROS_LOG_DIR=str(tmp_path)), capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0 and out.stdout == ""
+    assert out.stderr.strip().splitlines()[-1].endswith(
+        "rviz:=true needs RViz 2, the package rviz2 (apt install ros-jazzy-rviz2), which is not installed: launch with rviz:=false")
 
 
 def test_paper_grasp_launch_runs_the_paper_grasp(launch_ros: None) -> None:

@@ -37,8 +37,9 @@ def test_one_contact_push_is_the_weakest_joints_bound_over_its_lever(mu):
     ceiling = muscle_ceiling(ROD, obj, theta, mu=mu, directions=UP, ref=centre, scale=0.004, tol=1e-6)
     assert ceiling.contacts == 1 and ceiling.holds_shape
     k = np.arange(j + 1)
-    expected = np.min(ROD.muscle_bound[: j + 1] / ((j + 0.5 - k) * ROD.h))  # (the straight arm: no elastic couple)
-    assert ceiling.capacity[0] == pytest.approx(expected, rel=1e-9)
+    per_joint = ROD.muscle_bound[: j + 1] / ((j + 0.5 - k) * ROD.h)  # (the straight arm: no elastic couple)
+    assert ceiling.capacity[0] == pytest.approx(per_joint.min(), rel=1e-9)
+    assert ceiling.binding[0] == np.argmin(per_joint)  # (joint 16 here: the taper against the lever)
 
 
 def test_an_arm_cannot_pull_and_unbounded_muscles_push_without_limit():
@@ -48,7 +49,7 @@ def test_an_arm_cannot_pull_and_unbounded_muscles_push_without_limit():
     assert pull.capacity[0] == 0.0
     free = RodModel(n_elements=40)
     push = muscle_ceiling(free, obj, theta, mu=0.0, directions=UP, ref=centre, scale=0.004, tol=1e-6)
-    assert push.capacity[0] == np.inf
+    assert push.capacity[0] == np.inf and push.binding[0] == -1
 
 
 def test_frictionless_contact_on_a_circle_holds_no_torque_about_its_centre():

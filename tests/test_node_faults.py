@@ -677,14 +677,15 @@ def test_diagnostics_report_drops_by_reason(make) -> None:  # type: ignore[no-un
     sim.on_couple(CoupleControl(step=0, s=[0.0, 1.0], u=[0.0, 0.0]))
     spin(2.3)
     mine = [(t, v) for t, name, v in got if name == "boundary_sensor" and v["dropped_messages"] != "0"]
-    assert mine[0][1] == {"dropped_messages": "1", "dropped: /contgrasp/rod_state: NaN/Inf": "1"}
+    assert mine[0][1] == {"dropped_messages": "1", "dropped: /contgrasp/rod_state: NaN/Inf": "1", "pid": str(os.getpid())}
     assert mine[0][0] - t0 < 0.5
     last = mine[-1][1]
     assert last == {"dropped_messages": "41", "dropped: /contgrasp/rod_state: NaN/Inf": "1",
-                    "dropped: /contgrasp/rod_state: too few samples": "40"}
+                    "dropped: /contgrasp/rod_state: too few samples": "40", "pid": str(os.getpid())}
     assert 2 <= len(mine) <= 4  # the first drop, then the 1 s timer (2.3 s spun)
     sim_status = [v for _, name, v in got if name == "rod_simulator"][-1]
-    assert {"state", "step", "sim_time_s", "settled", "settle_time_s", "missed_deadlines", "max_penetration", "message"} <= set(sim_status)
+    assert {"state", "step", "sim_time_s", "settled", "settle_time_s", "missed_deadlines", "max_penetration", "message",
+            "pid"} <= set(sim_status)
     assert sim_status["dropped_messages"] == "1" and sim_status["dropped: /contgrasp/couple: wrong joints"] == "1"
     assert sim_status["state"] == "paused"
     ex.shutdown()
@@ -954,3 +955,41 @@ def test_a_callback_failing_because_the_node_is_stopping_is_not_an_internal_erro
     guarded_cb()
     assert drops.counts == {"/contgrasp/couple: internal error: RuntimeError": 1}
     node.destroy_node()
+
+
+def kernel_interrupted() -> SystemError:
+    """What a compiled kernel raises when a SIGINT is handled while it boxes its result: CPython's
+    "returned a result with an exception set" SystemError, caused by the KeyboardInterrupt (seen
+    from frames_nodes under SIGINT, also with a second SystemError between them)."""
+    try:
+        try:
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt as ki:
+                raise SystemError("CPUDispatcher(<function frames_nodes>) returned a result with an exception set") from ki
+        except SystemError as inner:
+            raise SystemError("CPUDispatcher(<function frames_nodes>) returned a result with an exception set") from inner
+    except SystemError as err:
+        return err
+
+
+@pytest.mark.parametrize("where", ["simulator step", "callback"])
+def test_a_ctrl_c_inside_a_compiled_kernel_stops_the_node_and_fails_nothing(make, where) -> None:  # type: ignore[no-untyped-def]
+    """Ctrl-C on a stepping simulator once ended its run as failed ("simulation stopped: ...
+    SystemError: CPUDispatcher(<function frames_nodes>) returned a result with an exception
+    set"): the interrupt surfaces as the KeyboardInterrupt it is, nothing is counted or failed."""
+    from contgrasp_ros.plumbing.convert import couple_to_msg
+    from contgrasp_ros.nodes.rod_simulator import _stamp
+
+    sim = small_sim(make)
+
+    def interrupted(*args: Any, **kwargs: Any) -> None:
+        raise kernel_interrupted()
+
+    if where == "simulator step":
+        sim.session.advance = interrupted
+    else:
+        sim._advance = interrupted
+    with pytest.raises(KeyboardInterrupt):
+        sim.on_couple(couple_to_msg(sim.model.joint_s, np.zeros(6), Header(stamp=_stamp(0.0)), 0))
+    assert not sim.failure and sim.drops.total == 0 and sim.session.k == 0

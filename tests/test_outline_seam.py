@@ -15,6 +15,8 @@ import pytest
 from contgrasp_core.cli import main
 from contgrasp_core.objects import ObjectSpec
 
+pytestmark = pytest.mark.heavy  # (about 16 s together: each test runs on one interpreter in CI)
+
 KIDNEY = Path(__file__).parent / "data" / "kidney_outline.csv"
 ROWS = np.loadtxt(KIDNEY, delimiter=",", comments="#", skiprows=2)
 ROWS = ROWS[:-1] if np.array_equal(ROWS[0], ROWS[-1]) else ROWS  # the file closes itself: keep one copy

@@ -16,6 +16,7 @@ import pytest
 from contgrasp_core.control.hold_law import LAWS, HoldLawSettings, ShapeHold, check_law_settings
 from contgrasp_core.errors import InvalidParameterError
 from contgrasp_core.holding import plan as plan_module
+from contgrasp_core.holding.experiment import GraspFailure, HoldExperiment, HoldSettings
 from contgrasp_core.holding.measure import check_reach
 from contgrasp_core.holding.plan import HoldPlan, PlannedHold, balanced_forces, plan_hold
 from contgrasp_core.objects import ROD_SCALE, ObjectSpec
@@ -271,6 +272,22 @@ def test_the_planned_hold_keeps_the_free_circle_through_the_sampled_loop(stress:
         assert out["final_penetration_ratio"] == pytest.approx(HoldLawSettings().plan_squeeze, abs=0.01)
     else:
         assert out["final_penetration_ratio"] < 0.01
+
+
+@pytest.mark.heavy
+def test_the_contact_wait_of_a_planned_hold_counts_from_its_close() -> None:
+    """Within 50 kPa muscles the playback first comes within the cage's reach at 0.62 s, past the
+    default 0.6 s without contact; the plan says when its arm reaches the object, so the wait
+    counts from its close (0.372 s) and ``contgrasp hold --law hold --max-muscle-stress 50000``
+    measures the grasp (before: "no node touched the object for 0.6 s")."""
+    scenario = replace(PLAN, rod=replace(PLAN.rod, max_muscle_stress=5e4))
+    short = HoldExperiment(scenario, HoldSettings(support=0, contact_wait=0.2))
+    assert isinstance(short.law, PlannedHold) and short.law.plan.close == pytest.approx(0.372)
+    with pytest.raises(GraspFailure, match=r"for 0.2 s \(at t = 0.572 s"):  # (the close plus the wait)
+        short.grasp()
+    default = HoldExperiment(scenario, HoldSettings(support=0))
+    default.grasp()
+    assert default.grasped is not None and default.grasped.settled and default.grasped.health.valid
 
 
 def test_the_commands_take_law_plan_and_its_gain(tmp_path: Path) -> None:

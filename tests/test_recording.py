@@ -27,6 +27,8 @@ from contgrasp_ros.bag import BagError  # noqa: E402
 from contgrasp_ros.bag.reader import info, iter_decoded, iter_raw, open_recording, recover  # noqa: E402
 from contgrasp_ros.bag.writer import RECORDER_RECORD, RUN_RECORD, BagWriter  # noqa: E402
 
+pytestmark = pytest.mark.heavy(per_module=True)  # (its tests share one recorded graph run: one shard makes it)
+
 BIN = Path(sys.executable).parent
 SHARE = Path(sys.prefix) / "share"
 RULE = "=" * 80
@@ -56,7 +58,6 @@ def graph_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
 # ---------------------------------------------------------------- conventions
 
 
-@pytest.mark.heavy
 def test_full_rate_run_is_recorded_completely(graph_bag: tuple[Path, dict]) -> None:
     """Every message the recorder received was written; every simulation step is in the bag."""
     path, summary = graph_bag
@@ -149,7 +150,7 @@ def test_bag_decodes_with_mcap_ros2_rosbags_and_rclpy(graph_bag: tuple[Path, dic
     from rclpy.serialization import deserialize_message, serialize_message
     from rosbags.highlevel import AnyReader
 
-    from contgrasp_ros.nodes.mcap_recorder import _message_class
+    from contgrasp_ros.plumbing.topics import message_class
 
     path, summary = graph_bag
     with open(path / "run_0.mcap", "rb") as f:
@@ -167,7 +168,7 @@ def test_bag_decodes_with_mcap_ros2_rosbags_and_rclpy(graph_bag: tuple[Path, dic
     last_rb = [m for t, m in rb if t == "/contgrasp/rod_state"][-1]
     np.testing.assert_array_equal(last_rb.x, summary["final"]["x"])
     for m in iter_raw(open_recording(path)):
-        cls = _message_class(m.type)
+        cls = message_class(m.type)
         msg = deserialize_message(m.data, cls)
         again = serialize_message(msg)
         # equal as messages (not bytes: publishers leave CDR alignment padding uninitialised)
@@ -425,7 +426,6 @@ def _recorder(out: Path, env: dict[str, str], *extra: str) -> subprocess.Popen[s
     )
 
 
-@pytest.mark.heavy
 def test_recorder_picks_up_new_topics_and_survives_sigkill(tmp_path: Path) -> None:
     """A topic that appears mid-run is recorded; a recorder killed with SIGKILL leaves an
     incomplete file (clear error) from which every complete chunk is recovered, in order."""
@@ -473,7 +473,6 @@ def test_recorder_with_unwritable_output_exits_1_with_the_reason(tmp_path: Path)
     assert proc.returncode == 1 and "cannot record" in out
 
 
-@pytest.mark.heavy
 def test_replay_reproduces_sequence_and_timing(tmp_path: Path) -> None:
     """`contgrasp replay --rate 2` republishes a recording; a second recorder sees the same
     messages in the same order, spaced by the recorded intervals / 2. (--wait-for-subscribers:
@@ -519,7 +518,6 @@ def test_replay_reproduces_sequence_and_timing(tmp_path: Path) -> None:
     assert np.median(np.abs(err)) < 0.01 and np.max(np.abs(err)) < 0.1, err
 
 
-@pytest.mark.heavy
 def test_shipped_sample_analysis_reproduces_its_summary() -> None:
     """`contgrasp analyze bags/paper_grasp.mcap --json` gives back what the launcher printed when
     the sample was recorded, and the quality recomputed from the recorded rod states matches the
@@ -648,7 +646,6 @@ def test_recorder_does_not_count_interleaved_publishers_as_loss(ros_context, tmp
             n.destroy_node()
 
 
-@pytest.mark.heavy
 def test_replay_window_and_loop(tmp_path: Path) -> None:
     """--start/--end select a log-time window; --loop starts over until interrupted."""
     path = tmp_path / "small.mcap"
@@ -708,7 +705,6 @@ def _after_300_states(rec: subprocess.Popen[str], env: dict[str, str]) -> Iterat
                 p.wait(timeout=30)
 
 
-@pytest.mark.heavy
 def test_recorder_finalises_through_repeated_ctrl_c(tmp_path: Path) -> None:
     """Ctrl-C under ros2 launch reaches a node twice (the terminal's and the one launch forwards):
     later SIGINTs during the clean-up are ignored, so the node exits 0 with no traceback and the
@@ -727,7 +723,6 @@ def test_recorder_finalises_through_repeated_ctrl_c(tmp_path: Path) -> None:
     assert steps == list(range(300))
 
 
-@pytest.mark.heavy
 def test_recorder_finalises_on_sigterm(tmp_path: Path) -> None:
     """(With a split every 0.2 s: the messages span several files, none lost at the splits.)"""
     env = ros_env(fresh_domain_id())
@@ -739,3 +734,27 @@ def test_recorder_finalises_on_sigterm(tmp_path: Path) -> None:
     assert len(rec_.files) >= 3  # 300 messages 2 ms apart (and more) in 0.2 s files
     steps = [m.step for _, m in iter_decoded(rec_, ["/contgrasp/rod_state"])]
     assert steps == list(range(300))
+
+
+def test_replay_of_a_type_whose_package_is_missing_says_what_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A recorded type of a message package the ROS layer needs, not installed, is a missing
+    dependency (exit 2, naming what to install); another package's (a recording made elsewhere),
+    or a type the installed package lacks, fails the replay (exit 1)."""
+    from contgrasp_core.errors import MissingDependencyError, RunFailure
+    from contgrasp_ros.recordings.replay import _message_class
+
+    monkeypatch.setitem(sys.modules, "rosgraph_msgs", None)
+    monkeypatch.setitem(sys.modules, "rosgraph_msgs.msg", None)
+    with pytest.raises(MissingDependencyError, match=r"^cannot replay rosgraph_msgs/msg/Clock: needs ROS 2 Jazzy "
+                                                     r"\(module 'rosgraph_msgs' is missing\).*contgrasp\[ros,ros-wheels\]"):
+        _message_class("rosgraph_msgs/msg/Clock")
+    with pytest.raises(RunFailure, match=r"^cannot replay no_such_msgs/msg/Thing: the message package is not installed"):
+        _message_class("no_such_msgs/msg/Thing")
+    with pytest.raises(RunFailure, match=r"^cannot replay std_msgs/msg/NoSuchType: the installed message package does not define it"):
+        _message_class("std_msgs/msg/NoSuchType")
+    proc = subprocess.run([sys.executable, "-c", "import sys; sys.modules['rosgraph_msgs'] = None\n"
+                           "from contgrasp_core.cli import main\n"
+                           f"sys.exit(main(['replay', {str(Path(__file__).parents[1] / 'bags' / 'paper_grasp.mcap')!r}]))"],
+                          capture_output=True, text=True, timeout=120,
+                          env=dict(os.environ, ROS_DOMAIN_ID=str(fresh_domain_id())))
+    assert proc.returncode == 2 and "contgrasp replay: error: cannot replay rosgraph_msgs/msg/Clock: needs ROS 2 Jazzy" in proc.stderr, proc.stderr

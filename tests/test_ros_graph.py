@@ -160,6 +160,34 @@ def test_launcher_reports_a_node_that_fails_to_start(tmp_path: Path) -> None:
     assert not any(alive(pid) for pid in out["pids"].values())
 
 
+@pytest.mark.heavy
+@pytest.mark.parametrize("node", ["rod_simulator", "grasp_controller"])
+def test_a_second_graph_in_the_same_domain_and_namespace_fails_the_run(tmp_path: Path, node: str) -> None:
+    """A node of another graph (here one started by hand: a simulator, a controller) in the
+    launcher's domain and namespace: each controller would answer both simulators, so the launcher
+    ends its run with one line naming that process and what to do, stops its own nodes and leaves
+    the other alone."""
+    domain = fresh_domain_id()
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain))
+    other = subprocess.Popen([sys.executable, "-m", f"contgrasp_ros.nodes.{node}"], env=env,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        proc = launch("--json", "--params", str(small_params(tmp_path, duration=5.0)), "--no-record",
+                      "--domain-id", str(domain))
+        assert other.poll() is None  # (still running: the launcher stops only what it started)
+    finally:
+        other.send_signal(signal.SIGINT)
+        other.wait(timeout=30)
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    out = json.loads(proc.stdout)
+    assert out["error"] == (f"another graph's {node} (pid {other.pid}) runs in this domain and namespace, so "
+                            "the two runs' messages mix: give each graph its own --namespace or --domain-id")
+    assert proc.stderr.splitlines()[-1] == f"contgrasp-launch: error: {out['error']}"
+    # stopped, not failed (a node still importing when the launcher stops it ends by the SIGINT itself)
+    assert all(code in (0, -signal.SIGINT) for code in out["exit_codes"].values()), out["exit_codes"]
+    assert not any(alive(pid) for pid in out["pids"].values())
+
+
 @pytest.mark.parametrize(("exc", "code", "prefix"), [(RuntimeError("rmw said no\nsecond line"), 1, "error: RuntimeError: "),
                                                     (InvalidParameterError("n_elements must be >= 2"), 2, "error: ")])
 def test_launcher_turns_unexpected_errors_into_one_line(monkeypatch, capsys, exc, code, prefix) -> None:  # type: ignore[no-untyped-def]
@@ -276,3 +304,65 @@ def test_text_summary_reads_like_the_contgrasp_subcommands(tmp_path: Path) -> No
         for word in line.split(": ", 1)[1].strip("[]").split(", "):
             mantissa = word.lower().split("e")[0].lstrip("-").replace(".", "").lstrip("0")
             assert not word[:1].isdigit() or len(mantissa) <= 6, line
+
+
+def test_the_monitor_keeps_its_own_nodes_statuses_and_names_another(ros_context) -> None:  # type: ignore[no-untyped-def]
+    """Every node's status carries its pid: the launcher's monitor takes the statuses of processes
+    it started (a restarted one too) and names a graph node's status from any other process
+    (another graph's) without taking its values; a status without a pid (an older recording
+    replayed) is taken; other nodes' statuses are none of its business."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from contgrasp_ros.launcher.graph_run import Monitor
+
+    def status(name: str, state: str, pid: str | None) -> DiagnosticArray:
+        values = [KeyValue(key="state", value=state)] + ([KeyValue(key="pid", value=pid)] if pid is not None else [])
+        return DiagnosticArray(status=[DiagnosticStatus(name=name, values=values)])
+
+    own = {100}
+    monitor = Monitor(history_period=None, own_pids=lambda: own, context=ros_context)
+    try:
+        monitor._on_diag(status("rod_simulator", "running", "100"))
+        monitor._on_diag(status("some_other_node", "x", "999"))
+        assert monitor.status == {"state": "running", "pid": "100"} and monitor.foreign is None
+        monitor._on_diag(status("rod_simulator", "finished", "200"))
+        assert monitor.status["state"] == "running" and monitor.foreign == ("rod_simulator", 200)
+        monitor._on_diag(status("grasp_quality", "ok", "201"))
+        assert monitor.foreign == ("grasp_quality", 201)
+        own.add(300)  # (restarted)
+        monitor._on_diag(status("rod_simulator", "paused", "300"))
+        monitor._on_diag(status("rod_simulator", "finished", None))
+        assert monitor.status == {"state": "finished"}
+    finally:
+        monitor.destroy_node()
+
+
+def test_the_monitor_pairs_each_contact_sample_with_the_rod_state_of_its_step_in_any_order(ros_context) -> None:  # type: ignore[no-untyped-def]
+    """The figure's history starts at step 0 even when the contact sample of a step comes before
+    its rod state (two topics: no order between them); one entry per history period."""
+    from contgrasp_msgs.msg import ContactState, RodState
+
+    from contgrasp_ros.launcher.graph_run import Monitor
+
+    def rod(step: int) -> RodState:
+        return RodState(step=step, s=[0.0, 0.1], x=[0.0, 0.1 + step], y=[0.0, 0.0], theta=[0.0] * 2, radius=[0.01] * 2)
+
+    def contact(step: int) -> ContactState:
+        msg = ContactState(step=step, s=[0.0, 0.1], rho=[0.05, 0.02 + step], alpha=[1.0, 1.5])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(step * 2_000_000, 1_000_000_000)
+        return msg
+
+    monitor = Monitor(history_period=0.01, context=ros_context)
+    try:
+        monitor._on_contact(contact(0))  # before its rod state
+        monitor._on_rod(rod(0))
+        for step in range(1, 12):  # in order: the rod state first (steps 5 and 10 enter the history)
+            monitor._on_rod(rod(step))
+            monitor._on_contact(contact(step))
+        monitor._on_rod(rod(15))  # the rod state of step 15 before that of 16, whose contact comes first
+        monitor._on_contact(contact(16))
+        monitor._on_rod(rod(16))
+        assert [(h["t"], h["x"][1], h["rho"][1]) for h in monitor.history] == [
+            (0.0, 0.1, 0.02), (0.01, 5.1, 5.02), (0.02, 10.1, 10.02), (0.032, 16.1, 16.02)]
+    finally:
+        monitor.destroy_node()

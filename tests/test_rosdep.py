@@ -127,3 +127,14 @@ def test_every_third_party_import_is_declared_or_optional() -> None:
     # and nothing declared for Python that no import needs (a stale key)
     python_keys = {k for k in runtime if k.startswith("python3-") or k in _snapshot()["rosdep_keys"]}
     assert python_keys <= set(IMPORT_KEYS.values()), python_keys - set(IMPORT_KEYS.values())
+
+
+def test_the_layers_interface_packages_are_its_declared_message_imports() -> None:
+    """contgrasp_ros.layer.INTERFACES (what replay calls a missing dependency of the layer) is
+    every interface package the layer imports, each declared in package.xml."""
+    from contgrasp_ros.layer import INTERFACES
+
+    interfaces = {m for m in _imports() if m.endswith(("_msgs", "_srvs", "_interfaces"))}
+    assert INTERFACES == interfaces
+    declared = _keys(MANIFESTS["contgrasp_ros"])
+    assert INTERFACES <= set(declared["exec_depend"]) | set(declared["depend"])

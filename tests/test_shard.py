@@ -8,7 +8,8 @@ from typing import Any
 
 import pytest
 
-from shard import heavy_first, in_shard, pytest_collection_modifyitems, shard_from_env
+import shard
+from shard import deal, heavy_first, in_shard, pytest_collection_modifyitems, shard_from_env
 
 
 @dataclass
@@ -17,6 +18,7 @@ class Item:
 
     nodeid: str
     mark: Any = None
+    user_properties: list[tuple[str, Any]] = field(default_factory=list)
 
     def get_closest_marker(self, name: str) -> Any:
         return self.mark if name == "heavy" else None
@@ -25,6 +27,10 @@ class Item:
 @dataclass
 class Config:
     deselected: list[Any] = field(default_factory=list)
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def getoption(self, name: str, default: Any = None) -> Any:
+        return self.options.get(name, default)
 
     @property
     def hook(self) -> Any:
@@ -86,3 +92,60 @@ def test_the_files_with_the_most_heavy_tests_go_first_each_in_its_own_order() ->
                      "tests/test_y.py::test_1", "tests/test_y.py::test_2",
                      "tests/test_x.py::test_1", "tests/test_x.py::test_2", "tests/test_x.py::test_3",
                      "tests/test_z.py::test_1", "tests/test_z.py::test_2"]
+
+
+def test_the_longest_units_are_dealt_first_each_to_the_least_loaded_shard() -> None:
+    durations = {"a": 5.0, "b": 4.0, "c": 3.0, "d": 3.0, "e": 3.0}
+    assert deal(durations, 2) == {"a": 0, "b": 1, "c": 1, "d": 0, "e": 1}  # loads 8 and 10
+    many = {f"t{i}": float((7 * i) % 23 + 1) for i in range(60)}
+    for n in (2, 3):
+        dealt = deal(many, n)
+        loads = [sum(s for k, s in many.items() if dealt[k] == j) for j in range(n)]
+        assert max(loads) - min(loads) <= max(many.values())  # (the deal's bound: one unit at most)
+
+
+def test_a_heavy_test_goes_where_the_stored_deal_puts_it_a_new_one_where_its_hash_does() -> None:
+    heavy = pytest.mark.heavy.mark
+    dealt = {"tests/test_a.py::test_1": 1}
+    stored = Item("tests/test_a.py::test_1", heavy)
+    assert [in_shard(stored, (k, 2), dealt) for k in (1, 2)] == [False, True]  # type: ignore[arg-type]
+    new = Item("tests/test_a.py::test_new", heavy)
+    assert sum(in_shard(new, (k, 2), dealt) for k in (1, 2)) == 1  # type: ignore[arg-type]
+    assert in_shard(new, (1, 2), dealt) == in_shard(new, (1, 2), {})  # type: ignore[arg-type]
+
+
+def test_the_stored_durations_deal_the_collected_heavy_tests() -> None:
+    """tests/heavy_durations.json names only heavy tests that exist (a renamed one would be dealt
+    by its hash), with durations of two seconds and more, split about evenly by the deal."""
+    import json
+
+    stored = json.loads(shard.DURATIONS.read_text())
+    assert stored and all(isinstance(s, float) and s >= 0 for s in stored.values())
+    dealt = deal(stored, 2)
+    loads = [sum(s for k, s in stored.items() if dealt[k] == j) for j in range(2)]
+    assert abs(loads[0] - loads[1]) <= max(stored.values())
+
+
+def test_the_durations_of_a_run_are_stored_per_unit(tmp_path: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("CONTGRASP_TEST_SHARD", raising=False)
+    monkeypatch.setattr(shard, "_measured", shard.Counter())
+    collected, config = items(), Config()
+    pytest_collection_modifyitems(config, collected)  # type: ignore[arg-type]
+    for item in collected:
+        for phase in ("setup", "call", "teardown"):
+            shard.pytest_runtest_logreport(pytest.TestReport(item.nodeid, ("", 0, ""), {}, "passed", None, phase,
+                                                             user_properties=item.user_properties, duration=0.25))
+    out = tmp_path / "durations.json"
+
+    class Session:
+        config = Config(options={"--store-heavy-durations": str(out)})
+
+    shard.store_durations(Session())  # type: ignore[arg-type]
+    stored = __import__("json").loads(out.read_text())
+    assert stored == {**{f"tests/test_a.py::test_heavy[{i}]": 0.8 for i in range(40)}, "tests/test_b.py": 4.5}
+
+
+def test_storing_durations_in_a_shard_is_a_usage_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("CONTGRASP_TEST_SHARD", "1/2")
+    with pytest.raises(pytest.UsageError, match="measures every test"):
+        pytest_collection_modifyitems(Config(options={"--store-heavy-durations": "x"}), items())  # type: ignore[arg-type]

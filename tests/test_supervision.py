@@ -274,3 +274,20 @@ def test_interrupted() -> None:
     assert run.sup.done and run.sup.error == "interrupted"
     run.sup.interrupted()
     assert run.sup.error == "interrupted"
+
+
+@pytest.mark.parametrize("phase", ["connecting", "running", "settling"])
+def test_another_graphs_simulator_in_the_domain_ends_the_run_in_any_phase(phase: str) -> None:
+    """A node of the graph that this launcher did not start, heard on its namespace's status: the
+    two graphs' messages mix (each controller answers both simulators), so the run fails, whatever
+    its phase."""
+    run = Run()
+    if phase != "connecting":
+        run.start()
+    if phase == "settling":
+        assert run.tick(simulator_state="finished") == [] and run.sup.phase is Phase.SETTLING
+    out = run.tick(foreign=("grasp_controller", 4242))
+    assert len(out) == 1 and isinstance(out[0], Finish) and out[0].error is not None
+    assert out[0].error.startswith("another graph's grasp_controller (pid 4242) runs in this domain and namespace")
+    assert "--namespace or --domain-id" in out[0].error and run.sup.done and run.sup.error == out[0].error
+    assert run.tick(foreign=("grasp_controller", 4242)) == []  # (once)

@@ -24,7 +24,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from .. import __version__
-from ..errors import ContgraspError, exit_code, one_line
+from ..errors import ContgraspError, exit_code, interruption, one_line
 
 __all__ = ["ArgumentParser", "build_parser", "main", "report", "summary_lines", "closed_stdout_safe"]
 
@@ -217,10 +217,10 @@ def _main(argv: Sequence[str] | None, extra: Sequence[Registrar] | None) -> int:
             text = json.dumps(_to_jsonable(result), allow_nan=False)
         else:
             text = getattr(args, "format_text", _summary)(result)
-    except KeyboardInterrupt:  # Ctrl-C: one line, the shell's code for SIGINT
-        print(f"contgrasp {command}: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:  # noqa: BLE001 - the CLI turns every failure into one line
+    except (KeyboardInterrupt, Exception) as exc:  # noqa: BLE001 - the CLI turns every failure into one line
+        if interruption(exc) is not None:  # Ctrl-C (also inside a compiled kernel): the shell's code for SIGINT
+            print(f"contgrasp {command}: interrupted", file=sys.stderr)
+            return 130
         if args.debug:  # the whole traceback, and the same exit code as without --debug
             traceback.print_exc()
             return exit_code(exc)

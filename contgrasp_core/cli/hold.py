@@ -63,8 +63,9 @@ def add_ramp_arguments(p: argparse.ArgumentParser, d: HoldSettings) -> None:
     p.add_argument("--ramp-time", type=float, default=d.ramp_time,
                    help=f"longest ramp, s (default {d.ramp_time:g}; the largest wrench tried is rate x ramp time)")
     p.add_argument("--contact-wait", type=float, default=d.contact_wait,
-                   help=f"longest time without touching the object before the grasp counts as failed, s "
-                   f"(default {d.contact_wait:g}; a cage closing from a far base needs a few seconds)")
+                   help=f"longest time without touching the object before the grasp counts as failed, s, from the "
+                   f"start or the planned hold's close (default {d.contact_wait:g}; a cage closing from a far base "
+                   "needs a few seconds)")
 
 
 def format_text(out: dict[str, Any]) -> str:

@@ -33,11 +33,13 @@ class MuscleCeiling:
     """(M5) per load direction: ``capacity`` (N, scaled wrench space; ``inf`` along a direction
     the contact resists with unbounded muscles), ``holds_shape`` whether any activation within
     the bound holds the shape at all (else every capacity is 0), ``contacts`` the elements
-    taken as touching."""
+    taken as touching, ``binding`` the joint whose muscle limits each direction most (the
+    largest dual of its bound; -1 where no bound limits it)."""
 
     capacity: Array
     holds_shape: bool
     contacts: int
+    binding: NDArray[np.intp]
 
 
 def joint_moments(rod: RodModel, theta: Array, forces: Array) -> Array:
@@ -91,16 +93,20 @@ def muscle_ceiling(rod: RodModel, boundary: Boundary, theta: ArrayLike, *, mu: f
         moments = np.hstack([cols, np.zeros((len(cols), 1))])
         a_ub, b_ub = np.vstack([moments, -moments]), np.concatenate([bound + elastic, bound - elastic])
     out = np.empty(len(dirs))
+    binding = np.full(len(dirs), -1)
     for i, d in enumerate(dirs):  # unknowns: the cone's edge weights (n) and the load c; the arm balances -c d
         a_eq = np.hstack([gen.T, d[:, None]])
         res = linprog(np.r_[np.zeros(n), -1.0], A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=np.zeros(3), bounds=(0, None),
                       method="highs")
         if res.status == 2:  # infeasible even unloaded: the muscles cannot hold this shape
-            return MuscleCeiling(np.zeros(len(dirs)), False, len(touching))
+            return MuscleCeiling(np.zeros(len(dirs)), False, len(touching), np.full(len(dirs), -1))
         if res.status == 3:
             out[i] = np.inf
         elif res.status == 0 and res.x is not None:
             out[i] = max(0.0, float(res.x[-1]))
+            if bound is not None:  # (the duals of joint k's two rows, upper and lower)
+                dual = np.abs(res.ineqlin.marginals[: len(bound)]) + np.abs(res.ineqlin.marginals[len(bound):])
+                binding[i] = int(np.argmax(dual)) if dual.max() > 0 else -1
         else:
             raise InvalidParameterError(f"the muscles' ceiling along {d.tolist()} did not solve: {res.message}")
-    return MuscleCeiling(out, True, len(touching))
+    return MuscleCeiling(out, True, len(touching), binding)

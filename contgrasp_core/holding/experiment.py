@@ -25,6 +25,7 @@ from contgrasp_core.contact import ContactState, sense
 from contgrasp_core.control.hold_law import HOLDING_LAWS
 from contgrasp_core.errors import InvalidParameterError, RunFailure
 from contgrasp_core.holding.ceiling import MuscleCeiling, muscle_ceiling
+from contgrasp_core.holding.plan import PlannedHold
 from contgrasp_core.quality import GraspQuality, quality_of_state
 from contgrasp_core.rod.body import BodyState, ObjectDynamics, mass_properties
 from contgrasp_core.rod.integrator import RodState
@@ -47,9 +48,9 @@ class HoldSettings:
     wrench (fx, fy, torque) and ``hold_time``, the capacity ramp's ``rate`` (N/s in the scaled
     wrench space) and ``ramp_time``, the number of force ``directions`` (plus the two pure
     torques), the escape thresholds (``escape_distance`` in object radii), and how long the
-    grasp may go without touching the object (``contact_wait``, s; the holding law's cage counts
-    as touching within its clearance and band) before it counts as failed. ``support = 0``
-    releases the object entirely free."""
+    grasp may go without touching the object (``contact_wait``, s, from the start or a planned
+    hold's close; the holding law's cage counts as touching within its clearance and band)
+    before it counts as failed. ``support = 0`` releases the object entirely free."""
 
     areal_density: float = 10.0
     support: float = 2.0
@@ -275,7 +276,9 @@ class HoldExperiment:
         and the force-weighted variant (:func:`force_weighted_quality`). :class:`GraspFailure`
         if it does not settle (module docstring)."""
         tol, wait = self.scenario.sensing.contact_tolerance, self.settings.contact_wait
-        touched = [0.0]  # when a node last touched the object (the start counts as a touch)
+        # when a node last touched the object: the start counts as a touch, and so does a planned
+        # hold's close (its plan says when its arm reaches the object: 0.62 s at 50 kPa)
+        touched = [self.law.plan.close if isinstance(self.law, PlannedHold) else 0.0]
 
         def out_of_reach(o: Observation, c: ContactState) -> bool:
             if (c.delta >= -self.reach).any():

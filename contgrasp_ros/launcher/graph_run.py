@@ -16,11 +16,12 @@ changes) and carries out its actions. The summary is :class:`contgrasp_ros.launc
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Container, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +43,7 @@ from contgrasp_ros.launcher.events import EventSink
 from contgrasp_ros.launcher.graph import LOOP as NODES
 from contgrasp_ros.launcher.graph import processes as graph_processes
 from contgrasp_ros.launcher.graph import parameter_file, recorder_params
-from contgrasp_ros.plumbing.runtime import DropCounter, GuardedSpin, make_executor
+from contgrasp_ros.plumbing.runtime import DropCounter, GuardedSpin, join_signal_thread, make_executor
 from contgrasp_ros.launcher.supervision import (
     RECORDER,
     Exit,
@@ -64,15 +65,21 @@ __all__ = ["Monitor", "run_graph"]
 
 RECORDED_STREAMS = (topics.OBJECT, topics.ROD_STATE, topics.CONTACT, topics.COUPLE, topics.QUALITY, topics.CLOCK)
 OBJECT_STREAMS = (topics.OBJECT_POSE, topics.OBJECT_TWIST)  # (published when the object moves)
+PAIRING_WINDOW = 8  # sampled rod states kept for the contact samples of their steps (each stream in order)
 
 
 class Monitor(Node):
     """Observes the run: last rod state, contact and quality, a history, the simulator status."""
 
     def __init__(self, history_period: float | None = 0.01, recording: bool = False,
-                 recorded_streams: tuple[str, ...] = RECORDED_STREAMS, **kw: Any) -> None:
+                 recorded_streams: tuple[str, ...] = RECORDED_STREAMS,
+                 own_pids: Callable[[], Container[int]] | None = None, **kw: Any) -> None:
         super().__init__("contgrasp_monitor", **kw)
         self.recording = recording
+        # the processes of this run (None: any): a status of one of the graph's nodes from another
+        # process is another graph's, in the same domain and namespace (``foreign``: node, pid)
+        self._own_pids = own_pids
+        self.foreign: tuple[str, int] | None = None
         self.recorded_streams = recorded_streams
         self.rod: RodState | None = None
         self.contact: ContactState | None = None
@@ -83,6 +90,8 @@ class Monitor(Node):
         self.history: list[dict[str, Any]] = []
         self._period = history_period
         self._next_t = 0.0
+        self._rods: dict[int, RodState] = {}  # the latest sampled rod states by step
+        self._waiting: ContactState | None = None  # a contact sample whose rod state has not come yet
         # the sampled streams (the first and the final state among them): a per-step reader would
         # cost the loop a wake-up every step
         self.create_subscription(RodState, topics.ROD_STATE_SAMPLED, self._on_rod, qos.STREAM)
@@ -91,46 +100,67 @@ class Monitor(Node):
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diag, qos.STREAM)
         self.pause = self.create_client(SetBool, "rod_simulator/pause")
         self.sim_params = AsyncParameterClient(self, "rod_simulator")
-        self._simulator = topics.status_name("rod_simulator", self.get_namespace())
-        self._controller = topics.status_name("grasp_controller", self.get_namespace())
+        self._statuses = {topics.status_name(name, self.get_namespace()): name for name in (*NODES, RECORDER)}
         self.drops = DropCounter(self)  # (only rclpy take failures: see GuardedSpin)
 
     def _on_rod(self, msg: RodState) -> None:
         self.rod = msg
+        self._rods[msg.step] = msg
+        while len(self._rods) > PAIRING_WINDOW:
+            del self._rods[min(self._rods)]
+        if self._waiting is not None and self._waiting.step == msg.step:
+            contact, self._waiting = self._waiting, None
+            self._record(msg, contact)
 
     def _on_contact(self, msg: ContactState) -> None:
+        """The latest contact; every ``history_period`` one into the history, with the rod state of
+        its step, whichever of the two streams brought its message first."""
         self.contact = msg
-        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
         if self._period is None:  # no figure wanted: keep no history (it grows with simulated time)
             return
-        if t + 1e-12 >= self._next_t and self.rod is not None and self.rod.step == msg.step:
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if t + 1e-12 >= self._next_t:
             self._next_t = t + self._period
-            self.history.append(
-                {
-                    "t": t,
-                    "x": list(self.rod.x),
-                    "y": list(self.rod.y),
-                    "theta": list(self.rod.theta),
-                    "radius": list(self.rod.radius),
-                    "s": list(msg.s),
-                    "rho": list(msg.rho),
-                    "alpha": list(msg.alpha),
-                    "object_q": list(self.rod.object_q),
-                    "object_centroid": list(self.rod.object_centroid),
-                }
-            )
+            rod = self._rods.get(msg.step)
+            if rod is None:
+                self._waiting = msg  # (its rod state is still on the way)
+            else:
+                self._record(rod, msg)
+
+    def _record(self, rod: RodState, contact: ContactState) -> None:
+        self.history.append(
+            {
+                "t": contact.header.stamp.sec + 1e-9 * contact.header.stamp.nanosec,
+                "x": list(rod.x),
+                "y": list(rod.y),
+                "theta": list(rod.theta),
+                "radius": list(rod.radius),
+                "s": list(contact.s),
+                "rho": list(contact.rho),
+                "alpha": list(contact.alpha),
+                "object_q": list(rod.object_q),
+                "object_centroid": list(rod.object_centroid),
+            }
+        )
 
     def _on_quality(self, msg: GraspQuality) -> None:
         self.quality = msg
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for st in msg.status:
-            if st.name == self._simulator:
+            node = self._statuses.get(st.name)
+            if node is None:
+                continue
+            values = {kv.key: kv.value for kv in st.values}
+            pid = values.get("pid", "")
+            if self._own_pids is not None and pid.isdigit() and int(pid) not in self._own_pids():
+                self.foreign = (node, int(pid))
+            elif node == "rod_simulator":
                 state = self.status.get("state")
-                self.status = {kv.key: kv.value for kv in st.values}
+                self.status = values
                 self.state_changed = self.state_changed or self.status.get("state") != state
-            elif st.name == self._controller:
-                self.controller_status = {kv.key: kv.value for kv in st.values}
+            elif node == "grasp_controller":
+                self.controller_status = values
 
     def connected(self) -> bool:
         """Every node of the monitor's namespace is up and each stream has its publisher and subscribers matched."""
@@ -193,6 +223,7 @@ def _observe(mon: Monitor, sup: Supervisor, group: Any, resume_fut: Any, params_
         params_ready=mon.sim_params.services_are_ready(),
         params_result=params_result,
         rod_state_publishers=frozenset(tuple(i.endpoint_gid) for i in mon.get_publishers_info_by_topic(topics.ROD_STATE)),
+        foreign=mon.foreign,
     )
 
 
@@ -326,7 +357,8 @@ def run_graph(
         moves = sim_params.get("object_mode", "fixed") != "fixed"
         with discovery_profile_set():  # (this process's participant is created with the first node)
             mon = Monitor(history_period=0.01 if keep_history else None, recording=record is not None,
-                          recorded_streams=RECORDED_STREAMS + (OBJECT_STREAMS if moves else ()))
+                          recorded_streams=RECORDED_STREAMS + (OBJECT_STREAMS if moves else ()),
+                          own_pids=lambda: {os.getpid(), *(group.pids if group is not None else ())})
         nodes.append(mon)
         if foxglove is not None:
             from contgrasp_ros.nodes.foxglove_bridge import FoxgloveBridge
@@ -352,8 +384,6 @@ def run_graph(
                 except ContgraspError as exc:
                     return {"error": f"{RECORDER}: {exc}", "exit_codes": {}, "pids": {}}, exit_code(exc)
         else:
-            import os
-
             from contgrasp_ros.launcher.processes import ProcessGroup
 
             env = dict(os.environ, PYTHONUNBUFFERED="1")
@@ -408,6 +438,7 @@ def run_graph(
             summary_codes.update(group.stop())
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+        join_signal_thread()  # (after the children are stopped: a SIGTERM now ends this process at once)
         executor.shutdown()
         for n in nodes:  # (in-process: the recorder was added last, so it is finalised last)
             n.destroy_node()

@@ -50,6 +50,7 @@ class ProcessGroup:
         self.events = events
         self.sink = sink if sink is not None else sys.stderr
         self.children: list[Child] = []
+        self.pids: set[int] = set()  # every process this group started, restarts included
         self._colour = hasattr(self.sink, "isatty") and self.sink.isatty()
         self._lock = threading.Lock()
 
@@ -65,6 +66,7 @@ class ProcessGroup:
         return child
 
     def _announce(self, child: Child, event: str) -> None:
+        self.pids.add(child.proc.pid)
         with self._lock:
             print(f"[launcher] started {child.name} (pid {child.proc.pid})", file=self.sink, flush=True)
         if self.events is not None:

@@ -66,7 +66,9 @@ class Observation:
     ``connected`` is only read while connecting; ``resume_answered`` says whether the latest
     :class:`Resume` call has been answered, ``params_result`` the outcome of the latest
     :class:`SetMinSubscribers` call (``None`` while it is pending); ``rod_state_publishers``
-    identifies the publishers of the rod state (e.g. their endpoint gids)."""
+    identifies the publishers of the rod state (e.g. their endpoint gids); ``foreign`` names a
+    node of the graph whose status came from a process the launcher did not start, and that
+    process's pid (another graph in the same domain and namespace), or is None."""
 
     now: float
     exited: tuple[Exit, ...] = ()
@@ -78,6 +80,7 @@ class Observation:
     params_ready: bool = False
     params_result: bool | None = None
     rod_state_publishers: frozenset[Hashable] = frozenset()
+    foreign: tuple[str, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -189,6 +192,13 @@ class Supervisor:
     def step(self, obs: Observation) -> list[Action]:
         """Decide on one observation; the actions in the order to perform them."""
         out: list[Action] = []
+        if obs.foreign is not None and not self.done:
+            # (e.g. two controllers answering each state, one simulator's couples reaching the
+            # other's: neither run is what it claims to be)
+            node, pid = obs.foreign
+            self._finish(f"another graph's {node} (pid {pid}) runs in this domain and namespace, so the two "
+                         "runs' messages mix: give each graph its own --namespace or --domain-id", out)
+            return out
         if self.phase is Phase.CONNECTING:
             if self._lower_pending:
                 self._lower(obs, out)

@@ -11,7 +11,6 @@ robustness: docs/recording.md ("The recorder node").
 from __future__ import annotations
 
 import functools
-import importlib
 import json
 import re
 import struct
@@ -80,11 +79,6 @@ def cdr_stamp(data: bytes) -> float:
     fmt = "<iI" if data[1] == 1 else ">iI"
     sec, nsec = struct.unpack_from(fmt, data, 4)
     return sec + 1e-9 * nsec
-
-
-def _message_class(type_name: str) -> Any:
-    pkg, _, name = type_name.rpartition("/")
-    return getattr(importlib.import_module(pkg.replace("/", ".")), name)
 
 
 class McapRecorder(Node):
@@ -199,7 +193,7 @@ class McapRecorder(Node):
             if not offers:
                 continue  # the publishers' QoS are needed (offered_qos_profiles); wait for one
             try:
-                cls = _message_class(types[0])
+                cls = topics.message_class(types[0])
             except (ImportError, AttributeError, ValueError):
                 self.get_logger().warn(f"not recording {topic}: type {types[0]} is not installed", once=True)
                 continue

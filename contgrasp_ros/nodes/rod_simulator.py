@@ -29,7 +29,7 @@ from std_msgs.msg import Header
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from contgrasp_core.errors import ContgraspError
+from contgrasp_core.errors import ContgraspError, interruption
 from contgrasp_core.rod.body import MODES
 from contgrasp_core.rod.closed_loop import ClosedLoopConfig
 from contgrasp_core.rod.disturbance import KINDS, WrenchInput
@@ -332,6 +332,8 @@ class RodSimulator(Node):
         except FatalNodeError:
             raise
         except Exception as exc:  # Newton failure, or anything else: the state can no longer be trusted
+            if (stop := interruption(exc)) is not None:  # (a Ctrl-C inside a compiled kernel: a stop)
+                raise stop from None
             self._fail(str(exc) if isinstance(exc, ContgraspError) else f"{type(exc).__name__}: {exc}")
             return
         self.last_couple = couple

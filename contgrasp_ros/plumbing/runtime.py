@@ -32,10 +32,11 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
+from rclpy.signals import uninstall_signal_handlers
 from std_msgs.msg import Header
 
 from contgrasp_core.boundary import Boundary
-from contgrasp_core.errors import ContgraspError, RunFailure, exit_code, one_line
+from contgrasp_core.errors import ContgraspError, RunFailure, exit_code, interruption, one_line
 from contgrasp_ros.plumbing import topics
 from contgrasp_ros.plumbing.executor import LeanExecutor
 
@@ -54,6 +55,7 @@ __all__ = [
     "make_executor",
     "run_node",
     "run_nodes",
+    "join_signal_thread",
     "sim_time_by_default",
     "FinishPolicy",
     "ON_FINISH",
@@ -270,6 +272,8 @@ def _call_guarded(drops: DropCounter, where: str, fn: Callable[..., Any], args: 
     except FatalNodeError:
         raise
     except Exception as exc:
+        if (stop := interruption(exc)) is not None:  # (a Ctrl-C inside a compiled kernel: a stop)
+            raise stop from None
         if drops.stopping():
             # SIGINT/SIGTERM shut the context down while this callback ran (its publish failed):
             # the node is stopping, not broken
@@ -412,7 +416,8 @@ class Diagnostics:
     def status(self, values: Status | None = None) -> DiagnosticStatus:
         """The current DiagnosticStatus (of ``values`` when given: a :meth:`_values` result)."""
         level, message, kv = values if values is not None else self._values()
-        kv = {**kv, **self._drops.key_values()}
+        # (the pid: a launcher tells its own nodes from another graph's of the same names)
+        kv = {**kv, **self._drops.key_values(), "pid": str(os.getpid())}
         return DiagnosticStatus(level=level, name=topics.status_name(self._node.get_name(), self._node.get_namespace()), message=message, hardware_id="contgrasp",
                                 values=[KeyValue(key=k, value=v) for k, v in kv.items()])
 
@@ -647,12 +652,34 @@ class GuardedSpin:
             self.streak = 0
 
 
+def _interrupt_once(signum: int, frame: object) -> None:
+    """SIGINT handler of a node process: the first SIGINT stops it (KeyboardInterrupt), and the
+    handler ignores every later one before anything else runs, so a burst of Ctrl-C cannot
+    land in the clean-up (before, one landed between the first interrupt and
+    :func:`_ignore_interrupts`, with a traceback and exit -2)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
 def _ignore_interrupts() -> None:
     """From here on SIGINT does nothing (the process is already stopping; a node process exits
     right after, and a second Ctrl-C must not cut its clean-up short). Called in-process (tests),
     it leaves SIGINT ignored, which later subprocesses inherit: tests/conftest.py puts it back."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def join_signal_thread() -> None:
+    """Take rclpy's SIGINT/SIGTERM handlers out and wait for its signal thread
+    (``rclpy.signals.uninstall_signal_handlers`` joins it): the first step of a clean-up after
+    rclpy ran, before anything is destroyed.
+
+    rclpy's C handler only wakes that thread, which then triggers the executors' guard
+    conditions and shuts the contexts down while the interrupted main thread goes on into its
+    clean-up; destroying nodes, an executor or the context under it crashed a node process on
+    shutdown under load (exit -11). From here on SIGTERM ends the process at once (what
+    launchers escalate to when a clean-up hangs)."""
+    uninstall_signal_handlers()
 
 
 def run_node(factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
@@ -678,15 +705,17 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
     """
     label = "+".join(getattr(f, "__name__", "node") for f in factories)
     argv = list(args) if args is not None else sys.argv
-    rclpy.init(args=argv)
-    nodes: list[Node] = []
-    code = 0
     unknown = rclpy.utilities.remove_ros_args(argv)[1:]
     if unknown:  # (e.g. a parameter given without --ros-args: it would be silently ignored)
         print(f"{label}: error: unrecognized arguments: {' '.join(unknown)} (parameters go after --ros-args: "
               "--ros-args -p NAME:=VALUE or --params-file FILE)", file=sys.stderr)
-        rclpy.shutdown()
         return 2
+    if threading.current_thread() is threading.main_thread():
+        # (before rclpy.init: rclpy's own SIGINT handler shuts the context down, then chains to this one)
+        signal.signal(signal.SIGINT, _interrupt_once)
+    rclpy.init(args=argv)
+    nodes: list[Node] = []
+    code = 0
     try:
         for factory in factories:
             try:
@@ -725,6 +754,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Sequence[str] | Non
         # terminal's Ctrl-C reaches every process and ros2 launch forwards one more to each child.
         # (SIGTERM still ends the process: what launchers escalate to when a clean-up hangs.)
         _ignore_interrupts()
+        join_signal_thread()
         for node in nodes:
             node.destroy_node()
             code = max(code, int(getattr(node, "exit_code", 0)))  # a failure during the node's own clean-up

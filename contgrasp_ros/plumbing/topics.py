@@ -10,9 +10,11 @@ conventions have them; a namespaced graph remaps ``/clock`` to ``<namespace>/clo
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Iterable
+from typing import Any
 
-__all__ = ["resolve", "status_name", "namespace_clock", "namespace_arguments", "recorded_namespace", "GLOBAL", "OBJECT", "ROD_STATE", "CONTACT", "COUPLE", "ROD_STATE_SAMPLED", "CONTACT_SAMPLED", "QUALITY", "MARKERS", "DIAGNOSTICS", "CLOCK", "OBJECT_POSE",
+__all__ = ["resolve", "message_class", "status_name", "namespace_clock", "namespace_arguments", "recorded_namespace", "GLOBAL", "OBJECT", "ROD_STATE", "CONTACT", "COUPLE", "ROD_STATE_SAMPLED", "CONTACT_SAMPLED", "QUALITY", "MARKERS", "DIAGNOSTICS", "CLOCK", "OBJECT_POSE",
            "OBJECT_TWIST", "OBJECT_WRENCH", "APPLY_WRENCH"]
 
 OBJECT = "contgrasp/object"
@@ -91,3 +93,11 @@ def recorded_namespace(names: Iterable[str]) -> str:
     :data:`ROD_STATE` (``/`` when none or several graphs' are there, the root's included)."""
     found = {n[: -len(ROD_STATE) - 1] for n in names if n.endswith("/" + ROD_STATE)}
     return next(iter(found)) or "/" if len(found) == 1 else "/"
+
+
+def message_class(type_name: str) -> Any:
+    """The Python class of the ROS message type ``pkg/msg/Name`` (importing ``pkg.msg``, not
+    rclpy); ModuleNotFoundError when its package is not installed, AttributeError when the
+    package has no such type, ValueError for a name without a package."""
+    pkg, _, name = type_name.rpartition("/")
+    return getattr(importlib.import_module(pkg.replace("/", ".")), name)

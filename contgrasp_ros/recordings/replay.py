@@ -8,15 +8,16 @@ recorded, so the sensing/controller/quality nodes, RViz or Foxglove can run agai
 
 from __future__ import annotations
 
-import importlib
 import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from contgrasp_core.errors import InvalidParameterError, RunFailure
+from contgrasp_core.errors import InvalidParameterError, MissingDependencyError, RunFailure
 from contgrasp_ros.bag.reader import Recording, info, iter_raw, open_recording
+from contgrasp_ros.layer import INTERFACES, missing
+from contgrasp_ros.plumbing.topics import message_class
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -39,11 +40,18 @@ def _qos(offered: Any) -> QoSProfile:
 
 
 def _message_class(type_name: str) -> Any:
-    pkg, _, name = type_name.rpartition("/")
+    """The class to publish ``type_name`` with. A missing package this layer itself needs is a
+    missing dependency (exit 2, saying what to install); any other package or type this
+    installation lacks fails the replay (exit 1)."""
     try:
-        return getattr(importlib.import_module(pkg.replace("/", ".")), name)
-    except (ImportError, AttributeError) as exc:
+        return message_class(type_name)
+    except ModuleNotFoundError as exc:
+        hint = missing(exc) if type_name.split("/")[0] in INTERFACES else None
+        if hint is not None:
+            raise MissingDependencyError(f"cannot replay {type_name}: {hint}") from exc
         raise RunFailure(f"cannot replay {type_name}: the message package is not installed ({exc})") from exc
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise RunFailure(f"cannot replay {type_name}: the installed message package does not define it ({exc})") from exc
 
 
 def replay(
@@ -129,11 +137,12 @@ def replay(
     finally:
         # reliable subscribers still being served: let them acknowledge before the publishers go
         # (after Ctrl-C rclpy has shut the context down, at any moment: all_acked then gives up)
-        from contgrasp_ros.plumbing.runtime import all_acked
+        from contgrasp_ros.plumbing.runtime import all_acked, join_signal_thread
 
         for pub in pubs.values():
             all_acked(pub, ack_timeout, node.context)
         if own:
+            join_signal_thread()
             node.destroy_node()
             if rclpy.ok():
                 rclpy.shutdown()
