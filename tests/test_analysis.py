@@ -8,8 +8,10 @@ import json
 import os
 import subprocess
 import sys
+from collections.abc import Iterable, Iterator
 from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -20,7 +22,7 @@ from conftest import fresh_domain_id
 from contgrasp_core.cli import main
 from contgrasp_core.scenario import PAPER
 from contgrasp_ros.recordings import cli_analyze
-from contgrasp_ros.recordings.analysis import analyze, load_run, recompute
+from contgrasp_ros.recordings.analysis import MixedRecordingError, analyze, check, load_run, recompute
 from contgrasp_ros.bag.reader import iter_decoded, iter_raw, open_recording
 from contgrasp_ros.bag.writer import BagWriter
 from contgrasp_ros.launcher.summary import ContactStats, FinalQuality, FinalState, RunSummary, build_summary, contact_stats
@@ -34,6 +36,24 @@ ROD, CONTACT, COUPLE, QUALITY = "/contgrasp/rod_state", "/contgrasp/contact", "/
 
 def cli(*argv: str) -> int:
     return main(["analyze", *argv], extra=[cli_analyze.add_parser])
+
+
+def copy_recording(rec: Any, dst: Path, rows: Iterable[tuple[str, Any, bytes, int, int]],
+                   dropped_records: tuple[str, ...] = ()) -> None:
+    """Write ``rows`` of ``rec`` (topic, raw message, its data, log time, publish time: each
+    possibly changed) as a new recording ``dst`` with ``rec``'s metadata records but ``dropped_records``."""
+    out = BagWriter(dst)
+    for topic, m, data, log_ns, publish_ns in rows:
+        out.add_topic(topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""),
+                      m.channel.metadata.get("topic_type_hash", ""), definition=m.schema.data.decode())
+        out.write(topic, data, log_ns, publish_ns, m.sequence)
+    out.records.update({k: v for k, v in rec.metadata_records().items() if k not in ("rosbag2", *dropped_records)})
+    out.close()
+
+
+def as_is(m: Any) -> tuple[str, Any, bytes, int, int]:
+    """A raw message as :func:`copy_recording` writes it unchanged."""
+    return m.topic, m, m.data, m.log_time_ns, m.publish_time_ns
 
 
 @pytest.fixture(scope="module")
@@ -174,23 +194,21 @@ def decimate(src: Path, dst: Path, period: float = 0.05) -> list[int]:
     last_of = {}
     for key in stamps:
         last_of[key[0]] = key
-    out = BagWriter(dst)
     kept_at: dict[str, float] = {}
     kept_steps = []
-    for m in iter_raw(rec):
+
+    def kept(m: Any) -> bool:
         key = (m.topic, m.log_time_ns, m.sequence)
         if key in stamps:
             t, step = stamps[key]
             if key != last_of[m.topic] and m.topic in kept_at and t - kept_at[m.topic] < period - 1e-12:
-                continue
+                return False
             kept_at[m.topic] = t
             if m.topic == ROD:
                 kept_steps.append(step)
-        out.add_topic(m.topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""), m.channel.metadata.get("topic_type_hash", ""),
-                      definition=m.schema.data.decode())
-        out.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns, m.sequence)
-    out.records.update({k: v for k, v in rec.metadata_records().items() if k != "rosbag2"})
-    out.close()
+        return True
+
+    copy_recording(rec, dst, (as_is(m) for m in iter_raw(rec) if kept(m)))
     return kept_steps
 
 
@@ -218,14 +236,9 @@ def test_streams_are_read_in_publish_order(recording: tuple[Path, dict], tmp_pat
     rec = open_recording(bag)
     first_quality = min(iter_raw(rec, [QUALITY]), key=lambda m: m.publish_time_ns)
     end_ns = max(m.log_time_ns for m in iter_raw(rec))
-    out = BagWriter(tmp_path / "late")
-    for m in iter_raw(rec):
-        out.add_topic(m.topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""), m.channel.metadata.get("topic_type_hash", ""),
-                      definition=m.schema.data.decode())
-        late = m.topic == QUALITY and m.publish_time_ns == first_quality.publish_time_ns
-        out.write(m.topic, m.data, end_ns + 1 if late else m.log_time_ns, m.publish_time_ns, m.sequence)
-    out.records.update({k: v for k, v in rec.metadata_records().items() if k != "rosbag2"})
-    out.close()
+    late = {(QUALITY, first_quality.publish_time_ns)}
+    copy_recording(rec, tmp_path / "late", ((m.topic, m, m.data, end_ns + 1 if (m.topic, m.publish_time_ns) in late else m.log_time_ns,
+                                             m.publish_time_ns) for m in iter_raw(rec)))
     last_logged = list(iter_raw(open_recording(tmp_path / "late"), [QUALITY]))[-1]
     assert last_logged.publish_time_ns == first_quality.publish_time_ns  # (the copy does reorder)
     assert analyze(tmp_path / "late")["final_quality"] == analyze(bag)["final_quality"] == summary["final_quality"]
@@ -236,17 +249,15 @@ def test_a_state_published_again_is_analysed_once(recording: tuple[Path, dict], 
     the sensor its answer: recorded twice in a row, analysed once, the recording still complete."""
     bag, summary = recording
     rec = open_recording(bag)
-    out = BagWriter(tmp_path / "again")
     repeated = {ROD: 0, CONTACT: 0}
-    for m in sorted(iter_raw(rec), key=lambda m: m.publish_time_ns):
-        out.add_topic(m.topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""), m.channel.metadata.get("topic_type_hash", ""),
-                      definition=m.schema.data.decode())
-        out.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns, m.sequence)
+
+    def again(m: Any) -> Iterator[tuple[str, Any, bytes, int, int]]:
+        yield as_is(m)
         if m.topic in repeated and repeated[m.topic] < 3:  # (steps 0, 1, 2, each once more)
-            out.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns + 1, m.sequence)
+            yield m.topic, m, m.data, m.log_time_ns, m.publish_time_ns + 1
             repeated[m.topic] += 1
-    out.records.update({k: v for k, v in rec.metadata_records().items() if k != "rosbag2"})
-    out.close()
+
+    copy_recording(rec, tmp_path / "again", (row for m in sorted(iter_raw(rec), key=lambda m: m.publish_time_ns) for row in again(m)))
     r, full = analyze(tmp_path / "again"), analyze(bag)
     assert r["step_gaps"] == {**full["step_gaps"], "repeated_states": 3} and r["step_gaps"]["contiguous"]
     for key in ("settled_recomputed", "settle_time_recomputed_s", "recomputed_pairs", "max_recompute_error", "final"):
@@ -399,13 +410,7 @@ def test_a_recording_without_run_parameters_still_replays_the_settle_rule(record
     bag, summary = recording
     rec = open_recording(bag)
     copy = tmp_path / "by_hand.mcap"
-    out = BagWriter(copy)
-    for m in iter_raw(rec):
-        out.add_topic(m.topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""),
-                      m.channel.metadata.get("topic_type_hash", ""), definition=m.schema.data.decode())
-        out.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns, m.sequence)
-    out.records.update({k: v for k, v in rec.metadata_records().items() if k not in ("rosbag2", RUN_RECORD)})
-    out.close()
+    copy_recording(rec, copy, (as_is(m) for m in iter_raw(rec)), dropped_records=(RUN_RECORD,))
     r = analyze(copy)
     assert r["step_gaps"]["contiguous"] and r["recompute_parameters"]["source"].startswith("recorded messages and node defaults")
     assert r["recompute_parameters"]["settle_speed"] == PAPER.loop.settle_speed
@@ -429,22 +434,89 @@ def test_a_recording_made_under_a_namespace_is_analysed_as_its_graph(recording: 
     bag, _ = recording
     rec = open_recording(bag)
     moved = tmp_path / "r1.mcap"
-    out = BagWriter(moved)
-    for m in iter_raw(rec):
+    def under_r1(m: Any) -> tuple[str, Any, bytes, int, int]:
         topic, data = ("/r1" + m.topic if m.topic.startswith(("/contgrasp/", "/clock")) else m.topic), m.data
         if m.topic == "/diagnostics":
             msg = deserialize_message(m.data, DiagnosticArray)
             for st in msg.status:
                 st.name = "r1/" + st.name
             data = serialize_message(msg)
-        out.add_topic(topic, m.type, m.channel.metadata.get("offered_qos_profiles", ""),
-                      m.channel.metadata.get("topic_type_hash", ""), definition=m.schema.data.decode())
-        out.write(topic, data, m.log_time_ns, m.publish_time_ns, m.sequence)
-    out.records.update({k: v for k, v in rec.metadata_records().items() if k != "rosbag2"})
-    out.close()
+        return topic, m, data, m.log_time_ns, m.publish_time_ns
+
+    copy_recording(rec, moved, (under_r1(m) for m in iter_raw(rec)))
     r, full = analyze(moved), analyze(bag)
     assert ROD not in {t["name"] for t in r["topics"]} and "/r1" + ROD in {t["name"] for t in r["topics"]}
     for key in ("simulator_state", "settled", "steps", "missed_deadlines", "final", "final_quality", "max_recompute_error",
                 "recomputed_pairs", "step_gaps"):
         assert r[key] == full[key], key
     assert full["simulator_state"] == "finished"
+
+
+def test_concurrent_processes_are_overlapping_status_spans() -> None:
+    """Two processes of one status name at once are listed; one after another (a restart) not."""
+    from contgrasp_ros.recordings.analysis import concurrent_processes
+
+    assert concurrent_processes({}) == []
+    restarted = {"rod_simulator": {7: (0, 100), 9: (150, 300)}, "grasp_controller": {8: (0, 300)}}
+    assert concurrent_processes(restarted) == []
+    twice = {"rod_simulator": {9: (50, 300), 7: (0, 100), 11: (310, 400)}}
+    assert concurrent_processes(twice) == [{"node": "rod_simulator", "pids": [7, 9]}]
+    same_instant = {"r1/grasp_quality": {5: (0, 100), 6: (100, 200)}}
+    assert concurrent_processes(same_instant) == [{"node": "r1/grasp_quality", "pids": [5, 6]}]
+
+
+def test_a_recording_beside_another_graph_fails_and_a_restart_passes(recording: tuple[Path, dict], tmp_path: Path) -> None:
+    """The fixture's recording with a second simulator's statuses beside its own (another graph
+    in the domain: a pid the run never had, at the same times) fails with exit 1 after its
+    result; with its simulator's statuses from a new pid after the middle of the run (a restart,
+    the processes one after another) it analyses as the original."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    bag, _ = recording
+    rec = open_recording(bag)
+    diags = [m for m in iter_raw(rec) if m.topic == "/diagnostics"]
+    middle = sorted(m.publish_time_ns for m in diags)[len(diags) // 2]
+    own_pid = None
+
+    def with_pid(m: Any, pid: int) -> bytes:
+        nonlocal own_pid
+        msg = deserialize_message(m.data, DiagnosticArray)
+        msg.status = [st for st in msg.status if st.name == "rod_simulator"]
+        for st in msg.status:
+            for kv in st.values:
+                if kv.key == "pid":
+                    own_pid, kv.value = int(kv.value), str(pid)
+        return serialize_message(msg)
+
+    def beside(m: Any) -> Iterator[tuple[str, Any, bytes, int, int]]:
+        yield as_is(m)
+        if m.topic == "/diagnostics":
+            yield m.topic, m, with_pid(m, 4_000_001), m.log_time_ns, m.publish_time_ns + 1
+
+    def restarted(m: Any) -> tuple[str, Any, bytes, int, int]:
+        if m.topic == "/diagnostics" and m.publish_time_ns > middle:
+            msg = deserialize_message(m.data, DiagnosticArray)
+            for st in msg.status:
+                for kv in st.values:
+                    if st.name == "rod_simulator" and kv.key == "pid":
+                        kv.value = "4000002"
+            return m.topic, m, serialize_message(msg), m.log_time_ns, m.publish_time_ns
+        return as_is(m)
+
+    copy_recording(rec, tmp_path / "beside.mcap", (row for m in iter_raw(rec) for row in beside(m)))
+    copy_recording(rec, tmp_path / "restarted.mcap", (restarted(m) for m in iter_raw(rec)))
+    full = analyze(bag)
+    assert full["concurrent_processes"] == [] and own_pid is not None
+
+    mixed = analyze(tmp_path / "beside.mcap")
+    assert mixed["concurrent_processes"] == [{"node": "rod_simulator", "pids": [own_pid, 4_000_001]}]
+    with pytest.raises(MixedRecordingError, match=rf"statuses of rod_simulator from pids {own_pid} and 4000001 at once"):
+        check(mixed)
+    assert cli(str(tmp_path / "beside.mcap"), "--json") == 1
+
+    again = analyze(tmp_path / "restarted.mcap")
+    assert again["concurrent_processes"] == []
+    check(again)
+    for key in ("simulator_state", "settled", "steps", "final", "final_quality", "max_recompute_error", "step_gaps"):
+        assert again[key] == full[key], key

@@ -11,6 +11,7 @@ Decimated recordings are paired by ``step``. Nothing here imports rclpy. docs/an
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -60,6 +61,8 @@ __all__ = [
     "analyze",
     "check",
     "RecomputeMismatchError",
+    "MixedRecordingError",
+    "concurrent_processes",
     "RECOMPUTE_BOUND",
 ]
 
@@ -72,6 +75,16 @@ class RecomputeMismatchError(RunFailure):
     """The recording does not recompute: an error above :data:`RECOMPUTE_BOUND`, contact flags or
     quality validity that differ, or steps whose recomputation failed. ``result`` is the
     analysis (``contgrasp analyze`` prints it, then the one error line, and exits 1)."""
+
+    def __init__(self, message: str, result: dict[str, Any]) -> None:
+        super().__init__(message)
+        self.result = result
+
+
+class MixedRecordingError(RunFailure):
+    """The recording holds two graphs' messages: one node's status came from two processes at
+    once (another graph ran in the same domain and namespace). ``result`` as in
+    :class:`RecomputeMismatchError`."""
 
     def __init__(self, message: str, result: dict[str, Any]) -> None:
         super().__init__(message)
@@ -183,6 +196,7 @@ class RunData:
     couples: dict[int, Any] | None = None  # the recorded couple answering each step (convert.couple_arrays)
     recorder: dict[str, Any] | None = None
     repeated_states: int = 0  # rod states published again (a re-send), each kept once
+    concurrent: list[dict[str, Any]] | None = None  # (concurrent_processes of the statuses)
 
 
 def _repeat(last: Any, msg: Any) -> bool:
@@ -191,6 +205,21 @@ def _repeat(last: Any, msg: Any) -> bool:
     lost") and the sensor its answer to it; same step, same stamp."""
     return bool(last.step == msg.step and last.header.stamp.sec == msg.header.stamp.sec
                 and last.header.stamp.nanosec == msg.header.stamp.nanosec)
+
+
+def concurrent_processes(spans: dict[str, dict[int, tuple[int, int]]]) -> list[dict[str, Any]]:
+    """The statuses published by two processes at once, from each status name's processes and
+    the first and last publish time of each (``spans[name][pid] = (first_ns, last_ns)``): one
+    entry ``{"node": name, "pids": [a, b]}`` per overlapping pair of a name. A restarted node's
+    processes follow one another (the old one's last status comes before the new one's first);
+    two graphs in one domain and namespace publish side by side."""
+    out = []
+    for name, by_pid in sorted(spans.items()):
+        ordered = sorted(by_pid.items(), key=lambda kv: kv[1])
+        for (pid_a, (_, last_a)), (pid_b, (first_b, _)) in itertools.pairwise(ordered):
+            if first_b <= last_a:
+                out.append({"node": name, "pids": [pid_a, pid_b]})
+    return out
 
 
 def _stack(rows: list[Any], what: str) -> Array:
@@ -309,6 +338,7 @@ def load_run(path: str | Path) -> RunData:
                                       topics.COUPLE: []}
     status: dict[str, str] = {}
     controller: dict[str, str] = {}
+    spans: dict[str, dict[int, tuple[int, int]]] = {}  # (status name -> pid -> first, last publish time)
     repeated = 0
     # in the order they were published, not by log time: a simulated-time log time is the header
     # stamp, and a late message stamped t = 0 (unset) is logged at the recorder's clock instead
@@ -325,10 +355,15 @@ def load_run(path: str | Path) -> RunData:
             kept.append(msg)
             continue
         for st in msg.status:
+            values = {kv.key: kv.value for kv in st.values}
+            pid, now = values.get("pid", ""), raw.publish_time_ns
+            if pid.isdigit():  # (a recording from before statuses carried it has none)
+                first, _ = spans.setdefault(st.name, {}).get(int(pid), (now, now))
+                spans[st.name][int(pid)] = (first, now)
             if st.name == simulator:
-                status = {kv.key: kv.value for kv in st.values}
+                status = values
             elif st.name == topics.status_name(CONTROLLER, ns):
-                controller = {kv.key: kv.value for kv in st.values}
+                controller = values
     try:
         boundary = boundary_from_msg(by_topic[topics.OBJECT][-1])
     except ContgraspError as exc:
@@ -347,6 +382,7 @@ def load_run(path: str | Path) -> RunData:
         couples=_couples(by_topic[topics.COUPLE]) if counts.get(name[topics.COUPLE]) else None,
         recorder=recorder,
         repeated_states=repeated,
+        concurrent=concurrent_processes(spans),
     )
 
 
@@ -729,6 +765,7 @@ def summarize(run: RunData, rc: Recomputation) -> dict[str, Any]:
                      "quality": 0 if q is None else len(q.step)},
         "recorder": run.recorder,
         "run": run.run_info or None,
+        "concurrent_processes": run.concurrent or [],
     }
 
 
@@ -843,9 +880,15 @@ def write_plots(run: RunData, rc: Recomputation, path: str | Path, settle_time: 
 
 
 def check(result: dict[str, Any]) -> None:
-    """:class:`RecomputeMismatchError` when an analysis (:func:`analyze`'s result) shows a
-    recompute error above :data:`RECOMPUTE_BOUND`, mismatching contact flags or validity, or
-    failed recomputations."""
+    """:class:`MixedRecordingError` when an analysis (:func:`analyze`'s result) shows two
+    processes of one node at once (:func:`concurrent_processes`); :class:`RecomputeMismatchError`
+    when it shows a recompute error above :data:`RECOMPUTE_BOUND`, mismatching contact flags or
+    validity, or failed recomputations."""
+    mixed = result.get("concurrent_processes")
+    if mixed:
+        pairs = "; ".join(f"{m['node']} from pids {m['pids'][0]} and {m['pids'][1]}" for m in mixed)
+        raise MixedRecordingError(f"the recording mixes two graphs' messages: statuses of {pairs} at once (two graphs "
+                                  "in one domain and namespace: give each its own --namespace or --domain-id)", result)
     problems = []
     err = result.get("max_recompute_error")
     if err is not None and not err <= RECOMPUTE_BOUND:
