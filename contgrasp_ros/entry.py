@@ -2,7 +2,8 @@
 
 Each imports its module only when run, so that where the layer's dependencies are missing (a
 library-only install, README "Install") it prints one line naming what to install and exits
-with code 2 instead of an import traceback.
+with code 2 instead of an import traceback; a Ctrl-C that comes before the command handles its
+own (while it imports) ends it as that command's Ctrl-C does, without a traceback.
 """
 
 from __future__ import annotations
@@ -17,23 +18,31 @@ __all__ = ["launcher", "rod_simulator", "boundary_sensor", "grasp_controller", "
            "foxglove_bridge", "mcap_recorder", "container"]
 
 
-def _entry(module: str) -> Callable[[], int]:
+def _entry(module: str, interrupted: int = 0) -> Callable[[], int]:
+    """The console script running ``module.main()``; ``interrupted`` is its exit code on a Ctrl-C
+    that ``main`` does not handle itself (a node stops with 0, as on any Ctrl-C; the launcher 130)."""
+
     def main() -> int:
+        name = sys.argv[0].rsplit("/", 1)[-1]
         try:
             code: int = importlib.import_module(module).main()
         except ModuleNotFoundError as exc:  # at import, or a dependency the command imports later
             error = missing(exc)
             if error is None:
                 raise
-            print(f"{sys.argv[0].rsplit('/', 1)[-1]}: error: {error}", file=sys.stderr)
+            print(f"{name}: error: {error}", file=sys.stderr)
             return 2
+        except KeyboardInterrupt:  # (before the command's own handler: a launcher stopping a starting node)
+            if interrupted:
+                print(f"{name}: interrupted", file=sys.stderr)
+            return interrupted
         return code
 
     main.__doc__ = f"Run ``{module}.main()``."
     return main
 
 
-launcher = _entry("contgrasp_ros.launcher.cli")
+launcher = _entry("contgrasp_ros.launcher.cli", interrupted=130)
 rod_simulator = _entry("contgrasp_ros.nodes.rod_simulator")
 boundary_sensor = _entry("contgrasp_ros.nodes.boundary_sensor")
 grasp_controller = _entry("contgrasp_ros.nodes.grasp_controller")

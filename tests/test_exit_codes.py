@@ -605,6 +605,28 @@ def test_launcher_without_ros_names_what_to_install(capsys: pytest.CaptureFixtur
     assert len(err) == 1 and err[0].startswith("contgrasp-launch: error: needs ROS 2 Jazzy (module 'rclpy' is missing)"), err
 
 
+@pytest.mark.parametrize(("script", "code", "line"), [("rod_simulator", 0, None),
+                                                       ("launcher", 130, "contgrasp-launch: interrupted")])
+def test_a_ctrl_c_while_a_command_imports_ends_it_as_its_own_ctrl_c(script: str, code: int, line: str | None,
+                                                                   monkeypatch: pytest.MonkeyPatch,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """A SIGINT before the command's own handler is installed (a launcher stopping a node that
+    is still importing numba and rclpy) stops it as a Ctrl-C of the running command does: a node
+    with 0, the launcher with 130 and one line, neither with a KeyboardInterrupt traceback."""
+    import importlib
+
+    from contgrasp_ros import entry
+
+    def interrupted_import(name: str) -> Any:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(importlib, "import_module", interrupted_import)
+    monkeypatch.setattr(sys, "argv", ["/venv/bin/" + ("contgrasp-launch" if script == "launcher" else "contgrasp-simulator")])
+    assert getattr(entry, script)() == code
+    err = capsys.readouterr().err
+    assert err.splitlines() == ([] if line is None else [line]), err
+
+
 def test_launcher_json_stays_clean_when_native_code_writes_to_stdout(monkeypatch: pytest.MonkeyPatch,
                                                                      capfd: pytest.CaptureFixture[str]) -> None:
     """``--json``: stdout carries the summary only. While the graph runs, what native code writes
