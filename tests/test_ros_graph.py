@@ -183,7 +183,7 @@ def test_a_second_graph_in_the_same_domain_and_namespace_fails_the_run(tmp_path:
     assert out["error"] == (f"another graph's {node} (pid {other.pid}) runs in this domain and namespace, so "
                             "the two runs' messages mix: give each graph its own --namespace or --domain-id")
     assert proc.stderr.splitlines()[-1] == f"contgrasp-launch: error: {out['error']}"
-    # stopped, not failed (a node still importing when the launcher stops it ends by the SIGINT itself)
+    # stopped, not failed (a node whose interpreter is still starting, before Python handles SIGINT, ends by the signal itself)
     assert all(code in (0, -signal.SIGINT) for code in out["exit_codes"].values()), out["exit_codes"]
     assert not any(alive(pid) for pid in out["pids"].values())
 
