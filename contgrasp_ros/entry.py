@@ -4,6 +4,8 @@ Each imports its module only when run, so that where the layer's dependencies ar
 library-only install, README "Install") it prints one line naming what to install and exits
 with code 2 instead of an import traceback; a Ctrl-C that comes before the command handles its
 own (while it imports) ends it as that command's Ctrl-C does, without a traceback.
+``python -m contgrasp_ros.entry EXECUTABLE ARGS...`` runs one of them by its name in
+``lib/contgrasp_ros/`` (how ``contgrasp-launch`` starts its node processes).
 """
 
 from __future__ import annotations
@@ -50,3 +52,13 @@ grasp_quality = _entry("contgrasp_ros.nodes.grasp_quality")
 foxglove_bridge = _entry("contgrasp_ros.nodes.foxglove_bridge")
 mcap_recorder = _entry("contgrasp_ros.nodes.mcap_recorder")
 container = _entry("contgrasp_ros.nodes.container")
+
+
+if __name__ == "__main__":
+    executable = sys.argv[1] if len(sys.argv) > 1 else ""
+    if executable not in __all__ or executable == "launcher":
+        print(f"usage: python -m contgrasp_ros.entry {{{','.join(n for n in __all__ if n != 'launcher')}}} [ARGS...]",
+              file=sys.stderr)
+        raise SystemExit(2)
+    sys.argv = [executable, *sys.argv[2:]]
+    raise SystemExit(globals()[executable]())

@@ -18,7 +18,9 @@ import json
 import os
 import resource
 import subprocess
+import signal
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -625,6 +627,24 @@ def test_a_ctrl_c_while_a_command_imports_ends_it_as_its_own_ctrl_c(script: str,
     assert getattr(entry, script)() == code
     err = capsys.readouterr().err
     assert err.splitlines() == ([] if line is None else [line]), err
+
+
+def test_a_node_process_stopped_while_it_imports_exits_0_without_a_traceback() -> None:
+    """The launcher's node command (``python -m contgrasp_ros.entry NODE``) SIGINTed 0.1 s after
+    its start, while it still imports its modules (about 0.25 s here; the module run directly,
+    ``python -m contgrasp_ros.nodes.rod_simulator``, exited -2 with a traceback there): exit 0,
+    nothing on stderr. Truth: the stop a launcher makes of a graph whose nodes are starting."""
+    from conftest import fresh_domain_id
+
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(fresh_domain_id()))
+    proc = subprocess.Popen([sys.executable, "-m", "contgrasp_ros.entry", "rod_simulator"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(0.1)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0 and "Traceback" not in err, err[-2000:]
+    unknown = subprocess.run([sys.executable, "-m", "contgrasp_ros.entry", "launcher"], capture_output=True, text=True, timeout=60)
+    assert unknown.returncode == 2 and unknown.stderr.startswith("usage: python -m contgrasp_ros.entry {rod_simulator,"), unknown.stderr
 
 
 def test_launcher_json_stays_clean_when_native_code_writes_to_stdout(monkeypatch: pytest.MonkeyPatch,

@@ -47,17 +47,12 @@ DECIMATED_STREAMS = (topics.ROD_STATE, topics.CONTACT, topics.COUPLE)
 @dataclass(frozen=True)
 class Process:
     """One node process: ``executable`` in ``lib/contgrasp_ros/`` (what ``ros2 run`` runs; also
-    ``python -m`` :attr:`module`) with ``arguments`` before ``--ros-args``; ``name`` labels it
-    (a container's is its nodes joined by ``+``)."""
+    ``python -m contgrasp_ros.entry EXECUTABLE``) with ``arguments`` before ``--ros-args``;
+    ``name`` labels it (a container's is its nodes joined by ``+``)."""
 
     name: str
     executable: str
     arguments: tuple[str, ...] = ()
-
-    @property
-    def module(self) -> str:
-        """The Python module the executable runs (every executable is a module of ``nodes/``)."""
-        return f"{PACKAGE}.nodes.{self.executable}"
 
 
 def compose_groups(texts: Sequence[str], nodes: Sequence[str] = LOOP) -> list[tuple[str, ...]]:

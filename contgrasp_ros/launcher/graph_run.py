@@ -416,7 +416,7 @@ def run_graph(
                 ros_args = ["--ros-args", *(a for f in files for a in ("--params-file", str(f))), *moved]
                 if proc.name != RECORDER:
                     processes.append(proc.name)
-                group.start(proc.name, [sys.executable, "-m", proc.module, *proc.arguments, *ros_args])
+                group.start(proc.name, [sys.executable, "-m", "contgrasp_ros.entry", proc.executable, *proc.arguments, *ros_args])
         for n in nodes:
             executor.add_node(n)
         sup = Supervisor(start=time.monotonic(), timeout=timeout, respawn=respawn, recording=record is not None,
