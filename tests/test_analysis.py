@@ -22,7 +22,9 @@ from conftest import fresh_domain_id
 from contgrasp_core.cli import main
 from contgrasp_core.scenario import PAPER
 from contgrasp_ros.recordings import cli_analyze
-from contgrasp_ros.recordings.analysis import MixedRecordingError, analyze, check, load_run, recompute
+from contgrasp_ros.recordings.analysis import MixedRecordingError, analyze, check
+from contgrasp_ros.recordings.recompute import recompute
+from contgrasp_ros.recordings.run_data import load_run
 from contgrasp_ros.bag.reader import iter_decoded, iter_raw, open_recording
 from contgrasp_ros.bag.writer import BagWriter
 from contgrasp_ros.launcher.summary import ContactStats, FinalQuality, FinalState, RunSummary, build_summary, contact_stats
@@ -405,7 +407,7 @@ def test_a_recording_without_run_parameters_still_replays_the_settle_rule(record
     (not ``settled_recomputed: None`` beside ``step_gaps.contiguous: true``).
     Truth: the simulator's own verdict, once the fixture's looser rule stands in as the defaults."""
     from contgrasp_ros.bag.writer import RUN_RECORD
-    from contgrasp_ros.recordings import analysis
+    from contgrasp_ros.recordings import recompute as recomputation
 
     bag, summary = recording
     rec = open_recording(bag)
@@ -416,9 +418,9 @@ def test_a_recording_without_run_parameters_still_replays_the_settle_rule(record
     assert r["recompute_parameters"]["settle_speed"] == PAPER.loop.settle_speed
     assert isinstance(r["settled_recomputed"], bool)
     fixture_rule = {"settle_speed": 0.05, "settle_hold": 0.04, "min_time": 0.2}  # (the recording fixture's)
-    default = analysis._default
-    monkeypatch.setattr(analysis, "_default", lambda node, key: fixture_rule.get(key, default(node, key))
-                        if node == analysis.SIMULATOR else default(node, key))
+    default = recomputation.node_default
+    monkeypatch.setattr(recomputation, "node_default", lambda node, key: fixture_rule.get(key, default(node, key))
+                        if node == recomputation.SIMULATOR else default(node, key))
     r = analyze(copy)
     assert r["settled_recomputed"] is True
     assert r["settle_time_recomputed_s"] == pytest.approx(summary["settle_time_s"], rel=0, abs=1e-9)
@@ -454,7 +456,7 @@ def test_a_recording_made_under_a_namespace_is_analysed_as_its_graph(recording: 
 
 def test_concurrent_processes_are_overlapping_status_spans() -> None:
     """Two processes of one status name at once are listed; one after another (a restart) not."""
-    from contgrasp_ros.recordings.analysis import concurrent_processes
+    from contgrasp_ros.recordings.run_data import concurrent_processes
 
     assert concurrent_processes({}) == []
     restarted = {"rod_simulator": {7: (0, 100), 9: (150, 300)}, "grasp_controller": {8: (0, 300)}}

@@ -23,7 +23,8 @@ from conftest import fresh_domain_id  # noqa: E402
 from contgrasp_ros.bag.reader import iter_decoded, open_recording  # noqa: E402
 from contgrasp_ros.launcher.launch_handle import LaunchHandle  # noqa: E402
 from contgrasp_ros.launcher.cli import default_params_file  # noqa: E402
-from contgrasp_ros.recordings.analysis import load_run, step_gaps  # noqa: E402
+from contgrasp_ros.recordings.recompute import step_gaps  # noqa: E402
+from contgrasp_ros.recordings.run_data import load_run  # noqa: E402
 
 BIN = Path(sys.executable).parent
 NODES = ("rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality")

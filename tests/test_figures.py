@@ -163,7 +163,8 @@ def test_the_animation_moves_the_object(drifting_object, tmp_path) -> None:  # t
 @pytest.mark.skipif(not SAMPLE_BAG.exists(), reason="the sample bag is not in this checkout")
 def test_run_figure_labels_legend_and_every_curve_inside() -> None:
     from contgrasp_core.figures.run import TIME_LABEL, build_run_figure
-    from contgrasp_ros.recordings.analysis import history, load_run
+    from contgrasp_ros.recordings.analysis import history
+    from contgrasp_ros.recordings.run_data import load_run
 
     run = load_run(SAMPLE_BAG)
     assert run.params is not None
@@ -273,7 +274,8 @@ def test_fig4_snapshot_colours_are_distinguishable_in_metres(short_grasp) -> Non
 def test_run_figure_shares_fig4s_units_and_colour_map() -> None:
     from contgrasp_core.figures.closed_loop import LENGTH_UNIT, snapshot_colours
     from contgrasp_core.figures.run import build_run_figure
-    from contgrasp_ros.recordings.analysis import history, load_run
+    from contgrasp_ros.recordings.analysis import history
+    from contgrasp_ros.recordings.run_data import load_run
 
     run = load_run(SAMPLE_BAG)
     assert run.params is not None

@@ -29,7 +29,7 @@ from contgrasp_core.rod.session import run_sampled  # noqa: E402
 from contgrasp_ros.bag.reader import iter_decoded, open_recording  # noqa: E402
 from contgrasp_ros.launcher.graph import default_params_file, load_params  # noqa: E402
 from contgrasp_ros.plumbing import topics  # noqa: E402
-from contgrasp_ros.recordings.analysis import load_run  # noqa: E402
+from contgrasp_ros.recordings.run_data import load_run  # noqa: E402
 
 from conftest import Sink, fresh_domain_id  # noqa: E402
 
@@ -118,7 +118,7 @@ def test_the_holding_law_through_the_graph_equals_the_core_loop_bit_for_bit(tmp_
     run = load_run(tmp_path / "bag")
     assert run.rod.object is not None
     # the recorded holds, each applied at the recorded state it answers, made the effort the simulator reported
-    from contgrasp_ros.recordings.analysis import peak_couple_recomputed
+    from contgrasp_ros.recordings.recompute import peak_couple_recomputed
 
     assert peak_couple_recomputed(run) == pytest.approx(summary["peak_couple"], rel=1e-9)
     contact = {int(m.step): m for _, m in iter_decoded(rec, [topics.resolve(topics.CONTACT)])}

@@ -24,7 +24,8 @@ from contgrasp_core.objects import FIG2_SCALE, ROD_SCALE, ObjectScale, ObjectSpe
 from contgrasp_core.scenario import PAPER
 from contgrasp_ros.launcher import cli as launcher_cli
 from contgrasp_ros.recordings import cli_analyze
-from contgrasp_ros.recordings.analysis import load_run, object_name
+from contgrasp_ros.recordings.analysis import object_name
+from contgrasp_ros.recordings.run_data import load_run
 
 ROOT = Path(__file__).resolve().parents[1]
 KIDNEY = ROOT / "tests" / "data" / "kidney_outline.csv"

@@ -25,7 +25,8 @@ pytest.importorskip("contgrasp_msgs.msg")
 
 from contgrasp_core.rod.session import run_sampled  # noqa: E402
 from contgrasp_ros.plumbing import topics  # noqa: E402
-from contgrasp_ros.recordings.analysis import analyze, history, load_run  # noqa: E402
+from contgrasp_ros.recordings.analysis import analyze, history  # noqa: E402
+from contgrasp_ros.recordings.run_data import load_run  # noqa: E402
 from contgrasp_ros.launcher.discovery import use_discovery_profile  # noqa: E402
 from contgrasp_ros.launcher.cli import default_params_file, load_params  # noqa: E402
 

@@ -142,7 +142,7 @@ def test_the_shipped_sample_matches_the_code(paper_run: dict[str, Any]) -> None:
     CPU's fused multiply-adds change the last bits; a 1e-17 m difference was seen between two
     machines of this kind). Regenerate it as bags/README.md says when not."""
     from contgrasp_core.rod.session import run_sampled
-    from contgrasp_ros.recordings.analysis import load_run
+    from contgrasp_ros.recordings.run_data import load_run
 
     run = load_run(Path(__file__).resolve().parents[1] / "bags" / "paper_grasp.mcap")
     assert run.params is not None, "the sample carries no run parameters"
