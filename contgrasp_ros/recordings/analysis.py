@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from contgrasp_core.errors import ContgraspError, InvalidParameterError, RunFailure, WriteError, output_error
 from contgrasp_core.objects import OUTLINE, ROD_SCALE, SHAPES, ObjectSpec, outline_text
@@ -30,7 +29,7 @@ from contgrasp_ros.recordings.recompute import (
     settle_recomputed,
     step_gaps,
 )
-from contgrasp_ros.recordings.run_data import SIMULATOR, RunData, load_run, node_default
+from contgrasp_ros.recordings.run_data import SIMULATOR, Array, IntArray, RunData, load_run, node_default
 
 __all__ = [
     "summarize",
@@ -46,8 +45,6 @@ __all__ = [
     "MixedRecordingError",
 ]
 
-Array = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 class RecomputeMismatchError(RunFailure):
     """The recording does not recompute: an error above :data:`RECOMPUTE_BOUND`, contact flags or

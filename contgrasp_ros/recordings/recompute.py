@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError
@@ -20,7 +19,7 @@ from contgrasp_core.rod.closed_loop import SettleDetector
 from contgrasp_core.scenario import PAPER, rod_from_parameters
 from contgrasp_ros.plumbing.convert import ContactArrays, HeldShape
 from contgrasp_ros.plumbing.evaluate import contact_quality
-from contgrasp_ros.recordings.run_data import SIMULATOR, RunData, node_default
+from contgrasp_ros.recordings.run_data import SIMULATOR, Array, IntArray, RunData, node_default
 
 __all__ = [
     "RECOMPUTE_BOUND",
@@ -32,8 +31,6 @@ __all__ = [
     "settle_recomputed",
 ]
 
-Array = NDArray[np.float64]
-IntArray = NDArray[np.int64]
 
 RECOMPUTE_BOUND = 1e-9
 """Largest recompute error of a genuine recording (in practice it is 0: the same functions on
