@@ -58,7 +58,7 @@ RUN_FAILURES = [StepFailedError, SimulationDivergedError, SingularSystemError, F
 
 def _ros_classes() -> tuple[list[type], list[type]]:
     from contgrasp_ros.plumbing.convert import MessageError
-    from contgrasp_ros.plumbing.runtime import FatalNodeError
+    from contgrasp_ros.plumbing.faults import FatalNodeError
 
     return [MessageError], [FatalNodeError]
 

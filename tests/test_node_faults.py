@@ -38,7 +38,7 @@ from contgrasp_core.rod.integrator import StepFailedError  # noqa: E402
 from contgrasp_msgs.msg import ContactState, CoupleControl, ObjectBoundary, RodState  # noqa: E402
 from contgrasp_ros.plumbing import qos, topics  # noqa: E402
 from contgrasp_ros.plumbing.convert import MAX_SAMPLES, boundary_to_msg  # noqa: E402
-from contgrasp_ros.plumbing.runtime import stamp_problem  # noqa: E402
+from contgrasp_ros.plumbing.stamps import stamp_problem  # noqa: E402
 
 from conftest import Sink, fresh_domain_id  # noqa: E402
 
@@ -606,7 +606,7 @@ def test_diagnostics_update_publishes_on_a_change_at_once_and_otherwise_a_few_ti
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
     from contgrasp_ros.nodes.boundary_sensor import BoundarySensor
-    from contgrasp_ros.plumbing.runtime import Diagnostics
+    from contgrasp_ros.plumbing.diagnostics import Diagnostics
 
     host = make(BoundarySensor)
     state = {"level": DiagnosticStatus.OK, "message": "running", "built": 0}
@@ -903,7 +903,8 @@ def test_guarded_spin_survives_a_message_rclpy_cannot_take(ros_context) -> None:
     from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
 
-    from contgrasp_ros.plumbing.runtime import DropCounter, GuardedSpin
+    from contgrasp_ros.plumbing.faults import DropCounter
+    from contgrasp_ros.plumbing.runtime import GuardedSpin
 
     class FlakyExecutor:
         def __init__(self, fail: int, context_ok: bool = True) -> None:
@@ -938,7 +939,7 @@ def test_a_callback_failing_because_the_node_is_stopping_is_not_an_internal_erro
     not a fault; the same failure on a live context is counted (and logged with its traceback)."""
     from rclpy.context import Context
 
-    from contgrasp_ros.plumbing.runtime import DropCounter
+    from contgrasp_ros.plumbing.faults import DropCounter
 
     ctx = Context()
     rclpy.init(context=ctx, domain_id=fresh_domain_id())

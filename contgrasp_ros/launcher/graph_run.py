@@ -43,7 +43,8 @@ from contgrasp_ros.launcher.events import EventSink
 from contgrasp_ros.launcher.graph import LOOP as NODES
 from contgrasp_ros.launcher.graph import processes as graph_processes
 from contgrasp_ros.launcher.graph import parameter_file, recorder_params
-from contgrasp_ros.plumbing.runtime import DropCounter, GuardedSpin, join_signal_thread, make_executor
+from contgrasp_ros.plumbing.faults import DropCounter
+from contgrasp_ros.plumbing.runtime import GuardedSpin, join_signal_thread, make_executor
 from contgrasp_ros.launcher.supervision import (
     RECORDER,
     Exit,

@@ -6,7 +6,7 @@ rod state's arm shape, in the object's start-pose frame when the object moves
 ``/contgrasp/contact`` (a state sent twice with the same answer:
 :class:`~contgrasp_ros.nodes.lockstep.Answered`), the sampled ones again on
 ``/contgrasp/contact/sampled``; the arm's own ``theta`` and ``kappa`` go along for the holding
-law. Bad input is dropped and counted (:mod:`contgrasp_ros.plumbing.runtime`). docs/ros.md, "Nodes".
+law. Bad input is dropped and counted (:mod:`contgrasp_ros.plumbing.faults`). docs/ros.md, "Nodes".
 """
 
 from __future__ import annotations
@@ -24,17 +24,11 @@ from contgrasp_ros.plumbing import qos, topics
 from contgrasp_ros.plumbing.cdr import Codec, MessageView
 from contgrasp_ros.plumbing.convert import RodArrays, contact_fields, require_finite, rod_state_arrays
 from contgrasp_ros.nodes.lockstep import Answered
-from contgrasp_ros.plumbing.runtime import (
-    Diagnostics,
-    DropCounter,
-    FinishPolicy,
-    ObjectTracker,
-    StampGate,
-    declare,
-    guarded,
-    run_node,
-    sim_time_by_default,
-)
+from contgrasp_ros.plumbing.diagnostics import Diagnostics
+from contgrasp_ros.plumbing.faults import DropCounter, guarded
+from contgrasp_ros.plumbing.parameters import declare
+from contgrasp_ros.plumbing.runtime import FinishPolicy, ObjectTracker, run_node, sim_time_by_default
+from contgrasp_ros.plumbing.stamps import StampGate
 
 
 RECENT = 16  # contact states kept for the sampled stream's announcements that arrive late

@@ -23,16 +23,11 @@ from contgrasp_core.rod.body import to_world
 from contgrasp_msgs.msg import ContactState, GraspQuality, RodState
 from contgrasp_ros.plumbing import qos, topics
 from contgrasp_ros.plumbing.convert import ContactArrays, RodArrays, contact_arrays, rod_state_arrays
-from contgrasp_ros.plumbing.runtime import (
-    Diagnostics,
-    DropCounter,
-    ObjectTracker,
-    StampGate,
-    declare,
-    guarded,
-    run_node,
-    sim_time_by_default,
-)
+from contgrasp_ros.plumbing.diagnostics import Diagnostics
+from contgrasp_ros.plumbing.faults import DropCounter, guarded
+from contgrasp_ros.plumbing.parameters import declare
+from contgrasp_ros.plumbing.runtime import ObjectTracker, run_node, sim_time_by_default
+from contgrasp_ros.plumbing.stamps import StampGate
 
 __all__ = ["FoxgloveBridge", "SCENE", "STATUS"]
 

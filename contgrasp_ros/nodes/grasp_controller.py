@@ -29,17 +29,11 @@ from contgrasp_ros.plumbing.cdr import Codec
 from contgrasp_ros.plumbing.convert import ContactArrays, MessageError, contact_arrays, couple_fields, require_finite
 from contgrasp_ros.nodes.lockstep import Answered
 from contgrasp_ros.nodes.rod_params import declare_rod_model
-from contgrasp_ros.plumbing.runtime import (
-    Diagnostics,
-    DropCounter,
-    FinishPolicy,
-    StampGate,
-    add_parameter_check,
-    declare,
-    guarded,
-    run_node,
-    sim_time_by_default,
-)
+from contgrasp_ros.plumbing.diagnostics import Diagnostics
+from contgrasp_ros.plumbing.faults import DropCounter, guarded
+from contgrasp_ros.plumbing.parameters import add_parameter_check, declare
+from contgrasp_ros.plumbing.runtime import FinishPolicy, run_node, sim_time_by_default
+from contgrasp_ros.plumbing.stamps import StampGate
 
 if TYPE_CHECKING:
     from contgrasp_core.holding.plan import HoldPlan

@@ -23,17 +23,11 @@ from contgrasp_msgs.msg import ContactState, GraspQuality
 from contgrasp_ros.plumbing import qos, topics
 from contgrasp_ros.plumbing.convert import ContactArrays, contact_arrays, quality_to_msg, require_finite
 from contgrasp_ros.plumbing.evaluate import contact_quality
-from contgrasp_ros.plumbing.runtime import (
-    Diagnostics,
-    DropCounter,
-    FinishPolicy,
-    ObjectTracker,
-    StampGate,
-    declare,
-    guarded,
-    run_node,
-    sim_time_by_default,
-)
+from contgrasp_ros.plumbing.diagnostics import Diagnostics
+from contgrasp_ros.plumbing.faults import DropCounter, guarded
+from contgrasp_ros.plumbing.parameters import declare
+from contgrasp_ros.plumbing.runtime import FinishPolicy, ObjectTracker, run_node, sim_time_by_default
+from contgrasp_ros.plumbing.stamps import StampGate
 
 
 class GraspQualityNode(Node):

@@ -41,7 +41,9 @@ from contgrasp_ros.bag.writer import (
     BagWriter,
     check_split,
 )
-from contgrasp_ros.plumbing.runtime import DropCounter, FatalNodeError, FinishPolicy, declare, guarded, run_node
+from contgrasp_ros.plumbing.faults import DropCounter, FatalNodeError, guarded
+from contgrasp_ros.plumbing.parameters import declare
+from contgrasp_ros.plumbing.runtime import FinishPolicy, run_node
 
 
 

@@ -6,7 +6,7 @@ from rclpy.node import Node
 
 from contgrasp_core.rod.model import FRICTION_MODELS, RodModel
 from contgrasp_core.scenario import PAPER
-from contgrasp_ros.plumbing.runtime import declare
+from contgrasp_ros.plumbing.parameters import declare
 
 __all__ = ["declare_rod_model"]
 

@@ -52,18 +52,11 @@ from contgrasp_ros.plumbing.convert import (
 from contgrasp_ros.nodes.lockstep import Answered, CoupleWait, LockStep, Peers, StartGate, WallClock
 from contgrasp_ros.plumbing.markers import scene_markers
 from contgrasp_ros.nodes.rod_params import declare_rod_model
-from contgrasp_ros.plumbing.runtime import (
-    Diagnostics,
-    DropCounter,
-    FatalNodeError,
-    FinishPolicy,
-    StampGate,
-    declare,
-    guarded,
-    run_node,
-    service_failure,
-    sim_time_by_default,
-)
+from contgrasp_ros.plumbing.diagnostics import Diagnostics
+from contgrasp_ros.plumbing.faults import DropCounter, FatalNodeError, guarded, service_failure
+from contgrasp_ros.plumbing.parameters import declare
+from contgrasp_ros.plumbing.runtime import FinishPolicy, run_node, sim_time_by_default
+from contgrasp_ros.plumbing.stamps import StampGate
 
 FALLBACKS = ("hold", "zero")
 # Lock-step: the timer polls the start gate every START_POLL_S until step 0 is out, then looks for

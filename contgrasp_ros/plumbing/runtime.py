@@ -1,30 +1,24 @@
-"""Shared node plumbing: parameters with validation, drop counting, the last-resort callback
-guard, the stamp rule, the /diagnostics status and main().
+"""A node's life: its executor (:func:`make_executor`), simulated time by default, the end of a
+run (:class:`FinishPolicy`, ``on_finish``), the object it follows (:class:`ObjectTracker`), the
+guarded spin and main() (:func:`run_node`: signals, exit codes, clean-up).
 
-Every contgrasp node uses these, so they degrade the same way (docs/ros.md, "Nodes";
-docs/RELIABILITY.md): :func:`declare` (a validated parameter: exit 2 at start-up, a refused
-``ros2 param set``), :class:`DropCounter` and :func:`guarded` (dropped messages and unexpected
-exceptions counted, never raised out of a callback), :class:`StampGate` (the stamp rule),
-:class:`Diagnostics` (the node's status), :class:`GuardedSpin`, :func:`sim_time_by_default` and
-:class:`FinishPolicy` (``on_finish``).
+Every contgrasp node runs through these, so they start, stop and fail the same way (docs/ros.md,
+"Nodes"; docs/RELIABILITY.md). Its parameters, faults, stamps and status are those of
+:mod:`.parameters`, :mod:`.faults`, :mod:`.stamps` and :mod:`.diagnostics`.
 """
 
 from __future__ import annotations
 
-import functools
 import os
 import signal
 import sys
 import threading
 import time
-import traceback
 from collections.abc import Callable, Sequence
-from typing import Any, TypeVar, cast
+from typing import Any
 
 import rclpy
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock, ClockType
 from rclpy.context import Context
 from rclpy.duration import Duration
@@ -33,23 +27,16 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.signals import uninstall_signal_handlers
-from std_msgs.msg import Header
 
 from contgrasp_core.boundary import Boundary
-from contgrasp_core.errors import ContgraspError, RunFailure, exit_code, interruption, one_line
+from contgrasp_core.errors import ContgraspError, exit_code, one_line
 from contgrasp_ros.plumbing import topics
 from contgrasp_ros.plumbing.executor import LeanExecutor
+from contgrasp_ros.plumbing.faults import DropCounter, guarded
+from contgrasp_ros.plumbing.parameters import declare
+from contgrasp_ros.plumbing.stamps import StampGate
 
 __all__ = [
-    "declare",
-    "add_parameter_check",
-    "DropCounter",
-    "guarded",
-    "service_failure",
-    "StampGate",
-    "stamp_problem",
-    "Diagnostics",
-    "FatalNodeError",
     "GuardedSpin",
     "ObjectTracker",
     "make_executor",
@@ -61,16 +48,6 @@ __all__ = [
     "ON_FINISH",
     "all_acked",
 ]
-
-F = TypeVar("F", bound=Callable[..., Any])
-Check = Callable[[Any], str | None]
-JointCheck = Callable[[dict[str, Any]], str | None]
-
-
-class FatalNodeError(RunFailure):
-    """Raised from a callback when the node cannot go on (e.g. the recorder's disk is full):
-    :func:`run_node` cleans up and exits with code 1 and the message. The callback guard lets
-    it through."""
 
 
 def make_executor(context: Context | None = None) -> Executor:
@@ -90,358 +67,6 @@ def make_executor(context: Context | None = None) -> Executor:
     if kind != "lean":
         raise ValueError(f"CONTGRASP_EXECUTOR must be 'lean', 'single' or 'events', got {kind!r}")
     return LeanExecutor(context=context)
-
-
-# ---------------------------------------------------------------------------- parameters
-class _ParameterChecks:
-    """The node's one on-set-parameters callback: per-parameter checks (choices) and joint
-    checks over all values. rclpy also calls it while a parameter is declared, so a bad
-    start-up value raises InvalidParameterValueException (exit code 2 in :func:`run_node`)."""
-
-    ATTR = "_contgrasp_parameter_checks"
-
-    def __init__(self, node: Node) -> None:
-        self._node = node
-        self.single: dict[str, Check] = {}
-        self.joint: list[JointCheck] = []
-        node.add_on_set_parameters_callback(self)
-
-    @classmethod
-    def of(cls, node: Node) -> _ParameterChecks:
-        checks = getattr(node, cls.ATTR, None)
-        if checks is None:
-            checks = cls(node)
-            setattr(node, cls.ATTR, checks)
-        return checks
-
-    def __call__(self, params: list[Parameter]) -> SetParametersResult:
-        try:
-            for p in params:
-                check = self.single.get(p.name)
-                reason = check(p.value) if check is not None else None
-                if reason:
-                    return SetParametersResult(successful=False, reason=f"{p.name}: {reason}")
-            if self.joint:
-                # (rclpy annotates the values as parameter values; they are Parameter objects)
-                current = cast("dict[str, Parameter]", self._node.get_parameters_by_prefix(""))
-                values = {name: p.value for name, p in current.items()}
-                values.update({p.name: p.value for p in params})
-                for joint in self.joint:
-                    if reason := joint(values):
-                        return SetParametersResult(successful=False, reason=reason)
-        except Exception as exc:  # a check must never take the parameter service down
-            return SetParametersResult(successful=False, reason=f"internal error checking parameters: {type(exc).__name__}: {exc}")
-        return SetParametersResult(successful=True)
-
-
-def _choice_check(choices: Sequence[str]) -> Check:
-    return lambda v: None if v in choices else f"must be one of {', '.join(map(repr, choices))}, got {v!r}"
-
-
-def declare(
-    node: Node,
-    name: str,
-    default: Any,
-    description: str,
-    *,
-    lo: float | None = None,
-    hi: float | None = None,
-    read_only: bool = False,
-    choices: Sequence[str] | None = None,
-) -> Any:
-    """Declare a parameter with a descriptor and its validation; return its value.
-
-    The type is fixed by ``default`` (rclpy refuses other types), numbers get the range
-    ``[lo, hi]`` (NaN/Inf are out of range) and strings may be restricted to ``choices``
-    (checks over several parameters: :func:`add_parameter_check`). rclpy enforces all of it
-    both for the start-up value (params file / overrides: the node refuses to start) and for
-    ``ros2 param set`` at run time (refused with the reason, the old value stays);
-    ``read_only`` parameters cannot be changed at run time at all.
-    """
-    desc = ParameterDescriptor(description=description, read_only=read_only)
-    if lo is not None and hi is not None:
-        if isinstance(default, bool):
-            pass
-        elif isinstance(default, int):
-            desc.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
-        elif isinstance(default, float):
-            desc.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
-    if choices:
-        desc.additional_constraints = f"one of: {', '.join(choices)}"
-        _ParameterChecks.of(node).single[name] = _choice_check(choices)
-    return node.declare_parameter(name, default, desc).value
-
-
-def add_parameter_check(node: Node, check: JointCheck) -> None:
-    """Add a check over several parameters: ``check(values)`` gets every declared parameter's
-    value with the proposed changes applied and returns the reason to refuse them (or None).
-    Register it after the parameters it reads are declared."""
-    _ParameterChecks.of(node).joint.append(check)
-
-
-# ---------------------------------------------------------------------------- drops and the guard
-class DropCounter:
-    """Counts dropped messages per ``<topic>: <reason>`` and warns at most once per
-    ``period_s`` wall seconds per key (saying how many were not logged).
-
-    Unexpected exceptions caught by the callback guard are counted the same way under
-    ``<where>: internal error: <ExcType>``, logged with their traceback the first time.
-    ``on_first_drop`` is called after the first drop (the node's diagnostics publish at once).
-    """
-
-    def __init__(self, node: Node, period_s: float = 2.0) -> None:
-        self._node = node
-        self._period = period_s
-        self.counts: dict[str, int] = {}
-        self._last_log: dict[str, tuple[float, int]] = {}  # key -> (wall time, count then)
-        self.on_first_drop: Callable[[], None] | None = None
-
-    def stopping(self) -> bool:
-        """The node's context was shut down (SIGINT/SIGTERM): failures from now on are not faults."""
-        return not self._node.context.ok()
-
-    @property
-    def total(self) -> int:
-        return sum(self.counts.values())
-
-    def _absolute(self, where: str) -> str:
-        """``where`` as counted and logged: a graph topic (``contgrasp/...``) by its absolute name."""
-        return topics.resolve(where, self._node.get_namespace()) if where.startswith("contgrasp/") else where
-
-    def drop(self, topic: str, reason: str, detail: str = "") -> None:
-        """Count a dropped message on ``topic`` under the short ``reason``; log ``detail`` (throttled)."""
-        topic = self._absolute(topic)
-        key = f"{topic}: {reason}"
-        self._count(key)
-        self._log(key, f"dropped message on {topic}: {detail or reason}")
-
-    def drop_error(self, topic: str, exc: Exception) -> None:
-        """Count a drop for a validation/processing error: the reason is the error's ``reason``
-        (:class:`~contgrasp_ros.plumbing.convert.MessageError`) or its class name."""
-        self.drop(topic, getattr(exc, "reason", None) or type(exc).__name__, str(exc))
-
-    def internal_error(self, where: str, exc: BaseException) -> None:
-        """Count an unexpected exception of a callback; log it, with the traceback the first time."""
-        where = self._absolute(where)
-        key = f"{where}: internal error: {type(exc).__name__}"
-        first = key not in self.counts
-        self._count(key)
-        if first:
-            tb = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
-            self._node.get_logger().error(f"internal error in {where} (the node keeps running):\n{tb}")
-            self._last_log[key] = (time.monotonic(), self.counts[key])
-        else:
-            self._log(key, f"internal error in {where}: {type(exc).__name__}: {exc}")
-
-    def guard(self, where: str, fn: F, on_error: Callable[[BaseException, tuple[Any, ...]], Any] | None = None) -> F:
-        """``fn`` wrapped so that an unexpected exception is counted (:meth:`internal_error`) and
-        ``on_error(exc, args)`` (or None) returned instead; FatalNodeError passes through."""
-
-        @functools.wraps(fn)
-        def wrapper(*args: Any, **kwargs: Any) -> Any:
-            return _call_guarded(self, where, fn, args, kwargs, on_error)
-
-        return cast(F, wrapper)
-
-    def key_values(self) -> dict[str, str]:
-        """``dropped_messages`` (total) and one ``dropped: <topic>: <reason>`` entry per key."""
-        out = {"dropped_messages": str(self.total)}
-        out.update({f"dropped: {key}": str(n) for key, n in sorted(self.counts.items())})
-        return out
-
-    def _count(self, key: str) -> None:
-        self.counts[key] = self.counts.get(key, 0) + 1
-        if self.total == 1 and self.on_first_drop is not None:
-            self.on_first_drop()
-
-    def _log(self, key: str, text: str) -> None:
-        now, n = time.monotonic(), self.counts[key]
-        last_t, last_n = self._last_log.get(key, (-float("inf"), 0))
-        if now - last_t < self._period:
-            return
-        unlogged = n - last_n - 1
-        more = f"; {unlogged} more since the last warning" if unlogged > 0 else ""
-        self._node.get_logger().warn(f"{text} ({n} dropped for this reason, {self.total} in total{more})")
-        self._last_log[key] = (now, n)
-
-
-def _call_guarded(drops: DropCounter, where: str, fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any],
-                  on_error: Callable[[BaseException, tuple[Any, ...]], Any] | None) -> Any:
-    try:
-        return fn(*args, **kwargs)
-    except FatalNodeError:
-        raise
-    except Exception as exc:
-        if (stop := interruption(exc)) is not None:  # (a Ctrl-C inside a compiled kernel: a stop)
-            raise stop from None
-        if drops.stopping():
-            # SIGINT/SIGTERM shut the context down while this callback ran (its publish failed):
-            # the node is stopping, not broken
-            return None if on_error is None else on_error(exc, args)
-        drops.internal_error(where, exc)
-        return None if on_error is None else on_error(exc, args)
-
-
-def guarded(where: str, on_error: Callable[[BaseException, tuple[Any, ...]], Any] | None = None) -> Callable[[F], F]:
-    """Method decorator: the last-resort guard of a callback method of an object with a
-    ``drops`` :class:`DropCounter` (a node, the object tracker). Direct calls are guarded too."""
-
-    def deco(method: F) -> F:
-        @functools.wraps(method)
-        def wrapper(self: Any, *args: Any, **kwargs: Any) -> Any:
-            return _call_guarded(self.drops, where, functools.partial(method, self), args, kwargs, on_error)
-
-        return cast(F, wrapper)
-
-    return deco
-
-
-def service_failure(exc: BaseException, args: tuple[Any, ...]) -> Any:
-    """``on_error`` for services with ``success``/``message`` responses (std_srvs): the response
-    (the callback's last argument) reports the internal error."""
-    resp = args[-1]
-    resp.success, resp.message = False, f"internal error: {type(exc).__name__}: {exc}"
-    return resp
-
-
-# ---------------------------------------------------------------------------- stamps
-_NS = 1_000_000_000
-
-
-def stamp_problem(sec: int, nanosec: int, step: int | None, newest_ns: int | None, now_ns: int, max_future_s: float,
-                  *, check_past: bool = True, newest_step: int | None = None) -> str | None:
-    """The stamp rule; returns the drop reason or None.
-
-    * ``invalid stamp``: ``sec < 0`` or ``nanosec >= 1e9``;
-    * ``from the future``: more than ``max_future_s`` ahead of the node clock ``now_ns`` - only
-      when the clock is valid (``now_ns > 0``; with sim time it is 0 until the first /clock);
-    * ``from the past``: older than the newest accepted stamp on the topic (``newest_ns``),
-      except for step 0 or a step below the newest accepted step (``newest_step``): the
-      simulator was reset or restarted and a new run began - the tracking restarts (its
-      first states may have been missed while the restarted publisher was being matched).
-    """
-    if sec < 0 or not 0 <= nanosec < _NS:
-        return "invalid stamp"
-    t_ns = sec * _NS + nanosec
-    if now_ns > 0 and t_ns - now_ns > max_future_s * _NS:
-        return "from the future"
-    new_run = step == 0 or (step is not None and newest_step is not None and step < newest_step)
-    if check_past and not new_run and newest_ns is not None and t_ns < newest_ns:
-        return "from the past"
-    return None
-
-
-class StampGate:
-    """Applies :func:`stamp_problem` to the messages a node receives, per topic; declares the
-    node's ``max_future_stamp`` parameter (seconds in the node's clock: sim time with
-    ``use_sim_time``)."""
-
-    def __init__(self, node: Node) -> None:
-        self._node = node
-        declare(node, "max_future_stamp", 1.0, "drop messages stamped more than this ahead of the node clock [s]",
-                lo=0.0, hi=1e9)
-        self.newest_ns: dict[str, int] = {}
-        self.newest_step: dict[str, int] = {}
-
-    def admit(self, topic: str, header: Any, step: int | None, *, check_past: bool = True) -> None:
-        """Accept the message's stamp (and track it as the newest on ``topic``) or raise
-        :class:`~contgrasp_ros.plumbing.convert.MessageError` with the rule's reason. ``check_past=False``
-        for topics without an order (the latched object: the newest publication wins)."""
-        from contgrasp_ros.plumbing.convert import MessageError
-
-        sec, nanosec = int(header.stamp.sec), int(header.stamp.nanosec)
-        now_ns = self._node.get_clock().now().nanoseconds
-        max_future = float(self._node.get_parameter("max_future_stamp").value)
-        newest = self.newest_ns.get(topic)
-        reason = stamp_problem(sec, nanosec, step, newest, now_ns, max_future, check_past=check_past,
-                               newest_step=self.newest_step.get(topic))
-        if reason is not None:
-            raise MessageError(
-                f"stamp {sec}.{nanosec:09d} s (step {step}) {reason}: node clock {now_ns / _NS:.9f} s, "
-                f"newest accepted {'none' if newest is None else f'{newest / _NS:.9f} s'}",
-                reason=reason,
-            )
-        if check_past:
-            self.newest_ns[topic] = sec * _NS + nanosec
-            if step is not None:
-                self.newest_step[topic] = int(step)
-
-    def reset(self) -> None:
-        """Forget the tracked stamps (the node's own reset)."""
-        self.newest_ns.clear()
-        self.newest_step.clear()
-
-
-# ---------------------------------------------------------------------------- diagnostics
-Status = tuple[int, str, dict[str, str]]
-
-
-class Diagnostics:
-    """The node's status on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, one
-    DiagnosticStatus named after the node): every ``period_s`` of wall time (steady-clock timer)
-    and at once on the first drop; :meth:`update` publishes a node's events (the simulator's
-    states) at most every ``min_period_s`` of wall time and at once when the level or the
-    message changes. ``build()`` gives (level, message, key/values); the drop counts
-    (:meth:`DropCounter.key_values`) are added. Default: OK / WARN when messages were dropped.
-    ``summary()`` gives (level, message) alone, cheaply: :meth:`update` then builds the values
-    only when it publishes (the simulator updates after every state)."""
-
-    def __init__(self, node: Node, drops: DropCounter, build: Callable[[], Status] | None = None, period_s: float = 1.0,
-                 min_period_s: float = 0.2, summary: Callable[[], tuple[int, str]] | None = None) -> None:
-        from contgrasp_ros.plumbing import qos
-
-        self._node = node
-        self._drops = drops
-        self._build = build
-        self._summary = summary
-        self._min_period = min_period_s
-        self._last: tuple[float, int, str] | None = None  # (wall time, level, message) of the last publication
-        self.pub = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, qos.STREAM)
-        drops.on_first_drop = self.publish
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        node.create_timer(period_s, drops.guard("diagnostics timer", self.publish), clock=self._steady)
-
-    def _values(self) -> Status:
-        if self._build is not None:
-            level, message, values = self._build()
-        else:
-            total = self._drops.total
-            level = DiagnosticStatus.WARN if total else DiagnosticStatus.OK
-            message, values = (f"{total} messages dropped" if total else "ok"), {}
-        return self._with_drops(level), message, values
-
-    def _with_drops(self, level: int) -> int:
-        return DiagnosticStatus.WARN if self._drops.total and level == DiagnosticStatus.OK else level
-
-    def status(self, values: Status | None = None) -> DiagnosticStatus:
-        """The current DiagnosticStatus (of ``values`` when given: a :meth:`_values` result)."""
-        level, message, kv = values if values is not None else self._values()
-        # (the pid: a launcher tells its own nodes from another graph's of the same names)
-        kv = {**kv, **self._drops.key_values(), "pid": str(os.getpid())}
-        return DiagnosticStatus(level=level, name=topics.status_name(self._node.get_name(), self._node.get_namespace()), message=message, hardware_id="contgrasp",
-                                values=[KeyValue(key=k, value=v) for k, v in kv.items()])
-
-    def publish(self, stamp: Time | None = None, values: Status | None = None) -> None:
-        """Publish the status now (stamped with ``stamp`` or the node clock)."""
-        values = values if values is not None else self._values()
-        header_stamp = stamp if stamp is not None else self._node.get_clock().now().to_msg()
-        self.pub.publish(DiagnosticArray(header=Header(stamp=header_stamp), status=[self.status(values)]))
-        self._last = (time.monotonic(), values[0], values[1])
-
-    def update(self, stamp: Time | None = None) -> None:
-        """Publish the status if its level or message changed since the last publication or
-        ``min_period_s`` wall seconds passed since then (a status per event, a few per second
-        at most: building and delivering one after every simulator state cost more than the
-        state itself, benchmarks/RESULTS.md, ros_loop)."""
-        last = self._last
-        if last is not None and time.monotonic() - last[0] < self._min_period:
-            if self._summary is not None:
-                level, message = self._summary()
-                if (self._with_drops(level), message) == last[1:]:
-                    return
-            elif self._values()[:2] == last[1:]:
-                return
-        self.publish(stamp)
 
 
 # ---------------------------------------------------------------------------- time and the end of a run
