@@ -565,3 +565,23 @@ def test_cli_grasp_sweep_and_bad_input():
     bad = _parse(["grasp", "--chi", "0", "--nodes", "60"])
     with pytest.raises(InvalidParameterError):
         bad.func(bad)
+
+
+@pytest.mark.parametrize("name", ["circle", "ellipse"])
+def test_the_iteration_limit_counts_every_fine_step_and_a_solution_reached_on_the_last_one_converges(name):
+    """``max_iterations`` bounds the reported ``iterations`` (fine SQP and reduced Newton steps
+    alike); the run the unlimited solve needs, K steps, converges with any limit >= K, also with
+    K itself (the residual reached on the last allowed step is tested), and no limit below K
+    converges or calls a residual below ``tol`` a miss. Truth: the unlimited solve's own count."""
+    problem = paper_problem(name, nodes=500)
+    full = solve(problem)
+    k = full.iterations
+    assert full.converged and k >= 2
+    for limit in range(1, k + 2):
+        r = solve(problem, max_iterations=limit)
+        assert r.iterations <= limit, (limit, r.iterations)
+        assert r.converged == (limit >= k), (limit, r.message)
+        if limit >= k:
+            assert r.iterations == k and r.cost == full.cost
+        else:
+            assert r.message == f"iteration limit {limit} reached (residual {r.residual:.3g} > tol 1e-09)" and r.residual > 1e-9

@@ -49,6 +49,8 @@ the fine grid's first step changes J by 2-5e-2 J on the Fig. 2 problems anyway (
 discretisation difference), so tighter coarse solves buy nothing."""
 FINE_SWITCH = 3e-5
 """SQP switch on the fine grid when only the residual tolerance ``tol`` is given."""
+SQP_STEPS = 6
+"""The most SQP steps on a grid (they contract quadratically from a good seed, or are given up)."""
 
 Array = NDArray[np.float64]
 
@@ -80,7 +82,7 @@ def solve(
     guess); its solution, interpolated, starts SQP steps on the fine grid (the coarse solution is
     within O(h_coarse^2) of the fine one, so they start in Newton's quadratic region).
     Returns a :class:`GraspResult`; ``iterations`` counts fine-grid Newton steps (SQP and
-    reduced); ``history`` = cost and residual of the trajectory the reduced Newton iterations
+    reduced), at most ``max_iterations``; ``history`` = cost and residual of the trajectory the reduced Newton iterations
     start from and after each of them (the fine SQP steps before them satisfy the dynamics only
     at their end: that end is the start), step length and Hessian kind (1 exact, 0
     Gauss-Newton) per reduced Newton iteration, ``sqp_steps`` (fine grid),
@@ -157,10 +159,11 @@ def solve(
             # decrement of about p^2 (measured constant <= 1): stop the SQP steps where the
             # certification below is expected to pass
             switch = FINE_SWITCH if cost_tol is None else min(np.sqrt(cost_tol), 1e-3)
-            u, guess, _, sqp_steps, ok, last = _sqp_steps(problem, u, guess, lam, pen, switch=switch, keep_factor=cost_tol is not None)
+            u, guess, _, sqp_steps, ok, last = _sqp_steps(problem, u, guess, lam, pen, switch=switch, keep_factor=cost_tol is not None,
+                                                          max_steps=min(SQP_STEPS, max_iterations))
             if ok and last is not None:  # (last is set exactly when ok)
                 start_traj, chord = last
-    out = _newton(problem, u, guess, pen, **opts, start=start_traj, chord=chord)
+    out = _newton(problem, u, guess, pen, **opts, start=start_traj, chord=chord, done=sqp_steps)
     wall = time.perf_counter() - t_start
     return make_result(
         problem,
@@ -171,7 +174,7 @@ def solve(
         cost=out.traj.cost,
         penalty=out.traj.penalty,
         residual=out.residual,
-        iterations=out.iterations + sqp_steps,
+        iterations=out.iterations,
         wall_time=wall,
         converged=out.converged,
         history={
@@ -222,13 +225,16 @@ def _newton(
     cost_tol: float | None,
     start: Trajectory | None = None,
     chord: KKTFactor | None = None,
+    done: int = 0,
 ) -> _NewtonOutcome:
     """Augmented-Lagrangian outer loop around damped Newton iterations (module docstring).
 
     ``start``: the trajectory of (u, guess) when it is already known to satisfy the dynamics
     (evaluated with ``pen``). ``chord``: KKT factors of a nearby point (the last fine SQP step);
     the first stopping check by the Newton decrement then uses them (a chord step, the step is
-    not taken) and falls back to a new factorisation when the check does not pass.
+    not taken) and falls back to a new factorisation when the check does not pass. ``done``:
+    the steps already taken towards ``max_iterations`` (the fine SQP steps); the outcome's
+    ``iterations`` counts them too.
     """
     d = problem.disc
     n = d.nodes
@@ -238,7 +244,7 @@ def _newton(
         x, lin = initial_states(d, u, guess)
         traj = evaluate(d, u, x, pen, lin)
     hist: dict[str, list[float]] = {"cost": [], "residual": [], "step": [], "exact_hessian": []}
-    iterations = 0
+    iterations = done
     converged = False
     message = ""
     prev_violation = np.inf
@@ -255,9 +261,11 @@ def _newton(
         use_exact = hessian == "exact"
         inner_ok = False
         predicted: float | None = None
-        while iterations < max_iterations:
-            if res <= tol:
+        while True:
+            if res <= tol:  # (also after the last allowed iteration)
                 inner_ok = True
+                break
+            if iterations >= max_iterations:
                 break
             if chord is not None and cost_tol is not None and use_exact and not outer:
                 # decrement with the factors of the last SQP step (no new factorisation)
@@ -333,7 +341,7 @@ def _sqp_steps(
     *,
     cost_bound: float = np.inf,
     switch: float = FINE_SWITCH,
-    max_steps: int = 6,
+    max_steps: int = SQP_STEPS,
     keep_factor: bool = False,
     lin0: Linearisation | None = None,
 ) -> tuple[Array, Array, Array, int, bool, tuple[Trajectory, KKTFactor | None] | None]:
