@@ -6,12 +6,14 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from contgrasp_core.cli import main
 
+ROOT = Path(__file__).resolve().parents[1]
 KIN_KEYS = {"max_discrepancy", "s", "rho", "alpha", "s_o", "x", "y", "theta", "kappa", "discrepancy"}
 
 
@@ -84,10 +86,15 @@ def test_the_holding_laws_options_under_the_papers_law_are_refused(argv: list[st
 @pytest.mark.parametrize("solver", ["fast", "forward-backward"])
 def test_grasp_json_histories_have_an_entry_per_iteration(solver: str, capsys: pytest.CaptureFixture[str]) -> None:
     """``cost_history`` and ``residual_history`` (docs/cli.md): the starting iterate and one
-    entry after each iteration but the fast solver's SQP steps, whose end is the start."""
+    entry after each iteration but the fast solver's SQP steps, whose end is the start. The
+    sweep stopped by its limit is no solution: exit 1, its result printed first, then one line."""
     capsys.readouterr()
-    assert main(["grasp", "--json", "--nodes", "120", "--solver", solver, "--max-iterations", "20"]) == 0
-    out = json.loads(capsys.readouterr().out)
+    code = main(["grasp", "--json", "--nodes", "120", "--solver", solver, "--max-iterations", "20"])
+    printed = capsys.readouterr()
+    assert code == (0 if solver == "fast" else 1), printed.err
+    if solver == "forward-backward":
+        assert printed.err.splitlines() == ["contgrasp grasp: error: no optimal grasp: iteration limit 20 reached"]
+    out = json.loads(printed.out)
     entries = out["iterations"] - out["sqp_steps"] + 1
     assert len(out["cost_history"]) == len(out["residual_history"]) == entries
     assert out["cost_history"][-1] == out["cost"]
@@ -130,3 +137,19 @@ def test_a_curvature_file_may_have_a_header_as_an_outline_may(tmp_path, header: 
     csv.write_text("s,kappa\n0,1\nnot,numbers\n")  # garbage after the data is still an error
     with pytest.raises(InvalidParameterError, match="cannot parse curvature file"):
         curvature_profile(str(csv), circle(1.0), s, 0.5, 0.0)
+
+
+def test_a_grasp_that_is_no_solution_exits_1_after_its_result(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The kidney outline given in millimetres instead of paper units (an object a thousand
+    times the arm): the solver stops at its limit far from a solution. Before, exit 0 with
+    ``converged: False`` as the only sign; now the result is printed, then one line, exit 1."""
+    kidney = np.loadtxt(ROOT / "tests" / "data" / "kidney_outline.csv", delimiter=",", skiprows=2)
+    outline = tmp_path / "kidney_mm.csv"
+    np.savetxt(outline, kidney * 1000.0, delimiter=",", header="x, y", comments="")
+    capsys.readouterr()
+    assert main(["grasp", "--outline", str(outline), "--nodes", "60", "--json"]) == 1
+    printed = capsys.readouterr()
+    out = json.loads(printed.out)
+    assert not out["converged"] and out["iterations"] == 200
+    assert printed.err.splitlines() == [f"contgrasp grasp: error: no optimal grasp: {out['message']}"]
+    assert out["message"].startswith("iteration limit 200 reached")

@@ -35,7 +35,7 @@ CLI_DOC = (ROOT / "docs" / "cli.md").read_text(encoding="utf-8")
 # each command at its cheapest: the smallest grid / duration its options allow
 COMMANDS: dict[str, tuple[ObjectScale, list[str]]] = {
     "kinematics": (FIG2_SCALE, ["--nodes", "21"]),
-    "grasp": (FIG2_SCALE, ["--nodes", "50", "--max-iterations", "5"]),
+    "grasp": (FIG2_SCALE, ["--nodes", "50"]),
     "quality-map": (FIG2_SCALE, ["--psi-steps", "1", "--d-steps", "1", "--d-max", "3", "--nodes", "20",
                                  "--executor", "serial", "--no-optimise"]),
     "simulate": (ROD_SCALE, ["--duration", "0.01", "--nodes", "11"]),

@@ -555,8 +555,12 @@ def test_cli_grasp_returns_the_solution_and_writes_a_plot(tmp_path):
 
 
 def test_cli_grasp_sweep_and_bad_input():
+    from contgrasp_core.cli.grasp import NoGraspError
+
     args = _parse(["grasp", "--solver", "forward-backward", "--nodes", "60", "--max-iterations", "20"])
-    res = args.func(args)
+    with pytest.raises(NoGraspError, match=r"^no optimal grasp: iteration limit 20 reached$") as failed:
+        args.func(args)
+    res = failed.value.result
     assert res["iterations"] == 20 and not res["converged"]
     assert len(res["cost_history"]) == 21
     bad = _parse(["grasp", "--alpha0", "3.3", "--nodes", "60"])

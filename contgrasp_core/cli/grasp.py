@@ -2,7 +2,8 @@
 
 ``grasp`` solves eq. (9) for one object with the paper's settings by default
 (arm L = 2 L_o / 3 tapered L/20 -> L/200, rho_d = r(s), alpha_d = pi/2, chi = 10, the
-paper's (rho0, alpha0) per object) with the fast solver or the paper's sweep.
+paper's (rho0, alpha0) per object) with the fast solver or the paper's sweep; a result that
+is not a solution (not converged, or outside the contact constraints) exits 1 after it is printed.
 ``figures`` regenerates the three Fig. 2 panels and the three Fig. 3 quality maps (with their
 optimum in ``fig3_<object>.json``) into a directory (default docs/figures).
 """
@@ -17,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._validate import MAX_NODES
-from ..errors import InvalidParameterError, WriteError
+from ..errors import InvalidParameterError, RunFailure, WriteError
 from ..objects import FIG2_SCALE, PAPER_OBJECTS, ObjectSpec
 from ..outputs import check_output
 from .common import add_object_arguments, object_from_args
@@ -25,7 +26,17 @@ from .common import add_object_arguments, object_from_args
 if TYPE_CHECKING:
     from ..optimal import GraspResult
 
-__all__ = ["add_parsers", "run_grasp", "run_figures"]
+__all__ = ["add_parsers", "run_grasp", "run_figures", "NoGraspError"]
+
+
+class NoGraspError(RunFailure):
+    """The solver stopped without an optimal grasp: not converged, or its last iterate violates
+    the contact constraints of eq. (9). ``result`` is what it reached (``contgrasp grasp`` prints
+    it, then the one error line, and exits 1)."""
+
+    def __init__(self, message: str, result: dict[str, Any]) -> None:
+        super().__init__(message)
+        self.result = result
 
 
 def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()) -> None:
@@ -108,6 +119,12 @@ def run_grasp(args: argparse.Namespace) -> dict[str, Any]:
         from ..figures.grasp import save_grasp_figure
 
         out["plot"] = str(save_grasp_figure(result, args.plot, title=f"{out['object']} ({result.solver})"))
+    if not result.converged:
+        raise NoGraspError(f"no optimal grasp: {result.message}", out)
+    if not result.constraints.ok:
+        c = result.constraints
+        raise NoGraspError(f"no optimal grasp: the result leaves the contact constraints of eq. (9) (min rho {c.min_rho:.3g}, "
+                           f"alpha in [{c.min_alpha:.3g}, {c.max_alpha:.3g}], min 1 + rho kappa_o {c.min_speed_factor:.3g})", out)
     return out
 
 
