@@ -9,10 +9,13 @@ kinematics are a deterministic function of the caller's initial state and curvat
 
 from __future__ import annotations
 
+from typing import Any
+
 __all__ = [
     "ContgraspError",
     "InputError",
     "RunFailure",
+    "FailedResult",
     "InvalidParameterError",
     "InvalidBoundaryError",
     "NotClosedError",
@@ -65,6 +68,16 @@ class InputError(ContgraspError, ValueError):
 
 class RunFailure(ContgraspError, RuntimeError):
     """A computation on valid input failed (exit code 1 in the command-line tools)."""
+
+
+class FailedResult(RunFailure):
+    """A computation that ended with a result, but not the one asked for (no optimal grasp, a
+    recording that does not recompute): ``result`` is what it reached, which the command-line
+    tools print before the one error line."""
+
+    def __init__(self, message: str, result: dict[str, Any]) -> None:
+        super().__init__(message)
+        self.result = result
 
 
 def exit_code(exc: BaseException) -> int:

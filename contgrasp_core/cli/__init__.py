@@ -24,7 +24,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from .. import __version__
-from ..errors import ContgraspError, exit_code, interruption, one_line
+from ..errors import ContgraspError, FailedResult, exit_code, interruption, one_line
 
 __all__ = ["ArgumentParser", "build_parser", "main", "report", "summary_lines", "closed_stdout_safe"]
 
@@ -224,8 +224,8 @@ def _main(argv: Sequence[str] | None, extra: Sequence[Registrar] | None) -> int:
         if args.debug:  # the whole traceback, and the same exit code as without --debug
             traceback.print_exc()
             return exit_code(exc)
-        result = getattr(exc, "result", None)  # a failed check that has a result: print it too
-        if isinstance(result, dict):
+        if isinstance(exc, FailedResult):  # a failed check that has a result: print it too
+            result = exc.result
             print(json.dumps(_to_jsonable(result), allow_nan=False) if args.json else getattr(args, "format_text", _summary)(result))
         return report(f"contgrasp {command}", exc)
     print(text)

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._validate import MAX_NODES
-from ..errors import InvalidParameterError, RunFailure, WriteError
+from ..errors import FailedResult, InvalidParameterError, WriteError
 from ..objects import FIG2_SCALE, PAPER_OBJECTS, ObjectSpec
 from ..outputs import check_output
 from .common import add_object_arguments, object_from_args
@@ -29,14 +29,10 @@ if TYPE_CHECKING:
 __all__ = ["add_parsers", "run_grasp", "run_figures", "NoGraspError"]
 
 
-class NoGraspError(RunFailure):
+class NoGraspError(FailedResult):
     """The solver stopped without an optimal grasp: not converged, or its last iterate violates
-    the contact constraints of eq. (9). ``result`` is what it reached (``contgrasp grasp`` prints
-    it, then the one error line, and exits 1)."""
-
-    def __init__(self, message: str, result: dict[str, Any]) -> None:
-        super().__init__(message)
-        self.result = result
+    the contact constraints of eq. (9) (``contgrasp grasp`` prints its result, then the one error
+    line, and exits 1)."""
 
 
 def add_parsers(subparsers: Any, parents: Sequence[argparse.ArgumentParser] = ()) -> None:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from contgrasp_core.errors import ContgraspError, InvalidParameterError, RunFailure, WriteError, output_error
+from contgrasp_core.errors import ContgraspError, FailedResult, InvalidParameterError, WriteError, output_error
 from contgrasp_core.objects import OUTLINE, ROD_SCALE, SHAPES, ObjectSpec, outline_text
 from contgrasp_ros.plumbing import topics
 from contgrasp_ros.launcher.summary import FinalQuality, FinalState, build_summary, contact_stats
@@ -46,24 +46,16 @@ __all__ = [
 ]
 
 
-class RecomputeMismatchError(RunFailure):
+class RecomputeMismatchError(FailedResult):
     """The recording does not recompute: an error above :data:`RECOMPUTE_BOUND`, contact flags or
-    quality validity that differ, or steps whose recomputation failed. ``result`` is the
-    analysis (``contgrasp analyze`` prints it, then the one error line, and exits 1)."""
-
-    def __init__(self, message: str, result: dict[str, Any]) -> None:
-        super().__init__(message)
-        self.result = result
+    quality validity that differ, or steps whose recomputation failed (``contgrasp analyze``
+    prints the analysis, then the one error line, and exits 1)."""
 
 
-class MixedRecordingError(RunFailure):
+class MixedRecordingError(FailedResult):
     """The recording holds two graphs' messages: one node's status came from two processes at
-    once (another graph ran in the same domain and namespace). ``result`` as in
+    once (another graph ran in the same domain and namespace); printed as
     :class:`RecomputeMismatchError`."""
-
-    def __init__(self, message: str, result: dict[str, Any]) -> None:
-        super().__init__(message)
-        self.result = result
 
 
 def history(run: RunData, period: float = 0.01) -> list[dict[str, Any]]:
