@@ -11,13 +11,28 @@ own (while it imports) ends it as that command's Ctrl-C does, without a tracebac
 from __future__ import annotations
 
 import importlib
+import signal
 import sys
 from collections.abc import Callable
+from types import ModuleType
 
 from contgrasp_ros.layer import missing
 
 __all__ = ["launcher", "rod_simulator", "boundary_sensor", "grasp_controller", "grasp_quality",
            "foxglove_bridge", "mcap_recorder", "container"]
+
+
+def _import_deferring_sigint(module: str) -> ModuleType:
+    """Import ``module`` with SIGINT held back until the import is done: an interrupt that lands
+    inside a compiled extension's import (rclpy's, numba's) was seen ignored, fatal (exit -2) or
+    a traceback; held back, it arrives after the import as an ordinary KeyboardInterrupt."""
+    if not hasattr(signal, "pthread_sigmask"):  # (not on Windows)
+        return importlib.import_module(module)
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        return importlib.import_module(module)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def _entry(module: str, interrupted: int = 0) -> Callable[[], int]:
@@ -27,7 +42,7 @@ def _entry(module: str, interrupted: int = 0) -> Callable[[], int]:
     def main() -> int:
         name = sys.argv[0].rsplit("/", 1)[-1]
         try:
-            code: int = importlib.import_module(module).main()
+            code: int = _import_deferring_sigint(module).main()
         except ModuleNotFoundError as exc:  # at import, or a dependency the command imports later
             error = missing(exc)
             if error is None:
