@@ -522,3 +522,32 @@ def test_a_recording_beside_another_graph_fails_and_a_restart_passes(recording: 
     check(again)
     for key in ("simulator_state", "settled", "steps", "final", "final_quality", "max_recompute_error", "step_gaps"):
         assert again[key] == full[key], key
+
+
+def test_the_settle_replay_of_a_run_outside_the_models_validity_is_not_settled(recording: tuple[Path, dict],
+                                                                             tmp_path: Path) -> None:
+    """The fixture's recording with its simulator's verdict turned to 'left the model's
+    validity' (as an arm inside its object reports it): the replayed rule, quiet as the states
+    are, is not settled either, as the simulator's own (settled and valid). Before, the replay
+    said settled at 1.878 s beside the simulator's 'not settled' on such a run."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    bag, summary = recording
+    assert summary["settled"] and analyze(bag)["settled_recomputed"] is True
+    rec = open_recording(bag)
+
+    def invalid(m: Any) -> tuple[str, Any, bytes, int, int]:
+        if m.topic != "/diagnostics":
+            return as_is(m)
+        msg = deserialize_message(m.data, DiagnosticArray)
+        for st in msg.status:
+            for kv in st.values:
+                if st.name == "rod_simulator" and kv.key == "validity":
+                    kv.value = json.dumps({**json.loads(kv.value), "valid": False})
+        return m.topic, m, serialize_message(msg), m.log_time_ns, m.publish_time_ns
+
+    copy_recording(rec, tmp_path / "invalid.mcap", (invalid(m) for m in iter_raw(rec)))
+    r = analyze(tmp_path / "invalid.mcap")
+    assert r["validity"]["valid"] is False
+    assert (r["settled_recomputed"], r["settle_time_recomputed_s"]) == (False, None)

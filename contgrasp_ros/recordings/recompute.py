@@ -8,6 +8,7 @@ topics to rounding; :func:`settle_recomputed` replays the simulator's settle rul
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -249,14 +250,34 @@ def settle_recomputed(run: RunData) -> tuple[bool | None, float | None]:
     only a few times per second): the rule's hold and minimum time are taken 1 ns short, so a
     run the simulator judged settled at the last step is so judged again, and the settle time
     agrees with the simulator's to 1 ns; the rule's parameters as :func:`recompute_parameters`
-    finds them (the run's, else the node defaults: a run started by hand records none);
-    (None, None) when the rod states are not complete."""
+    finds them (the run's, else the node defaults: a run started by hand records none).
+
+    As in the simulator, a state after a couple whose law was still in transition (the holding
+    law before its hold: the couple's ``transition``) does not count as quiet, and a run that
+    left the model's validity (its simulator's last status, ``validity.valid``) is not settled.
+    (None, None) when the rod states are not complete, or when a law in transition was recorded
+    but not the couple answering every state (its phases cannot be replayed)."""
     gaps = step_gaps(run)
     if not gaps["contiguous"] or gaps["first_step"] != 0:
+        return None, None
+    transitions = run.transitions or {}
+    steps = run.rod.step
+    if any(transitions.values()) and not all(int(k) in transitions for k in steps[:-1]):
         return None, None
     par = recompute_parameters(run)
     speed, hold, min_time = par["settle_speed"], par["settle_hold"], par["min_time"]
     det = SettleDetector(speed, hold - STAMP_RESOLUTION_S, min_time - STAMP_RESOLUTION_S)
-    for t, v in zip(run.rod.t, run.rod.max_speed, strict=True):
-        det.update(float(t), float(v))
+    for k, t, v in zip(steps, run.rod.t, run.rod.max_speed, strict=True):
+        det.update(float(t), float(v), ready=not transitions.get(int(k) - 1, False))
+    if not _recorded_valid(run.status):
+        return False, None
     return det.settled, det.settle_time
+
+
+def _recorded_valid(status: dict[str, str]) -> bool:
+    """The simulator's verdict on the model's validity in its status (valid when a status from
+    before the verdict was recorded has none)."""
+    try:
+        return bool(json.loads(status.get("validity") or "{}").get("valid", True))
+    except (ValueError, AttributeError):
+        return True

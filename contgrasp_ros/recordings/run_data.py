@@ -152,6 +152,7 @@ class RunData:
     status: dict[str, str]
     controller_status: dict[str, str]  # (the controller's last /diagnostics values: law, law_phase)
     couples: dict[int, Any] | None = None  # the recorded couple answering each step (convert.couple_arrays)
+    transitions: dict[int, bool] | None = None  # whether that couple's law was still in transition
     recorder: dict[str, Any] | None = None
     repeated_states: int = 0  # rod states published again (a re-send), each kept once
     concurrent: list[dict[str, Any]] | None = None  # (concurrent_processes of the statuses)
@@ -337,21 +338,26 @@ def load_run(path: str | Path) -> RunData:
         run_info=run_info,
         status=status,
         controller_status=controller,
-        couples=_couples(by_topic[topics.COUPLE]) if counts.get(name[topics.COUPLE]) else None,
+        **_couples(by_topic[topics.COUPLE] if counts.get(name[topics.COUPLE]) else None),
         recorder=recorder,
         repeated_states=repeated,
         concurrent=concurrent_processes(spans),
     )
 
 
-def _couples(msgs: list[Any]) -> dict[int, Any]:
-    """The first usable couple answering each step (a re-sent state is answered twice; a
-    malformed message is left out, as the simulator leaves it out)."""
-    out: dict[int, Any] = {}
+def _couples(msgs: list[Any] | None) -> dict[str, Any]:
+    """``couples`` and ``transitions`` of :class:`RunData`: the first usable couple answering each
+    step (a re-sent state is answered twice; a malformed message is left out, as the simulator
+    leaves it out) and its law's ``transition`` flag; both None without recorded couples."""
+    if msgs is None:
+        return {"couples": None, "transitions": None}
+    couples: dict[int, Any] = {}
+    transitions: dict[int, bool] = {}
     for msg in msgs:
         try:
-            step, _, couple, _ = couple_arrays(msg)
+            step, _, couple, transition = couple_arrays(msg)
         except ContgraspError:
             continue
-        out.setdefault(step, couple)
-    return out
+        if step not in couples:
+            couples[step], transitions[step] = couple, transition
+    return {"couples": couples, "transitions": transitions}
