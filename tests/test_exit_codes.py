@@ -323,7 +323,13 @@ def test_launcher_bad_input_and_usage_exit_2(capsys: pytest.CaptureFixture[str],
                         (["--no-record", "--friction", "-0.5"], "contgrasp-launch: error: friction must be a finite number >= 0"),
                         (["--no-record", "--friction", "nan"], "contgrasp-launch: error: friction must be a finite number >= 0"),
                         (["--bag", str(tmp_path), "--domain-id", "5"], f"contgrasp-launch: error: --bag {tmp_path} already exists"),
-                        (["--params", str(tmp_path / "none.yaml")], "contgrasp-launch: error: cannot read parameter file")):
+                        (["--params", str(tmp_path / "none.yaml")], "contgrasp-launch: error: cannot read parameter file"),
+                        # (recording options the recorder would refuse: before, the graph started and the run failed)
+                        (["--bag", str(tmp_path / "x.txt"), "--bag-layout", "file"],
+                         f"contgrasp-launch: error: --bag / --bag-layout: a single-file recording must end in .mcap, got {tmp_path / 'x.txt'}"),
+                        (["--no-record", "--events", "/proc/ev"], "contgrasp-launch: error: --events /proc/ev: "),
+                        (["--bag", str(tmp_path / "b"), "--bag-exclude", "("],
+                         "contgrasp-launch: error: --bag-exclude '(': invalid regular expression: missing ), unterminated subpattern")):
         capsys.readouterr()
         assert launcher.main(argv) == 2
         err = capsys.readouterr().err.splitlines()

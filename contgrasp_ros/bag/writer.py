@@ -22,7 +22,7 @@ from .definitions import full_text
 from .errors import BagInputError, BagIOError
 from .rosbag2 import TopicRecord, bag_metadata, metadata_yaml, offered_qos_yaml
 
-__all__ = ["BagWriter", "COMPRESSIONS", "LAYOUTS", "RUN_RECORD", "RECORDER_RECORD", "LOG_TIME_RECORD", "check_split"]
+__all__ = ["BagWriter", "COMPRESSIONS", "LAYOUTS", "RUN_RECORD", "RECORDER_RECORD", "LOG_TIME_RECORD", "check_file_name", "check_split"]
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 LAYOUTS = ("folder", "file")
@@ -51,6 +51,13 @@ def check_split(layout: str, max_bag_duration: float, max_bag_size: int) -> None
     if layout == "file" and (max_bag_duration or max_bag_size):
         raise BagInputError("max_bag_duration / max_bag_size split a bag folder; a single .mcap file cannot be split: "
                        "use layout 'folder'")
+
+
+def check_file_name(layout: str, path: str | Path) -> None:
+    """A single-file recording's name ends in ``.mcap`` (the writer's rule, which the launcher
+    applies before starting the graph); raises :class:`BagError`."""
+    if layout == "file" and Path(path).suffix != ".mcap":
+        raise BagInputError(f"a single-file recording must end in .mcap, got {path}")
 
 
 @dataclass
@@ -102,8 +109,7 @@ class BagWriter:
             raise BagInputError(f"chunk_size must be an integer in [1 KiB, 1 GiB], got {self.chunk_size!r}")
         check_split(self.layout, self.max_bag_duration, self.max_bag_size)
         self.split = bool(self.max_bag_duration or self.max_bag_size)
-        if self.layout == "file" and self.path.suffix != ".mcap":
-            raise BagInputError(f"a single-file recording must end in .mcap, got {self.path}")
+        check_file_name(self.layout, self.path)
         if self.path.exists():
             raise BagInputError(f"cannot record to {self.path}: it already exists")
         self.topics: dict[str, _Topic] = {}

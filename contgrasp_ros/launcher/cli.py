@@ -38,7 +38,7 @@ from contgrasp_core.outputs import check_output
 from contgrasp_core.rod.body import MODES
 from contgrasp_core.scenario import Scenario
 from contgrasp_ros.bag import BagError
-from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_split
+from contgrasp_ros.bag.writer import MIN_BAG_SIZE, check_file_name, check_split
 from contgrasp_ros.layer import guarded
 from contgrasp_ros.launcher.events import EventWriter, open_events
 from contgrasp_ros.launcher.graph import compose_groups, default_params_file, launch_overrides, load_params, parameter_file
@@ -270,6 +270,13 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
         layout = args.bag_layout or ("file" if out.suffix == ".mcap" else "folder")
         if out.exists():
             raise InvalidParameterError(f"--bag {out} already exists (give a new folder or .mcap file name)")
+        try:
+            check_file_name(layout, out)
+            re.compile(args.bag_exclude)
+        except BagError as exc:
+            raise InvalidParameterError(f"--bag / --bag-layout: {exc}") from exc
+        except re.error as exc:
+            raise InvalidParameterError(f"--bag-exclude {args.bag_exclude!r}: invalid regular expression: {exc}") from exc
         check_output(out, "--bag", folder=layout == "folder")
         # the file as the user named it (or the packaged one by name), never a path of this machine:
         # the parameters themselves are in ``params``

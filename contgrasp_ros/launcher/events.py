@@ -15,10 +15,10 @@ import sys
 import threading
 import time
 from collections.abc import Iterable, Iterator
-from pathlib import Path
 from typing import IO, Any, Protocol
 
 from contgrasp_core.errors import InvalidParameterError, output_error
+from contgrasp_core.outputs import check_output
 
 __all__ = ["EVENTS", "EventSink", "EventWriter", "open_events", "parse_event", "read_events"]
 
@@ -63,8 +63,9 @@ def open_events(target: str) -> EventWriter:
             return EventWriter(os.fdopen(fd, "w", buffering=1), close=True)
         except (ValueError, OSError) as exc:
             raise InvalidParameterError(f"--events {target}: not an open file descriptor ({exc})") from exc
+    path = check_output(target, "--events")  # (a path it cannot create: bad input, exit 2)
     try:
-        return EventWriter(open(Path(target), "w", buffering=1), close=True)  # (closed by close())
+        return EventWriter(open(path, "w", buffering=1), close=True)  # (closed by close())
     except OSError as exc:
         raise output_error(f"the events file {target}", exc) from exc
 
