@@ -51,6 +51,8 @@ __all__ = [
 ]
 
 METRICS = ("Q1", "Q2", "Q3")
+NO_BASE, BAD_START = "no base pose", "invalid initial state"
+"""How a pose's reason starts when its inner problem was never solved (:attr:`QualityMap.n_solves`)."""
 MAX_MAP_STEPS = 100_000
 """Largest psi_steps / d_steps of a map."""
 MAX_MAP_SIZE = 100_000_000
@@ -109,6 +111,7 @@ class MapSpec:
         real("contact_tol", self.contact_tol, lo=0.0)
         object.__setattr__(self, "object", ObjectSpec.coerce(self.object, FIG2_SCALE))
         boundary = self.object.boundary()
+        check_origin_inside(self.object, boundary)
         reach = self.length_fraction * boundary.length
         if d_max >= reach:
             raise InvalidParameterError(
@@ -157,6 +160,22 @@ def _ray_distance(boundary: Boundary, direction: Array, lam: float) -> float:
     return float(boundary.project(np.array([lam * direction])).signed_distance[0])
 
 
+ORIGIN_OUTSIDE = "the object frame origin must lie inside the object to place bases in D"
+"""Why an object has no base poses: bases are placed on rays from the origin (:func:`disc_pose`)."""
+
+
+def check_origin_inside(obj: ObjectSpec, boundary: Boundary) -> None:
+    """Refuse an object whose frame origin (0, 0) is not inside it (an input error, one line
+    naming the object, the origin's distance outside and where the object's centre is)."""
+    outside = _ray_distance(boundary, np.zeros(2), 0.0)
+    if outside >= 0:
+        cx, cy = obj.reference
+        raise InvalidParameterError(
+            f"{ORIGIN_OUTSIDE}: (0, 0) lies {outside:.4g} outside {obj.text()}, whose centre is at "
+            f"({round(cx, 4) + 0.0:g}, {round(cy, 4) + 0.0:g}); shift the object so that it surrounds the origin"
+        )
+
+
 def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
     """Base pose in D: on the ray at polar angle ``psi`` from the origin, at boundary distance ``d``.
 
@@ -172,7 +191,7 @@ def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
         raise InvalidParameterError(f"d must be <= 1e100, got {d!r}")
     u = np.array([np.cos(psi), np.sin(psi)])
     if _ray_distance(boundary, u, 0.0) >= 0:
-        raise InvalidParameterError("the object frame origin must lie inside the object to place bases in D")
+        raise InvalidParameterError(ORIGIN_OUTSIDE)
     _, pts = boundary.sample(256)
     r_max = float(np.max(np.hypot(*pts.T))) + boundary.length / 256
     lam_b = brentq(lambda lam: _ray_distance(boundary, u, lam), 0.0, r_max, xtol=1e-13)
@@ -201,7 +220,7 @@ def optimal_grasp(spec: MapSpec, boundary: Boundary, base: BasePose, warm: Any =
     try:
         problem = _problem(spec, boundary, base)
     except ContgraspError as exc:
-        raise InvalidParameterError(f"invalid initial state: {exc}") from exc
+        raise InvalidParameterError(f"{BAD_START}: {exc}") from exc
     res, errors = None, []
     for initial in ([warm] if warm is not None else []) + ["approach", "zero"]:
         try:
@@ -263,7 +282,7 @@ def _column(spec: MapSpec, psi: float) -> list[PoseResult]:
             try:
                 base = disc_pose(boundary, psi, d)
             except ContgraspError as exc:
-                out.append(PoseResult(psi, d, (np.nan, np.nan, np.nan), False, f"no base pose: {exc}"))
+                out.append(PoseResult(psi, d, (np.nan, np.nan, np.nan), False, f"{NO_BASE}: {exc}"))
                 continue
             t0 = time.perf_counter()
             res, sol = _evaluate(spec, boundary, psi, float(d), base, warm)
@@ -292,7 +311,9 @@ class QualityMap:
 
     @property
     def n_solves(self) -> int:
-        return int(self.spec.psi_steps * self.spec.d_steps)
+        """Grid poses whose inner problem was solved (not those without a base pose or with an
+        invalid initial state; the maximisation's evaluations are counted apart)."""
+        return sum(not r.startswith((NO_BASE, BAD_START)) for row in self.reasons for r in row)
 
     def to_dict(self) -> dict[str, Any]:
         def grid(a: Array) -> list[list[float | None]]:

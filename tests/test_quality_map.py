@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -123,3 +125,38 @@ def test_a_tapered_map_arm_tracks_its_own_radius() -> None:
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(InvalidParameterError, match="arm_radius_tip"):
             MapSpec("circle", arm_radius_tip=bad)
+
+
+def _shifted_egg(path: Path) -> str:
+    """An egg r = 5 + 0.8 cos t moved +20 in x: the origin (0, 0) lies outside it."""
+    t = np.linspace(0.0, 2 * np.pi, 40, endpoint=False)
+    r = 5.0 + 0.8 * np.cos(t)
+    np.savetxt(path, np.column_stack([20.0 + r * np.cos(t), r * np.sin(t)]), delimiter=", ", header="x, y", comments="")
+    return str(path)
+
+
+def test_an_object_not_around_the_origin_is_refused_before_any_solve(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Bases lie on rays from the origin: an object away from it has no pose at all, so the
+    spec (and the command, exit 2 in one line) refuses it instead of computing an empty map."""
+    from contgrasp_core.cli import main
+    from contgrasp_core.objects import FIG2_SCALE, ObjectSpec
+
+    outline = _shifted_egg(tmp_path / "egg_shift.csv")
+    with pytest.raises(InvalidParameterError, match=r"origin must lie inside .* whose centre is at \(20\.\d+, 0\)"):
+        MapSpec(ObjectSpec.from_cli(None, outline, FIG2_SCALE))
+    assert main(["quality-map", "--outline", outline, "--psi-steps", "8", "--d-steps", "3", "--executor", "serial"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1 and "shift the object so that it surrounds the origin" in err
+    assert "quality map" not in err  # (no progress bar: nothing was computed)
+
+
+def test_n_solves_counts_the_poses_actually_solved() -> None:
+    """A pose without a base pose or with an invalid initial state is not solved; a failed
+    or unconverged solve is."""
+    from dataclasses import replace
+
+    qm = quality_map(MapSpec("circle", psi_steps=1, d_steps=2, nodes=40), executor="serial", optimise=False)
+    assert qm.n_solves == 2
+    for reasons, solves in ((["no base pose: x", "invalid initial state: y"], 0), (["inner solve failed: z", "not converged"], 2),
+                            (["ok", "no base pose: x"], 1)):
+        assert replace(qm, reasons=[reasons]).n_solves == solves

@@ -71,7 +71,7 @@ def format_text(out: dict[str, Any]) -> str:
             f"heading {base.get('theta', float('nan')):.4g} rad; {opt.get('evaluations', '?')} evaluations){best_grid}"
         )
     if not out["optimum"]:
-        lines.append("optimum: not computed (--no-optimise) or no valid pose")
+        lines.append("optimum: none (no valid pose)" if not out["n_valid"] else "optimum: not computed (--no-optimise)")
     lines.append(f"wall_time_s: {out['wall_time_s']:.3g} ({out['n_solves']} solves, executor {out['executor']})")
     if out.get("saved"):  # (save_map writes the arrays and the metadata beside them)
         saved = Path(out["saved"])
@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         if args.out:
             save_map(qm, args.out)
     out = qm.to_dict()
-    if args.metric != "all":
+    if args.metric != "all" and out["optimum"]:
         out["optimum"] = {args.metric: out["optimum"].get(args.metric)}
     if args.plot:
         from ..figures.quality_map import quality_map_figure
