@@ -45,6 +45,7 @@ __all__ = [
     "maximise",
     "best_grid_pose",
     "TIE_RTOL",
+    "map_paths",
     "save_map",
     "load_map",
     "METRICS",
@@ -479,9 +480,25 @@ def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
     }
 
 
+MAP_SUFFIXES = (".npz", ".json")
+"""The two files of a saved map: the arrays and the metadata."""
+
+
+def map_paths(path: str | Path) -> tuple[Path, Path]:
+    """The files ``FILE.npz`` and ``FILE.json`` a map named ``path`` is saved in: ``path`` is
+    ``FILE`` itself or one of the two files; any other suffix is part of the name and kept
+    (``map.v2`` -> ``map.v2.npz``, ``egg.csv`` -> ``egg.csv.json``), so no other file is replaced."""
+    p = Path(path)
+    if not p.name:
+        raise InvalidParameterError(f"a quality map needs a file name, got {str(path)!r}")
+    base = p.with_suffix("") if p.suffix in MAP_SUFFIXES else p
+    npz, meta = (base.with_name(base.name + suffix) for suffix in MAP_SUFFIXES)
+    return npz, meta
+
+
 def save_map(qm: QualityMap, path: str | Path) -> Path:
-    """Save to ``path`` (.npz arrays) plus ``path`` with suffix .json (metadata, optimum)."""
-    p = Path(path).with_suffix(".npz")
+    """Save to :func:`map_paths` of ``path`` (.npz arrays, .json metadata and optimum); the .npz path."""
+    p, meta_path = map_paths(path)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(
@@ -489,24 +506,24 @@ def save_map(qm: QualityMap, path: str | Path) -> Path:
             seconds=qm.seconds, reasons=np.array(qm.reasons, dtype=str),
         )
         meta = {k: v for k, v in qm.to_dict().items() if k not in ("Q1", "Q2", "Q3", "valid")}
-        p.with_suffix(".json").write_text(json.dumps(meta, indent=1))
+        meta_path.write_text(json.dumps(meta, indent=1))
     except OSError as exc:
         raise WriteError(f"cannot save the quality map to {p}: {exc.strerror or exc}") from exc
     return p
 
 
 def load_map(path: str | Path) -> QualityMap:
-    """Reload a map saved by :func:`save_map` (no recomputation)."""
+    """Reload a map saved by :func:`save_map` under the same name (no recomputation)."""
     try:
-        p = Path(path).with_suffix(".npz")
+        p, meta_path = map_paths(path)
     except (TypeError, ValueError) as exc:
         raise InvalidParameterError(f"cannot load quality map {path!r}: not a file path ({exc})") from exc
-    for f in (p, p.with_suffix(".json")):  # (the map's arrays first: a typo names the file the user meant)
+    for f in (p, meta_path):  # (the map's arrays first: a typo names the file the user meant)
         if not f.is_file():
             raise InvalidParameterError(f"cannot load quality map {path}: no file {f} "
                                         "(a map is FILE.npz with FILE.json beside it, as --out writes them)")
     try:
-        meta = json.loads(p.with_suffix(".json").read_text())
+        meta = json.loads(meta_path.read_text())
         with np.load(p) as z:
             arrays = {k: z[k] for k in z.files}
         spec = MapSpec(**meta["spec"])

@@ -160,3 +160,24 @@ def test_n_solves_counts_the_poses_actually_solved() -> None:
     for reasons, solves in ((["no base pose: x", "invalid initial state: y"], 0), (["inner solve failed: z", "not converged"], 2),
                             (["ok", "no base pose: x"], 1)):
         assert replace(qm, reasons=[reasons]).n_solves == solves
+
+
+def test_out_keeps_a_suffix_it_does_not_write(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--out FILE``: FILE, FILE.npz and FILE.json name the same pair; any other suffix is part
+    of the name (it was replaced: ``--out egg.csv`` overwrote an unrelated ``egg.json``)."""
+    from contgrasp_core.cli import main
+
+    (tmp_path / "egg.json").write_text("unrelated")
+    out = str(tmp_path / "egg.csv")
+    assert main(["quality-map", "--psi-steps", "1", "--d-steps", "1", "--nodes", "40", "--executor", "serial",
+                 "--no-optimise", "--out", out]) == 0
+    assert f"saved: {out}.npz and {out}.json" in capsys.readouterr().out
+    assert (tmp_path / "egg.json").read_text() == "unrelated" and not (tmp_path / "egg.npz").exists()
+    assert load_map(out).n_solves == load_map(out + ".npz").n_solves == 1
+
+    from contgrasp_core.quality_map import map_paths
+
+    for name, npz in (("m", "m.npz"), ("m.npz", "m.npz"), ("m.json", "m.npz"), ("m.v2", "m.v2.npz"), ("m_r0.5", "m_r0.5.npz")):
+        assert map_paths(tmp_path / name) == (tmp_path / npz, tmp_path / (npz[:-4] + ".json"))
+    with pytest.raises(InvalidParameterError, match="needs a file name"):
+        map_paths("")
