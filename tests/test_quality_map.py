@@ -181,3 +181,23 @@ def test_out_keeps_a_suffix_it_does_not_write(tmp_path: Path, capsys: pytest.Cap
         assert map_paths(tmp_path / name) == (tmp_path / npz, tmp_path / (npz[:-4] + ".json"))
     with pytest.raises(InvalidParameterError, match="needs a file name"):
         map_paths("")
+
+
+def test_load_refuses_the_options_of_a_new_map(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--load`` shows the saved map as it was computed: an object, a grid, an executor or
+    ``--out`` given with it would be ignored (the loaded map was printed instead), so each is refused."""
+    from contgrasp_core.cli import main
+
+    saved = str(tmp_path / "map")
+    assert main(["quality-map", "--psi-steps", "1", "--d-steps", "1", "--nodes", "40", "--executor", "serial",
+                 "--no-optimise", "--out", saved, "--json"]) == 0
+    for extra in (["--outline", _shifted_egg(tmp_path / "egg.csv")], ["--object", "ellipse"], ["--psi-steps", "3"],
+                  ["--d-max", "9"], ["--executor", "serial"], ["--no-optimise"], ["--out", str(tmp_path / "again")]):
+        capsys.readouterr()
+        assert main(["quality-map", "--load", saved, *extra]) == 2, extra
+        out, err = capsys.readouterr()
+        assert out == "" and err.splitlines() == [
+            f"contgrasp quality-map: error: {extra[0]} does nothing with --load (a saved map is shown as it was computed): "
+            "it needs a map computed anew (no --load)"]
+    assert main(["quality-map", "--load", saved, "--metric", "Q1", "--psi-steps", "24"]) == 0  # (the defaults pass)
+    assert not (tmp_path / "again.npz").exists()

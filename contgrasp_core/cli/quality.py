@@ -7,13 +7,21 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InvalidParameterError, output_error
+from ..errors import InvalidParameterError, output_error, refuse_ignored
 from ..outputs import check_output
 from ..objects import FIG2_SCALE
 from ..quality_map import METRICS, MapSpec, load_map, map_paths, quality_map, save_map
 from .common import add_executor_arguments, add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run"]
+
+COMPUTING_OPTIONS = ("--object", "--outline", "--psi-steps", "--d-steps", "--d-min", "--d-max", "--nodes", "--contact-tol",
+                     "--executor", "--workers", "--scheduler", "--no-optimise", "--out")
+"""The options of a map computed anew: ``--load`` refuses them (a saved map is shown as it was computed)."""
+
+
+def _dest(option: str) -> str:
+    return option[2:].replace("-", "_")
 
 
 def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
@@ -40,7 +48,8 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
                    "pair, any other suffix is kept: egg.csv -> egg.csv.npz) for later re-plotting")
     p.add_argument("--load", metavar="FILE", help="re-plot / report a saved map (FILE as --out named it) instead of computing")
     p.add_argument("--plot", metavar="FILE", help="draw the Fig. 3 panels to FILE")
-    p.set_defaults(func=run, format_text=format_text)
+    p.set_defaults(func=run, format_text=format_text,
+                   computing_defaults={option: p.get_default(_dest(option)) for option in COMPUTING_OPTIONS})
 
 
 def format_text(out: dict[str, Any]) -> str:
@@ -89,6 +98,9 @@ def _check_out_path(path: str) -> None:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Execute ``contgrasp quality-map``; JSON keys in docs/cli.md."""
+    if args.load:
+        refuse_ignored([o for o, default in args.computing_defaults.items() if getattr(args, _dest(o)) != default],
+                       "with --load (a saved map is shown as it was computed)", "a map computed anew (no --load)")
     if args.plot:
         from ..figures.draw import check_figure_path
 
