@@ -418,6 +418,8 @@ def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
     The search variables are (psi, d) with d bounded to [d_min, d_max] (scipy's bounded
     Nelder-Mead); psi is periodic. Invalid poses count as -inf quality.
 
+    The base's heading ``theta`` is given in [0, 2 pi), as psi.
+
     Ties (the optimum of a rotation-invariant map is a whole ring of poses): the start is the
     grid pose of :func:`best_grid_pose` (smallest psi among values within :data:`TIE_RTOL` of
     the best, then smallest d), and Nelder-Mead's result replaces it only if it is better by more
@@ -473,7 +475,7 @@ def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
         "d": d,
         "value": float(best.Q[k]),
         "grid_value": grid_best,
-        "base": {"x": best.base[0], "y": best.base[1], "theta": best.base[2]},
+        "base": {"x": best.base[0], "y": best.base[1], "theta": float(np.mod(best.base[2], 2 * np.pi))},  # (like psi)
         "evaluations": int(res.nfev),
         "x": None if best.x is None else best.x.tolist(),
         "y": None if best.y is None else best.y.tolist(),

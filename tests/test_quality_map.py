@@ -127,11 +127,11 @@ def test_a_tapered_map_arm_tracks_its_own_radius() -> None:
             MapSpec("circle", arm_radius_tip=bad)
 
 
-def _shifted_egg(path: Path) -> str:
-    """An egg r = 5 + 0.8 cos t moved +20 in x: the origin (0, 0) lies outside it."""
+def _egg(path: Path, shift: float = 20.0) -> str:
+    """An egg r = 5 + 0.8 cos t moved ``shift`` in x (by 20: the origin (0, 0) lies outside it)."""
     t = np.linspace(0.0, 2 * np.pi, 40, endpoint=False)
     r = 5.0 + 0.8 * np.cos(t)
-    np.savetxt(path, np.column_stack([20.0 + r * np.cos(t), r * np.sin(t)]), delimiter=", ", header="x, y", comments="")
+    np.savetxt(path, np.column_stack([shift + r * np.cos(t), r * np.sin(t)]), delimiter=", ", header="x, y", comments="")
     return str(path)
 
 
@@ -141,7 +141,7 @@ def test_an_object_not_around_the_origin_is_refused_before_any_solve(tmp_path: P
     from contgrasp_core.cli import main
     from contgrasp_core.objects import FIG2_SCALE, ObjectSpec
 
-    outline = _shifted_egg(tmp_path / "egg_shift.csv")
+    outline = _egg(tmp_path / "egg_shift.csv")
     with pytest.raises(InvalidParameterError, match=r"origin must lie inside .* whose centre is at \(20\.\d+, 0\)"):
         MapSpec(ObjectSpec.from_cli(None, outline, FIG2_SCALE))
     assert main(["quality-map", "--outline", outline, "--psi-steps", "8", "--d-steps", "3", "--executor", "serial"]) == 2
@@ -191,7 +191,7 @@ def test_load_refuses_the_options_of_a_new_map(tmp_path: Path, capsys: pytest.Ca
     saved = str(tmp_path / "map")
     assert main(["quality-map", "--psi-steps", "1", "--d-steps", "1", "--nodes", "40", "--executor", "serial",
                  "--no-optimise", "--out", saved, "--json"]) == 0
-    for extra in (["--outline", _shifted_egg(tmp_path / "egg.csv")], ["--object", "ellipse"], ["--psi-steps", "3"],
+    for extra in (["--outline", _egg(tmp_path / "egg.csv")], ["--object", "ellipse"], ["--psi-steps", "3"],
                   ["--d-max", "9"], ["--executor", "serial"], ["--no-optimise"], ["--out", str(tmp_path / "again")]):
         capsys.readouterr()
         assert main(["quality-map", "--load", saved, *extra]) == 2, extra
@@ -201,3 +201,20 @@ def test_load_refuses_the_options_of_a_new_map(tmp_path: Path, capsys: pytest.Ca
             "it needs a map computed anew (no --load)"]
     assert main(["quality-map", "--load", saved, "--metric", "Q1", "--psi-steps", "24"]) == 0  # (the defaults pass)
     assert not (tmp_path / "again.npz").exists()
+
+
+def test_the_optimal_base_heading_is_given_in_0_to_2_pi(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """theta0 = psi + pi/2 with psi in [0, 2 pi) was reported unwrapped (6.32 rad); now in
+    [0, 2 pi) as psi, the same in the JSON and the text."""
+    import json
+
+    from contgrasp_core.cli import main
+
+    argv = ["quality-map", "--outline", _egg(tmp_path / "egg.csv", shift=0.0), "--psi-steps", "8", "--d-steps", "2",
+            "--nodes", "40", "--executor", "serial", "--metric", "Q2"]
+    assert main([*argv, "--json"]) == 0
+    opt = json.loads(capsys.readouterr().out)["optimum"]["Q2"]
+    assert opt["psi"] > 1.5 * np.pi  # (the egg's Q2 optimum: psi + pi/2 passes 2 pi)
+    assert opt["base"]["theta"] == pytest.approx(opt["psi"] - 1.5 * np.pi, abs=1e-12)
+    assert main(argv) == 0
+    assert f"heading {opt['base']['theta']:.4g} rad" in capsys.readouterr().out
