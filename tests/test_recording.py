@@ -284,6 +284,27 @@ def test_recovery_says_what_was_lost_against_the_recordings_own_counts(small_bag
     assert folder["messages_lost"] == 300 - folder["messages"] > 0
 
 
+def test_recover_refuses_an_output_it_cannot_create_before_reading(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bag recover IN OUT``: an OUT that cannot be created is bad input (exit 2, one line naming
+    the recovered recording, not "record"), found by a probe file before the input is read; it
+    was an exit 1 from the writer after the scan had begun."""
+    from contgrasp_core.cli import main
+
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes((Path(__file__).resolve().parents[1] / "bags" / "paper_grasp.mcap").read_bytes()[:300_000])
+    (tmp_path / "file").write_text("x")
+    for out, why in (("/proc/contgrasp-none/o.mcap", "cannot create a file in /proc (No such file or directory)"),
+                     (str(tmp_path / "file" / "o.mcap"), f"{tmp_path / 'file'} is not a directory"),
+                     (str(tmp_path / "file"), "already exists: give a new path")):
+        capsys.readouterr()
+        assert main(["bag", "recover", str(cut), out]) == 2, out
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.splitlines() == [
+            f"contgrasp bag recover: error: the recovered recording {out}"
+            + (" " if why.startswith("already") else ": ") + why]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cut.mcap", "file"]
+
+
 def test_unwritable_outputs_are_clear_errors(tmp_path: Path) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("x")
