@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -706,6 +707,23 @@ def test_replay_window_and_loop(tmp_path: Path) -> None:
     assert json.loads(out)["published"] > 300
     bad = subprocess.run([str(BIN / "contgrasp"), "replay", str(path), "--rate", "0"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "rate" in bad.stderr
+
+
+def test_replay_refuses_a_start_after_the_recordings_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A --start past the last message published nothing and exited 0; now it is bad input
+    (exit 2, one line with the recording's length), found before any ROS node is created."""
+    from contgrasp_core.cli import main
+    from contgrasp_core.errors import InvalidParameterError
+    from contgrasp_ros.recordings.replay import replay
+
+    path = tmp_path / "small.mcap"
+    _small_bag(path, n=300)  # one message per ms: the last 0.299 s after the first
+    why = "--start 5 s is after the recording's end (0.299 s after its first message)"
+    with pytest.raises(InvalidParameterError, match=f"^{re.escape(why)}$"):
+        replay(path, start=5.0, delay=0.0)
+    capsys.readouterr()
+    assert main(["replay", str(path), "--start", "5"]) == 2
+    assert capsys.readouterr().err.splitlines() == [f"contgrasp replay: error: {why}"]
 
 
 @contextmanager
