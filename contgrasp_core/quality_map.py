@@ -45,12 +45,15 @@ __all__ = [
     "maximise",
     "best_grid_pose",
     "TIE_RTOL",
+    "map_paths",
     "save_map",
     "load_map",
     "METRICS",
 ]
 
 METRICS = ("Q1", "Q2", "Q3")
+NO_BASE, BAD_START = "no base pose", "invalid initial state"
+"""How a pose's reason starts when its inner problem was never solved (:attr:`QualityMap.n_solves`)."""
 MAX_MAP_STEPS = 100_000
 """Largest psi_steps / d_steps of a map."""
 MAX_MAP_SIZE = 100_000_000
@@ -109,6 +112,7 @@ class MapSpec:
         real("contact_tol", self.contact_tol, lo=0.0)
         object.__setattr__(self, "object", ObjectSpec.coerce(self.object, FIG2_SCALE))
         boundary = self.object.boundary()
+        check_origin_inside(self.object, boundary)
         reach = self.length_fraction * boundary.length
         if d_max >= reach:
             raise InvalidParameterError(
@@ -157,6 +161,22 @@ def _ray_distance(boundary: Boundary, direction: Array, lam: float) -> float:
     return float(boundary.project(np.array([lam * direction])).signed_distance[0])
 
 
+ORIGIN_OUTSIDE = "the object frame origin must lie inside the object to place bases in D"
+"""Why an object has no base poses: bases are placed on rays from the origin (:func:`disc_pose`)."""
+
+
+def check_origin_inside(obj: ObjectSpec, boundary: Boundary) -> None:
+    """Refuse an object whose frame origin (0, 0) is not inside it (an input error, one line
+    naming the object, the origin's distance outside and where the object's centre is)."""
+    outside = _ray_distance(boundary, np.zeros(2), 0.0)
+    if outside >= 0:
+        cx, cy = obj.reference
+        raise InvalidParameterError(
+            f"{ORIGIN_OUTSIDE}: (0, 0) lies {outside:.4g} outside {obj.text()}, whose centre is at "
+            f"({round(cx, 4) + 0.0:g}, {round(cy, 4) + 0.0:g}); shift the object so that it surrounds the origin"
+        )
+
+
 def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
     """Base pose in D: on the ray at polar angle ``psi`` from the origin, at boundary distance ``d``.
 
@@ -172,7 +192,7 @@ def disc_pose(boundary: Boundary, psi: float, d: float) -> BasePose:
         raise InvalidParameterError(f"d must be <= 1e100, got {d!r}")
     u = np.array([np.cos(psi), np.sin(psi)])
     if _ray_distance(boundary, u, 0.0) >= 0:
-        raise InvalidParameterError("the object frame origin must lie inside the object to place bases in D")
+        raise InvalidParameterError(ORIGIN_OUTSIDE)
     _, pts = boundary.sample(256)
     r_max = float(np.max(np.hypot(*pts.T))) + boundary.length / 256
     lam_b = brentq(lambda lam: _ray_distance(boundary, u, lam), 0.0, r_max, xtol=1e-13)
@@ -201,7 +221,7 @@ def optimal_grasp(spec: MapSpec, boundary: Boundary, base: BasePose, warm: Any =
     try:
         problem = _problem(spec, boundary, base)
     except ContgraspError as exc:
-        raise InvalidParameterError(f"invalid initial state: {exc}") from exc
+        raise InvalidParameterError(f"{BAD_START}: {exc}") from exc
     res, errors = None, []
     for initial in ([warm] if warm is not None else []) + ["approach", "zero"]:
         try:
@@ -263,7 +283,7 @@ def _column(spec: MapSpec, psi: float) -> list[PoseResult]:
             try:
                 base = disc_pose(boundary, psi, d)
             except ContgraspError as exc:
-                out.append(PoseResult(psi, d, (np.nan, np.nan, np.nan), False, f"no base pose: {exc}"))
+                out.append(PoseResult(psi, d, (np.nan, np.nan, np.nan), False, f"{NO_BASE}: {exc}"))
                 continue
             t0 = time.perf_counter()
             res, sol = _evaluate(spec, boundary, psi, float(d), base, warm)
@@ -292,7 +312,9 @@ class QualityMap:
 
     @property
     def n_solves(self) -> int:
-        return int(self.spec.psi_steps * self.spec.d_steps)
+        """Grid poses whose inner problem was solved (not those without a base pose or with an
+        invalid initial state; the maximisation's evaluations are counted apart)."""
+        return sum(not r.startswith((NO_BASE, BAD_START)) for row in self.reasons for r in row)
 
     def to_dict(self) -> dict[str, Any]:
         def grid(a: Array) -> list[list[float | None]]:
@@ -396,6 +418,8 @@ def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
     The search variables are (psi, d) with d bounded to [d_min, d_max] (scipy's bounded
     Nelder-Mead); psi is periodic. Invalid poses count as -inf quality.
 
+    The base's heading ``theta`` is given in [0, 2 pi), as psi.
+
     Ties (the optimum of a rotation-invariant map is a whole ring of poses): the start is the
     grid pose of :func:`best_grid_pose` (smallest psi among values within :data:`TIE_RTOL` of
     the best, then smallest d), and Nelder-Mead's result replaces it only if it is better by more
@@ -451,16 +475,32 @@ def maximise(qm: QualityMap, metric: str) -> dict[str, Any]:
         "d": d,
         "value": float(best.Q[k]),
         "grid_value": grid_best,
-        "base": {"x": best.base[0], "y": best.base[1], "theta": best.base[2]},
+        "base": {"x": best.base[0], "y": best.base[1], "theta": float(np.mod(best.base[2], 2 * np.pi))},  # (like psi)
         "evaluations": int(res.nfev),
         "x": None if best.x is None else best.x.tolist(),
         "y": None if best.y is None else best.y.tolist(),
     }
 
 
+MAP_SUFFIXES = (".npz", ".json")
+"""The two files of a saved map: the arrays and the metadata."""
+
+
+def map_paths(path: str | Path) -> tuple[Path, Path]:
+    """The files ``FILE.npz`` and ``FILE.json`` a map named ``path`` is saved in: ``path`` is
+    ``FILE`` itself or one of the two files; any other suffix is part of the name and kept
+    (``map.v2`` -> ``map.v2.npz``, ``egg.csv`` -> ``egg.csv.json``), so no other file is replaced."""
+    p = Path(path)
+    if not p.name:
+        raise InvalidParameterError(f"a quality map needs a file name, got {str(path)!r}")
+    base = p.with_suffix("") if p.suffix in MAP_SUFFIXES else p
+    npz, meta = (base.with_name(base.name + suffix) for suffix in MAP_SUFFIXES)
+    return npz, meta
+
+
 def save_map(qm: QualityMap, path: str | Path) -> Path:
-    """Save to ``path`` (.npz arrays) plus ``path`` with suffix .json (metadata, optimum)."""
-    p = Path(path).with_suffix(".npz")
+    """Save to :func:`map_paths` of ``path`` (.npz arrays, .json metadata and optimum); the .npz path."""
+    p, meta_path = map_paths(path)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(
@@ -468,24 +508,24 @@ def save_map(qm: QualityMap, path: str | Path) -> Path:
             seconds=qm.seconds, reasons=np.array(qm.reasons, dtype=str),
         )
         meta = {k: v for k, v in qm.to_dict().items() if k not in ("Q1", "Q2", "Q3", "valid")}
-        p.with_suffix(".json").write_text(json.dumps(meta, indent=1))
+        meta_path.write_text(json.dumps(meta, indent=1))
     except OSError as exc:
         raise WriteError(f"cannot save the quality map to {p}: {exc.strerror or exc}") from exc
     return p
 
 
 def load_map(path: str | Path) -> QualityMap:
-    """Reload a map saved by :func:`save_map` (no recomputation)."""
+    """Reload a map saved by :func:`save_map` under the same name (no recomputation)."""
     try:
-        p = Path(path).with_suffix(".npz")
+        p, meta_path = map_paths(path)
     except (TypeError, ValueError) as exc:
         raise InvalidParameterError(f"cannot load quality map {path!r}: not a file path ({exc})") from exc
-    for f in (p, p.with_suffix(".json")):  # (the map's arrays first: a typo names the file the user meant)
+    for f in (p, meta_path):  # (the map's arrays first: a typo names the file the user meant)
         if not f.is_file():
             raise InvalidParameterError(f"cannot load quality map {path}: no file {f} "
                                         "(a map is FILE.npz with FILE.json beside it, as --out writes them)")
     try:
-        meta = json.loads(p.with_suffix(".json").read_text())
+        meta = json.loads(meta_path.read_text())
         with np.load(p) as z:
             arrays = {k: z[k] for k in z.files}
         spec = MapSpec(**meta["spec"])

@@ -155,6 +155,19 @@ def test_quality_map_text_shows_the_optimum(tmp_path: Path, capsys: pytest.Captu
     assert "optimum Q2: " in one and "optimum Q1" not in one
 
 
+def test_quality_map_text_says_why_there_is_no_optimum(capsys: pytest.CaptureFixture[str]) -> None:
+    """Not computed because of --no-optimise (also with --metric), or none because no pose is
+    valid: the line names the one that holds."""
+    from contgrasp_core.cli.quality import format_text
+
+    argv = ["quality-map", "--psi-steps", "1", "--d-steps", "1", "--nodes", "40", "--executor", "serial", "--no-optimise"]
+    for metric in ("all", "Q2"):
+        lines = _text(capsys, [*argv, "--metric", metric]).splitlines()
+        assert "optimum: not computed (--no-optimise)" in lines and not any("no valid pose" in ln for ln in lines)
+    out = json.loads(_text(capsys, [*argv, "--json"]))
+    assert "optimum: none (no valid pose)" in format_text({**out, "n_valid": 0}).splitlines()
+
+
 # ---------------------------------------------------------------- simulate: holds
 
 def test_zoh_warning_names_the_first_order_hold() -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -123,3 +125,96 @@ def test_a_tapered_map_arm_tracks_its_own_radius() -> None:
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(InvalidParameterError, match="arm_radius_tip"):
             MapSpec("circle", arm_radius_tip=bad)
+
+
+def _egg(path: Path, shift: float = 20.0) -> str:
+    """An egg r = 5 + 0.8 cos t moved ``shift`` in x (by 20: the origin (0, 0) lies outside it)."""
+    t = np.linspace(0.0, 2 * np.pi, 40, endpoint=False)
+    r = 5.0 + 0.8 * np.cos(t)
+    np.savetxt(path, np.column_stack([shift + r * np.cos(t), r * np.sin(t)]), delimiter=", ", header="x, y", comments="")
+    return str(path)
+
+
+def test_an_object_not_around_the_origin_is_refused_before_any_solve(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Bases lie on rays from the origin: an object away from it has no pose at all, so the
+    spec (and the command, exit 2 in one line) refuses it instead of computing an empty map."""
+    from contgrasp_core.cli import main
+    from contgrasp_core.objects import FIG2_SCALE, ObjectSpec
+
+    outline = _egg(tmp_path / "egg_shift.csv")
+    with pytest.raises(InvalidParameterError, match=r"origin must lie inside .* whose centre is at \(20\.\d+, 0\)"):
+        MapSpec(ObjectSpec.from_cli(None, outline, FIG2_SCALE))
+    assert main(["quality-map", "--outline", outline, "--psi-steps", "8", "--d-steps", "3", "--executor", "serial"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1 and "shift the object so that it surrounds the origin" in err
+    assert "quality map" not in err  # (no progress bar: nothing was computed)
+
+
+def test_n_solves_counts_the_poses_actually_solved() -> None:
+    """A pose without a base pose or with an invalid initial state is not solved; a failed
+    or unconverged solve is."""
+    from dataclasses import replace
+
+    qm = quality_map(MapSpec("circle", psi_steps=1, d_steps=2, nodes=40), executor="serial", optimise=False)
+    assert qm.n_solves == 2
+    for reasons, solves in ((["no base pose: x", "invalid initial state: y"], 0), (["inner solve failed: z", "not converged"], 2),
+                            (["ok", "no base pose: x"], 1)):
+        assert replace(qm, reasons=[reasons]).n_solves == solves
+
+
+def test_out_keeps_a_suffix_it_does_not_write(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--out FILE``: FILE, FILE.npz and FILE.json name the same pair; any other suffix is part
+    of the name (it was replaced: ``--out egg.csv`` overwrote an unrelated ``egg.json``)."""
+    from contgrasp_core.cli import main
+
+    (tmp_path / "egg.json").write_text("unrelated")
+    out = str(tmp_path / "egg.csv")
+    assert main(["quality-map", "--psi-steps", "1", "--d-steps", "1", "--nodes", "40", "--executor", "serial",
+                 "--no-optimise", "--out", out]) == 0
+    assert f"saved: {out}.npz and {out}.json" in capsys.readouterr().out
+    assert (tmp_path / "egg.json").read_text() == "unrelated" and not (tmp_path / "egg.npz").exists()
+    assert load_map(out).n_solves == load_map(out + ".npz").n_solves == 1
+
+    from contgrasp_core.quality_map import map_paths
+
+    for name, npz in (("m", "m.npz"), ("m.npz", "m.npz"), ("m.json", "m.npz"), ("m.v2", "m.v2.npz"), ("m_r0.5", "m_r0.5.npz")):
+        assert map_paths(tmp_path / name) == (tmp_path / npz, tmp_path / (npz[:-4] + ".json"))
+    with pytest.raises(InvalidParameterError, match="needs a file name"):
+        map_paths("")
+
+
+def test_load_refuses_the_options_of_a_new_map(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--load`` shows the saved map as it was computed: an object, a grid, an executor or
+    ``--out`` given with it would be ignored (the loaded map was printed instead), so each is refused."""
+    from contgrasp_core.cli import main
+
+    saved = str(tmp_path / "map")
+    assert main(["quality-map", "--psi-steps", "1", "--d-steps", "1", "--nodes", "40", "--executor", "serial",
+                 "--no-optimise", "--out", saved, "--json"]) == 0
+    for extra in (["--outline", _egg(tmp_path / "egg.csv")], ["--object", "ellipse"], ["--psi-steps", "3"],
+                  ["--d-max", "9"], ["--executor", "serial"], ["--no-optimise"], ["--out", str(tmp_path / "again")]):
+        capsys.readouterr()
+        assert main(["quality-map", "--load", saved, *extra]) == 2, extra
+        out, err = capsys.readouterr()
+        assert out == "" and err.splitlines() == [
+            f"contgrasp quality-map: error: {extra[0]} does nothing with --load (a saved map is shown as it was computed): "
+            "it needs a map computed anew (no --load)"]
+    assert main(["quality-map", "--load", saved, "--metric", "Q1", "--psi-steps", "24"]) == 0  # (the defaults pass)
+    assert not (tmp_path / "again.npz").exists()
+
+
+def test_the_optimal_base_heading_is_given_in_0_to_2_pi(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """theta0 = psi + pi/2 with psi in [0, 2 pi) was reported unwrapped (6.32 rad); now in
+    [0, 2 pi) as psi, the same in the JSON and the text."""
+    import json
+
+    from contgrasp_core.cli import main
+
+    argv = ["quality-map", "--outline", _egg(tmp_path / "egg.csv", shift=0.0), "--psi-steps", "8", "--d-steps", "2",
+            "--nodes", "40", "--executor", "serial", "--metric", "Q2"]
+    assert main([*argv, "--json"]) == 0
+    opt = json.loads(capsys.readouterr().out)["optimum"]["Q2"]
+    assert opt["psi"] > 1.5 * np.pi  # (the egg's Q2 optimum: psi + pi/2 passes 2 pi)
+    assert opt["base"]["theta"] == pytest.approx(opt["psi"] - 1.5 * np.pi, abs=1e-12)
+    assert main(argv) == 0
+    assert f"heading {opt['base']['theta']:.4g} rad" in capsys.readouterr().out

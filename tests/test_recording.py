@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -282,6 +283,27 @@ def test_recovery_says_what_was_lost_against_the_recordings_own_counts(small_bag
     folder = recover(tmp_path / "bag", tmp_path / "b")
     assert (folder["chunks_lost"], folder["messages_expected"]) == ("unknown", 300)
     assert folder["messages_lost"] == 300 - folder["messages"] > 0
+
+
+def test_recover_refuses_an_output_it_cannot_create_before_reading(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bag recover IN OUT``: an OUT that cannot be created is bad input (exit 2, one line naming
+    the recovered recording, not "record"), found by a probe file before the input is read; it
+    was an exit 1 from the writer after the scan had begun."""
+    from contgrasp_core.cli import main
+
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes((Path(__file__).resolve().parents[1] / "bags" / "paper_grasp.mcap").read_bytes()[:300_000])
+    (tmp_path / "file").write_text("x")
+    for out, why in (("/proc/contgrasp-none/o.mcap", "cannot create a file in /proc (No such file or directory)"),
+                     (str(tmp_path / "file" / "o.mcap"), f"{tmp_path / 'file'} is not a directory"),
+                     (str(tmp_path / "file"), "already exists: give a new path")):
+        capsys.readouterr()
+        assert main(["bag", "recover", str(cut), out]) == 2, out
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.splitlines() == [
+            f"contgrasp bag recover: error: the recovered recording {out}"
+            + (" " if why.startswith("already") else ": ") + why]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cut.mcap", "file"]
 
 
 def test_unwritable_outputs_are_clear_errors(tmp_path: Path) -> None:
@@ -685,6 +707,23 @@ def test_replay_window_and_loop(tmp_path: Path) -> None:
     assert json.loads(out)["published"] > 300
     bad = subprocess.run([str(BIN / "contgrasp"), "replay", str(path), "--rate", "0"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "rate" in bad.stderr
+
+
+def test_replay_refuses_a_start_after_the_recordings_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A --start past the last message published nothing and exited 0; now it is bad input
+    (exit 2, one line with the recording's length), found before any ROS node is created."""
+    from contgrasp_core.cli import main
+    from contgrasp_core.errors import InvalidParameterError
+    from contgrasp_ros.recordings.replay import replay
+
+    path = tmp_path / "small.mcap"
+    _small_bag(path, n=300)  # one message per ms: the last 0.299 s after the first
+    why = "--start 5 s is after the recording's end (0.299 s after its first message)"
+    with pytest.raises(InvalidParameterError, match=f"^{re.escape(why)}$"):
+        replay(path, start=5.0, delay=0.0)
+    capsys.readouterr()
+    assert main(["replay", str(path), "--start", "5"]) == 2
+    assert capsys.readouterr().err.splitlines() == [f"contgrasp replay: error: {why}"]
 
 
 @contextmanager

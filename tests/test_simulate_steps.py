@@ -45,3 +45,21 @@ def test_the_first_order_loop_senses_a_free_object_where_it_is() -> None:
     np.testing.assert_array_equal(result.x[-1], core.x)
     assert result.object_q is not None
     np.testing.assert_array_equal(result.object_q[-1], core.body.q)
+
+
+@pytest.mark.parametrize(("extra", "why"), [
+    (["--control-period", "1e-9"], "control_period must be at least 0.0001 s"),
+    (["--control-period", "5e-5", "--hold", "first-order"], "control_period must be at least 0.0001 s"),
+    (["--dt", "1e-7"], "--duration 4 s at --dt 1e-07 s is 4e+07 steps, more than 1e+07"),
+    (["--control-period", "1e-4", "--duration", "2000"], "--duration 2000 s at --control-period 0.0001 s is 2e+07 steps"),
+])
+def test_too_many_steps_are_refused_before_the_run(capsys: pytest.CaptureFixture[str], extra: list[str], why: str) -> None:
+    """A tiny control period or step ran practically forever (``--control-period 1e-9``): the
+    period has a floor (:data:`~contgrasp_core.rod.closed_loop.MIN_CONTROL_PERIOD`, the ROS nodes'
+    ``control_period`` parameter's too) and a run at most 1e7 steps; exit 2 in one line."""
+    from contgrasp_core.rod.closed_loop import MIN_CONTROL_PERIOD, ClosedLoopConfig
+
+    assert main(["simulate", "--nodes", "21", *extra]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1 and why in err, err
+    assert ClosedLoopConfig(control_period=5e-4).control_period == 5e-4 >= MIN_CONTROL_PERIOD  # (the tests' shortest)

@@ -3,18 +3,25 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..errors import InvalidParameterError, output_error
+from ..errors import InvalidParameterError, output_error, refuse_ignored
 from ..outputs import check_output
 from ..objects import FIG2_SCALE
-from ..quality_map import METRICS, MapSpec, load_map, quality_map, save_map
+from ..quality_map import METRICS, MapSpec, load_map, map_paths, quality_map, save_map
 from .common import add_executor_arguments, add_object_arguments, object_from_args
 
 __all__ = ["add_parser", "run"]
+
+COMPUTING_OPTIONS = ("--object", "--outline", "--psi-steps", "--d-steps", "--d-min", "--d-max", "--nodes", "--contact-tol",
+                     "--executor", "--workers", "--scheduler", "--no-optimise", "--out")
+"""The options of a map computed anew: ``--load`` refuses them (a saved map is shown as it was computed)."""
+
+
+def _dest(option: str) -> str:
+    return option[2:].replace("-", "_")
 
 
 def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
@@ -37,10 +44,12 @@ def add_parser(sub: Any, parents: list[argparse.ArgumentParser]) -> None:
     p.add_argument("--metric", choices=(*METRICS, "all"), default="all", help="metric(s) to maximise and plot")
     add_executor_arguments(p)
     p.add_argument("--no-optimise", action="store_true", help="skip the Nelder-Mead maximisation")
-    p.add_argument("--out", metavar="FILE", help="save the map (FILE.npz + FILE.json) for later re-plotting")
-    p.add_argument("--load", metavar="FILE", help="re-plot / report a saved map instead of computing")
+    p.add_argument("--out", metavar="FILE", help="save the map (FILE.npz + FILE.json; FILE.npz or FILE.json name the same "
+                   "pair, any other suffix is kept: egg.csv -> egg.csv.npz) for later re-plotting")
+    p.add_argument("--load", metavar="FILE", help="re-plot / report a saved map (FILE as --out named it) instead of computing")
     p.add_argument("--plot", metavar="FILE", help="draw the Fig. 3 panels to FILE")
-    p.set_defaults(func=run, format_text=format_text)
+    p.set_defaults(func=run, format_text=format_text,
+                   computing_defaults={option: p.get_default(_dest(option)) for option in COMPUTING_OPTIONS})
 
 
 def format_text(out: dict[str, Any]) -> str:
@@ -71,11 +80,10 @@ def format_text(out: dict[str, Any]) -> str:
             f"heading {base.get('theta', float('nan')):.4g} rad; {opt.get('evaluations', '?')} evaluations){best_grid}"
         )
     if not out["optimum"]:
-        lines.append("optimum: not computed (--no-optimise) or no valid pose")
+        lines.append("optimum: none (no valid pose)" if not out["n_valid"] else "optimum: not computed (--no-optimise)")
     lines.append(f"wall_time_s: {out['wall_time_s']:.3g} ({out['n_solves']} solves, executor {out['executor']})")
     if out.get("saved"):  # (save_map writes the arrays and the metadata beside them)
-        saved = Path(out["saved"])
-        lines.append(f"saved: {saved.with_suffix('.npz')} and {saved.with_suffix('.json')}")
+        lines.append("saved: {} and {}".format(*map_paths(out["saved"])))
     if out.get("plot"):
         lines.append(f"plot: {out['plot']}")
     lines.append("(in --json only: psi, d, Q1, Q2, Q3, valid, optimum arm shapes, spec)")
@@ -84,12 +92,15 @@ def format_text(out: dict[str, Any]) -> str:
 
 def _check_out_path(path: str) -> None:
     """``--out FILE``: FILE.npz and FILE.json must be creatable (checked before computing)."""
-    for f in (Path(path).with_suffix(".npz"), Path(path).with_suffix(".json")):
+    for f in map_paths(path):
         check_output(f, "--out")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Execute ``contgrasp quality-map``; JSON keys in docs/cli.md."""
+    if args.load:
+        refuse_ignored([o for o, default in args.computing_defaults.items() if getattr(args, _dest(o)) != default],
+                       "with --load (a saved map is shown as it was computed)", "a map computed anew (no --load)")
     if args.plot:
         from ..figures.draw import check_figure_path
 
@@ -114,7 +125,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         if args.out:
             save_map(qm, args.out)
     out = qm.to_dict()
-    if args.metric != "all":
+    if args.metric != "all" and out["optimum"]:
         out["optimum"] = {args.metric: out["optimum"].get(args.metric)}
     if args.plot:
         from ..figures.quality_map import quality_map_figure

@@ -158,8 +158,18 @@ def loop_config(args: argparse.Namespace, record_period: float | None = None) ->
     ``settle_speed`` for ``settle_hold`` s, not before ``min_time``, the same as the ROS graph's)
     with the command's duration, control period and integrator step (:func:`default_dt`)."""
     duration = PAPER.loop.duration if args.duration is None else args.duration
-    return replace(PAPER.loop, duration=duration, control_period=args.control_period,
-                   dt=default_dt(args) if args.control_period is None else None, record_period=record_period)
+    config = replace(PAPER.loop, duration=duration, control_period=args.control_period,
+                     dt=default_dt(args) if args.control_period is None else None, record_period=record_period)
+    steps = config.duration / config.period
+    if steps > MAX_STEPS:
+        step = f"--control-period {config.period:g}" if args.control_period is not None else f"--dt {config.period:g}"
+        raise InvalidParameterError(f"--duration {config.duration:g} s at {step} s is {steps:.3g} steps, more than "
+                                    f"{MAX_STEPS:.0e}: shorten the duration or lengthen the step")
+    return config
+
+
+MAX_STEPS = 10_000_000
+"""Most control periods (or continuous steps) of one ``simulate`` / ``hold`` run: hours of computing."""
 
 
 RECORD_PERIOD = 0.01

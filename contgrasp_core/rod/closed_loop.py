@@ -34,8 +34,14 @@ if TYPE_CHECKING:  # (imported by the runner: the scenario's ClosedLoopConfig co
     from contgrasp_core.rod.integrator import RodState, RodSystem
     from contgrasp_core.rod.obstacle import Obstacle
 
-__all__ = ["ClosedLoopConfig", "ClosedLoopResult", "SettleDetector", "stops_at_settle", "run_closed_loop", "object_motion",
+__all__ = ["MIN_CONTROL_PERIOD", "ClosedLoopConfig", "ClosedLoopResult", "SettleDetector", "stops_at_settle", "run_closed_loop", "object_motion",
            "static_solution"]
+
+
+MIN_CONTROL_PERIOD = 1e-4
+"""The shortest control period, s (10 kHz; the graph's is 2 ms, the tests' shortest 0.5 ms): the
+rod takes at least one implicit step per period, so a shorter one only multiplies the steps
+(``simulate --control-period 1e-9`` ran practically forever). The CLI and the nodes' parameter share it."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +71,9 @@ class ClosedLoopConfig:
                 continue
             if not (np.isfinite(v) and v > 0):
                 raise InvalidParameterError(f"{name} must be finite and > 0, got {v!r}")
+        if self.control_period is not None and self.control_period < MIN_CONTROL_PERIOD:
+            raise InvalidParameterError(f"control_period must be at least {MIN_CONTROL_PERIOD:g} s (one implicit rod step "
+                                        f"per period at least), got {self.control_period!r}")
         if not (np.isfinite(self.min_time) and self.min_time >= 0):
             raise InvalidParameterError("min_time must be finite and >= 0")
         if self.max_iterations_per_period is not None and not (np.isfinite(self.max_iterations_per_period)

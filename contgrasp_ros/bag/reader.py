@@ -27,6 +27,9 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata, Schema, Statistics
 from mcap.stream_reader import StreamReader
 
+from contgrasp_core.errors import InvalidParameterError
+from contgrasp_core.outputs import check_output
+
 from .errors import BagError, BagInputError, read_error
 
 __all__ = [
@@ -312,6 +315,17 @@ UNKNOWN = "unknown"
 """What :func:`recover` reports for a loss it cannot count: the file's end, with its statistics, is gone."""
 
 
+def _check_recovered(dst: Path, layout: str) -> None:
+    """The recovered recording ``dst`` must be new and creatable (a :class:`BagInputError` before
+    any work: :func:`contgrasp_core.outputs.check_output` tries a probe file where it goes)."""
+    if dst.exists():
+        raise BagInputError(f"the recovered recording {dst} already exists: give a new path")
+    try:
+        check_output(dst, "the recovered recording", folder=layout == "folder")
+    except InvalidParameterError as exc:
+        raise BagInputError(str(exc)) from None
+
+
 def recover(src: str | Path, dst: str | Path, *, layout: str | None = None) -> dict[str, Any]:
     """Copy every intact record of a damaged or unfinished recording into a finished one.
 
@@ -325,16 +339,12 @@ def recover(src: str | Path, dst: str | Path, *, layout: str | None = None) -> d
 
     src_p, dst_p = _path(src), _path(dst, "output")
     files, meta = _mcap_files(src_p)
-    for parent in dst_p.parents:  # an output path through a regular file is bad input, found before any work
-        if parent.exists():
-            if not parent.is_dir():
-                raise BagInputError(f"cannot record to {dst_p}: {parent} is not a folder")
-            break
+    layout = layout or ("file" if dst_p.suffix == ".mcap" else "folder")
+    _check_recovered(dst_p, layout)
     for f in files:  # before the output is created: a wrong input leaves nothing behind
         with _opened(f) as stream:
             if stream.read(len(MAGIC)) != MAGIC:
                 raise BagInputError(f"{f} is not an MCAP file (bad or missing magic)")
-    layout = layout or ("file" if dst_p.suffix == ".mcap" else "folder")
     stats: dict[str, Any] = {"chunks_kept": 0, "chunks_lost": UNKNOWN, "records_lost": UNKNOWN, "messages": 0,
                              "messages_without_channel": 0, "truncated": False}
     scans: list[_Scan] = []

@@ -22,6 +22,7 @@ from rclpy.node import Node
 from contgrasp_core.control import FeedbackGains, feedback_at_joints, paper_gains
 from contgrasp_core.control.hold_law import LAWS, HoldController, HoldLawSettings, Law, ShapeHold
 from contgrasp_core.errors import ContgraspError, InvalidParameterError
+from contgrasp_core.rod.closed_loop import MIN_CONTROL_PERIOD
 from contgrasp_core.scenario import HOLD_PREFIX, OBJECT_PARAMETERS, PAPER, object_from_parameters
 from contgrasp_msgs.msg import ContactState, CoupleControl
 from contgrasp_ros.plumbing import qos, topics
@@ -58,7 +59,7 @@ class GraspController(Node):
         self.law_name = declare(self, "law", paper["law"], "the closed loop's law: paper (eq. (19)), hold (the "
                                 "planned hold) or reactive (docs/holding.md)", choices=LAWS, read_only=True)
         self.period = declare(self, "control_period", paper["control_period"], "the simulator's control period: the "
-                              "holding law's phases run in time [s]", lo=1e-6, hi=10.0, read_only=True)
+                              "holding law's phases run in time [s]", lo=MIN_CONTROL_PERIOD, hi=10.0, read_only=True)
         self.hold_settings = HoldLawSettings(**{
             f.name: declare(self, f"{HOLD_PREFIX}{f.name}", paper[f"{HOLD_PREFIX}{f.name}"],
                             f"holding law: {f.name} (contgrasp_core.control.hold_law.HoldLawSettings)", read_only=True)

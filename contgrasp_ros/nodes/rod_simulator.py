@@ -31,7 +31,7 @@ from visualization_msgs.msg import MarkerArray
 
 from contgrasp_core.errors import ContgraspError, interruption
 from contgrasp_core.rod.body import MODES
-from contgrasp_core.rod.closed_loop import ClosedLoopConfig
+from contgrasp_core.rod.closed_loop import MIN_CONTROL_PERIOD, ClosedLoopConfig
 from contgrasp_core.rod.disturbance import KINDS, WrenchInput
 from contgrasp_core.rod.session import DivergenceLimits, LoopSession, Observation, preload
 from contgrasp_core.scenario import PAPER, motion_from_parameters, object_from_parameters, rod_system
@@ -91,7 +91,7 @@ class RodSimulator(Node):
         # take effect at a reset, which would be surprising).
         self.config = ClosedLoopConfig(
             duration=declare(self, "duration", paper["duration"], "simulated seconds at most [s]", lo=1e-6, hi=1e6, read_only=True),
-            control_period=declare(self, "control_period", paper["control_period"], "control period [s]", lo=1e-6, hi=10.0, read_only=True),
+            control_period=declare(self, "control_period", paper["control_period"], "control period [s]", lo=MIN_CONTROL_PERIOD, hi=10.0, read_only=True),
             dt=declare(self, "dt", paper["dt"], "integrator step [s]; 0 = the control period", lo=0.0, hi=10.0, read_only=True) or None,
             settle_speed=declare(self, "settle_speed", paper["settle_speed"], "settled when every node is slower [m/s]", lo=1e-12, hi=1e3, read_only=True),
             settle_hold=declare(self, "settle_hold", paper["settle_hold"], "for this long [s]", lo=1e-9, hi=1e6, read_only=True),

@@ -98,6 +98,9 @@ def replay(
     hi = None if end is None else t0 + int(end * 1e9)
     if lo is not None and hi is not None and hi < lo:
         raise InvalidParameterError("--end must not be before --start")
+    if lo is not None and meta["end_ns"] is not None and lo > meta["end_ns"]:  # (nothing would be published)
+        raise InvalidParameterError(f"--start {start:g} s is after the recording's end "
+                                    f"({(meta['end_ns'] - t0) / 1e9:g} s after its first message)")
     classes = {t: _message_class(known[t]["type"]) for t in chosen}
     import rclpy  # only now: everything above works (and fails cleanly) without ROS
 
