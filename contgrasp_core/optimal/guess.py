@@ -110,5 +110,6 @@ def initial_states(d: Any, u: Array, guess: Array | None) -> tuple[Array, Any]:
         return solve_states_linearised(d, u, guess)
     except ForwardSolveError as exc:
         raise InvalidParameterError(
-            f"the initial curvature makes the contact kinematics singular ({exc}); give another initial guess"
+            f"the initial curvature makes the contact kinematics singular ({exc}); start elsewhere (rho0, alpha0, s_o0: "
+            "grasp's --rho0, --alpha0, --s-o0) or refine the grid (--nodes)"
         ) from exc
