@@ -90,7 +90,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
 def test_analyze_reproduces_the_launcher_summary(recording: tuple[Path, dict]) -> None:
     bag, summary = recording
     r = analyze(bag)
-    for key in ("settled", "settle_time_s", "sim_time_s", "steps", "missed_deadlines", "max_penetration",
+    for key in ("object", "settled", "settle_time_s", "sim_time_s", "steps", "missed_deadlines", "max_penetration",
                 "mean_abs_rho_ratio_minus_1_contact", "mean_abs_alpha_minus_half_pi_contact"):
         assert r[key] == summary[key], key
     for key in ("s", "x", "y", "theta"):

@@ -223,7 +223,7 @@ def test_bounded_muscles_through_the_graph_equal_the_core_loop_bit_for_bit() -> 
     assert bound is not None and effort["peak_couple"] <= bound[0]
 
 
-SHARED_FACTS = ("law", "law_phase", "object_displacement", "object_velocity", "settled", "settle_time_s", "sim_time_s",
+SHARED_FACTS = ("object", "law", "law_phase", "object_displacement", "object_velocity", "settled", "settle_time_s", "sim_time_s",
                 "steps", "validity", "peak_couple", "peak_couple_arclength", "peak_couple_sim_time_s", "peak_couple_ratio",
                 "mean_abs_rho_ratio_minus_1_contact", "max_abs_rho_ratio_minus_1_contact",
                 "mean_abs_alpha_minus_half_pi_contact", "max_abs_alpha_minus_half_pi_contact", "contact_nodes",
@@ -244,6 +244,7 @@ def test_simulate_and_the_launcher_give_the_same_facts_the_same_keys() -> None:
     graph = launch_json("--law", "reactive", "--object-mode", "free", "--duration", "0.4", "--no-record")
     assert set(SHARED_FACTS) <= set(sim) & set(graph)
     assert sim["law"] == graph["law"] == "reactive" and sim["law_phase"] == graph["law_phase"] in ("cage", "close", "hold")
+    assert sim["object"] == graph["object"] == "circle:0.025"
     for key in ("steps", "settled", "settle_time_s"):
         assert sim[key] == graph[key], key
     for key in ("object_displacement", "object_velocity"):

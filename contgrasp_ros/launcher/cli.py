@@ -313,6 +313,7 @@ def _launch(args: argparse.Namespace, argv: Sequence[str] | None, folder: Path, 
                                   record=record, respawn=args.respawn, keep_history=args.plot is not None, events=events,
                                   foxglove=args.foxglove, allow_unrecorded=args.allow_unrecorded, compose=compose,
                                   namespace=args.namespace)
+    summary["object"] = scenario.object.text()  # (as every command names it: docs/cli.md, "Objects")
     summary["domain_id"] = domain
     summary["mode"] = "in-process" if args.in_process else "processes"
     if args.plot is not None and summary.get("history"):
