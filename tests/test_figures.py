@@ -233,6 +233,24 @@ def test_fig3_labels_legend_colour_bar_and_title() -> None:
     assert fig.get_suptitle() == "grasp quality maps: circle:5"  # the object's text, not its repr
 
 
+def test_fig3_of_a_single_distance_shows_its_poses() -> None:
+    """A map of one distance (``--d-steps 1``) spans no area to shade: each panel shows its
+    poses as coloured points, one per polar angle (before: a ValueError from the triangulation)."""
+    from matplotlib.collections import PathCollection
+
+    from contgrasp_core.figures.quality_map import quality_map_figure
+    from contgrasp_core.objects import ObjectSpec
+    from contgrasp_core.quality_map import MapSpec, quality_map
+
+    qm = quality_map(MapSpec(ObjectSpec.parse("ellipse"), psi_steps=5, d_steps=1, nodes=40), executor="serial",
+                     progress=False)
+    fig = quality_map_figure(qm)
+    _check_figure(fig)
+    panels = [ax for ax in fig.get_axes() if ax.get_label() != "<colorbar>"]
+    points = [c for ax in panels for c in ax.collections if isinstance(c, PathCollection)]
+    assert len(points) == 3 and all(len(c.get_offsets()) == int((~np.isnan(qm.base[..., 0])).sum()) == 5 for c in points)
+
+
 # --- readable figures and figures the code reproduces
 
 FIGURES_DIR = Path(__file__).resolve().parents[1] / "docs" / "figures"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from matplotlib.cm import ScalarMappable
 from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
@@ -16,7 +17,9 @@ TIE_NOTE = (f"optimum: Nelder-Mead from the best grid pose; ties (values within 
 """The tie rule of :func:`contgrasp_core.quality_map.maximise`, printed under every Fig. 3."""
 
 
-def _ring_triangulation(qm: QualityMap) -> tuple[Triangulation, np.ndarray]:
+def _ring_triangulation(qm: QualityMap) -> tuple[Triangulation | None, np.ndarray]:
+    """The grid's poses as triangles between neighbouring rings (None with one distance: a
+    single ring has no area), and which poses have no base point."""
     P, D = qm.valid.shape
     x, y = qm.base[..., 0].ravel(), qm.base[..., 1].ravel()
     idx = np.arange(P * D).reshape(P, D)
@@ -26,17 +29,18 @@ def _ring_triangulation(qm: QualityMap) -> tuple[Triangulation, np.ndarray]:
         for j in range(D - 1):
             tris.append([a[j], b[j], b[j + 1]])
             tris.append([a[j], b[j + 1], a[j + 1]])
-    tri = np.array(tris)
     bad = ~np.isfinite(x) | ~np.isfinite(y)
+    if not tris:
+        return None, bad
     xs, ys = np.where(bad, 0.0, x), np.where(bad, 0.0, y)
-    t = Triangulation(xs, ys, tri)
-    return t, bad
+    return Triangulation(xs, ys, np.array(tris)), bad
 
 
 def quality_map_figure(qm: QualityMap, *, title: str | None = None) -> Figure:
     """One panel per metric: heatmap over D normalised by its maximum (darker = higher), the
     object, the optimal base point (purple) and its arm configuration (purple dashed); the tie
-    rule of the optimum (:data:`TIE_NOTE`) is printed under the panels."""
+    rule of the optimum (:data:`TIE_NOTE`) is printed under the panels. A map of one distance
+    shows its poses as coloured points (a single ring spans no area)."""
     fig = Figure(figsize=(13, 4.6))
     t, bad = _ring_triangulation(qm)
     for k, metric in enumerate(METRICS):
@@ -45,8 +49,13 @@ def quality_map_figure(qm: QualityMap, *, title: str | None = None) -> Figure:
         finite = np.isfinite(vals) & ~bad
         vmax = np.nanmax(vals[finite]) if finite.any() else 1.0
         norm = np.where(finite, vals / vmax, 0.0)
-        t.set_mask(np.any(~finite[t.triangles], axis=1))
-        pc = ax.tripcolor(t, norm, shading="gouraud", cmap="Greys", vmin=0.0, vmax=1.0)
+        pc: ScalarMappable
+        if t is None:  # (one distance: the poses themselves, coloured alike)
+            pc = ax.scatter(qm.base[..., 0].ravel()[~bad], qm.base[..., 1].ravel()[~bad], c=norm[~bad], cmap="Greys",
+                            vmin=0.0, vmax=1.0, s=40, edgecolors="0.5", zorder=3)
+        else:
+            t.set_mask(np.any(~finite[t.triangles], axis=1))
+            pc = ax.tripcolor(t, norm, shading="gouraud", cmap="Greys", vmin=0.0, vmax=1.0)
         draw_boundary(ax, qm.spec.boundary(), color="0.75")
         opt = qm.optimum.get(metric)
         if opt:
