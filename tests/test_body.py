@@ -236,7 +236,8 @@ def test_simulate_object_mode_reports_the_object_and_rejects_bad_input() -> None
     assert fixed["object_mode"] == "fixed" and fixed["object_displacement"] is None and fixed["object_velocity"] is None
     assert free["object_mode"] == "free" and np.hypot(free["object_displacement"]["x"], free["object_displacement"]["y"]) > 1e-5
     for bad in (["--object-mode", "free", "--object-mass", "-1"], ["--object-mode", "spring", "--object-stiffness", "1", "2"],
-                ["--object-mode", "spring", "--object-damping", "1", "nan", "1"], ["--object-stiffness", "1", "1", "1"]):
+                ["--object-mode", "spring", "--object-damping", "1", "nan", "1"], ["--object-stiffness", "1", "1", "1"],
+                ["--object-mass", "1"], ["--object-inertia", "1"], ["--object-density", "5"]):  # (the fixed object: no inertia)
         p = subprocess.run(cmd + bad, capture_output=True, text=True)
         assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, (bad, p.stderr)
 

@@ -230,10 +230,15 @@ SPRING_DEFAULTS = ((50.0, 50.0, 0.05), (1.0, 1.0, 0.001))
 
 def object_dynamics(args: argparse.Namespace) -> ObjectDynamics:
     """How the object moves, from ``--object-mode`` and the ``--object-*`` options (a spring's
-    stiffness or damping without ``--object-mode spring`` is a usage error)."""
+    stiffness or damping without ``--object-mode spring``, or an inertia for the fixed object, is
+    a usage error)."""
     spring = args.object_mode == "spring"
     if not spring and (args.object_stiffness is not None or args.object_damping is not None):
         raise InvalidParameterError("--object-stiffness/--object-damping set the spring: give --object-mode spring")
+    inertial = args.object_mass is not None or args.object_inertia is not None or args.object_density != ObjectDynamics().areal_density
+    if args.object_mode == "fixed" and inertial:
+        raise InvalidParameterError("--object-mass/--object-inertia/--object-density set a movable object's inertia: "
+                                    "give --object-mode spring or free (the fixed object does not move)")
     stiffness = SPRING_DEFAULTS[0] if args.object_stiffness is None else tuple(args.object_stiffness)
     damping = SPRING_DEFAULTS[1] if args.object_damping is None else tuple(args.object_damping)
     return ObjectDynamics(mode=args.object_mode, areal_density=args.object_density, mass=args.object_mass,
