@@ -691,5 +691,6 @@ def load_points(path: str) -> NDArray[np.float64]:
             raise DegenerateBoundaryError(f"{path}:{line_no}: x, y must be finite numbers, got {line!r}")
         rows.append(row)
     if not rows:
-        raise DegenerateBoundaryError(f"{path}: no x, y rows found")
+        raise DegenerateBoundaryError(f"{path}: no x, y rows found (two numbers per line, separated by a comma or "
+                                      "white space; a header line allowed)")
     return np.asarray(rows)
