@@ -36,6 +36,7 @@ os.environ.setdefault("PYTHONFAULTHANDLER", "1")
 os.environ.setdefault("AMENT_PREFIX_PATH", sys.prefix)
 
 _domains = itertools.count()
+DOMAIN_CLASS_VARIABLE = "CONTGRASP_TEST_DOMAIN_CLASS"
 # a random starting point per test run: two concurrent runs on one machine (a developer's and
 # a benchmark's, say) rarely share a domain, and graphs on different domains cannot cross-talk
 _BASE = random.SystemRandom().randint(0, 100)
@@ -46,6 +47,15 @@ _SHARD, _SHARDS = shard_from_env() or (1, 1)
 _WORKERS = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
 _CLASSES = _SHARDS * _WORKERS
 _CLASS = (_SHARD - 1) * _WORKERS + int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw"))
+if os.environ.get(DOMAIN_CLASS_VARIABLE):  # (a pytest run a test started: its parent's class, never another's)
+    _CLASS, _CLASSES = (int(v) for v in os.environ[DOMAIN_CLASS_VARIABLE].split("/"))
+
+
+def domain_class() -> dict[str, str]:
+    """What a pytest run started by a test (``colcon test`` of the workspace) needs in its
+    environment to take its domains from this worker's class: with CI's two legs at once, a
+    random domain of its own had met the other leg's simulator (a rod state from nowhere)."""
+    return {DOMAIN_CLASS_VARIABLE: f"{_CLASS}/{_CLASSES}"}
 
 
 def fresh_domain_id() -> int:

@@ -27,7 +27,7 @@ if shutil.which("colcon", path=os.pathsep.join([str(Path(sys.prefix) / "bin"), o
     pytest.skip("colcon is not installed (the set-up's test extra installs colcon-common-extensions)", allow_module_level=True)
 
 import test_by_hand as by_hand  # noqa: E402 - the by-hand graph and its fixtures
-from conftest import fresh_domain_id  # noqa: E402
+from conftest import domain_class, fresh_domain_id  # noqa: E402
 
 Graph = by_hand.Graph
 graph = by_hand.graph
@@ -86,7 +86,8 @@ def test_colcon_builds_both_packages_and_installs_what_a_ros_package_installs(wo
 def test_colcon_test_runs_the_node_tests_and_they_pass(workspace: dict[str, Any]) -> None:
     """`colcon test` runs the package's node tests (CMakeLists.txt, ament_cmake_pytest) against the
     install; `colcon test-result` counts them: some, none failed."""
-    env = dict(workspace["env"], ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env = dict(workspace["env"], ROS_DOMAIN_ID=str(fresh_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               **domain_class())  # (its domains this worker's, never those of CI's other leg running at once)
     env.pop("CONTGRASP_TEST_SHARD", None)  # (the node tests run whole under colcon, whatever CI's shard)
     test = subprocess.run(["colcon", "test", "--packages-select", "contgrasp_ros", "--event-handlers", "console_direct-"],
                           cwd=workspace["ws"], env=env, capture_output=True, text=True, timeout=900)
