@@ -148,7 +148,9 @@ def test_a_killed_container_is_restarted_as_one_process_and_the_loop_resumes(tmp
     assert code == 0, "".join(launch.lines[-40:])
     assert out["restarts"] == {name: 1} and out["exit_codes"][name] == 0
     assert out["simulator_state"] == "finished" and out["sim_time_s"] == pytest.approx(2.0)
-    assert any("couples are back" in line for line in launch.lines)  # both nodes came back: the loop closed again
+    # both nodes came back and the loop closed again: after missing deadlines, or within the first
+    # (a fast restart: the state re-sent to the new peer answered before the timeout; CI met it)
+    assert any("couples are back" in line or "the loop closed again" in line for line in launch.lines), "".join(launch.lines[-40:])
     assert not any(alive(pid) for pid in out["pids"].values())
 
 
