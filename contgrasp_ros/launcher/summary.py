@@ -24,7 +24,7 @@ import numpy as np
 from contgrasp_core.rod.body import motion_summary
 from contgrasp_core.tracking import ContactStats, contact_stats
 
-__all__ = ["FinalState", "FinalQuality", "ContactStats", "RunSummary", "contact_stats", "build_summary"]
+__all__ = ["status_json", "FinalState", "FinalQuality", "ContactStats", "RunSummary", "contact_stats", "build_summary"]
 
 FloatSeq = Sequence[float] | np.ndarray
 
@@ -140,7 +140,8 @@ def _num(status: Mapping[str, str], key: str) -> float | None:
         return None
 
 
-def _json(status: Mapping[str, str], key: str) -> dict[str, Any] | None:
+def status_json(status: Mapping[str, str], key: str) -> dict[str, Any] | None:
+    """The JSON object a status value holds (``validity``), or None when it holds none."""
     try:
         value = json.loads(status[key])
     except (KeyError, ValueError):
@@ -183,7 +184,7 @@ def build_summary(
         missed_deadlines=int(_num(status, "missed_deadlines") or 0),
         late_couples=int(_num(status, "late_couples") or 0),
         max_penetration=_num(status, "max_penetration"),
-        validity=_json(status, "validity"),
+        validity=status_json(status, "validity"),
         peak_couple=_num(status, "peak_couple"),
         peak_couple_arclength=_num(status, "peak_couple_arclength"),
         peak_couple_sim_time_s=_num(status, "peak_couple_sim_time_s"),

@@ -8,7 +8,6 @@ topics to rounding; :func:`settle_recomputed` replays the simulator's settle rul
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,6 +17,7 @@ from contgrasp_core.contact import sense
 from contgrasp_core.errors import ContgraspError
 from contgrasp_core.rod.closed_loop import SettleDetector
 from contgrasp_core.scenario import PAPER, rod_from_parameters
+from contgrasp_ros.launcher.summary import status_json
 from contgrasp_ros.plumbing.convert import ContactArrays, HeldShape
 from contgrasp_ros.plumbing.evaluate import contact_quality
 from contgrasp_ros.recordings.run_data import SIMULATOR, Array, IntArray, RunData, node_default
@@ -269,15 +269,6 @@ def settle_recomputed(run: RunData) -> tuple[bool | None, float | None]:
     det = SettleDetector(speed, hold - STAMP_RESOLUTION_S, min_time - STAMP_RESOLUTION_S)
     for k, t, v in zip(steps, run.rod.t, run.rod.max_speed, strict=True):
         det.update(float(t), float(v), ready=not transitions.get(int(k) - 1, False))
-    if not _recorded_valid(run.status):
+    if not (status_json(run.status, "validity") or {}).get("valid", True):  # (a status from before the verdict: none)
         return False, None
     return det.settled, det.settle_time
-
-
-def _recorded_valid(status: dict[str, str]) -> bool:
-    """The simulator's verdict on the model's validity in its status (valid when a status from
-    before the verdict was recorded has none)."""
-    try:
-        return bool(json.loads(status.get("validity") or "{}").get("valid", True))
-    except (ValueError, AttributeError):
-        return True

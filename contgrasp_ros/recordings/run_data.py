@@ -327,6 +327,7 @@ def load_run(path: str | Path) -> RunData:
         boundary = boundary_from_msg(by_topic[topics.OBJECT][-1])
     except ContgraspError as exc:
         raise BagInputError(f"{path}: the recorded object boundary is unusable: {exc}") from exc
+    couples, transitions = _couples(by_topic[topics.COUPLE]) if counts.get(name[topics.COUPLE]) else (None, None)
     return RunData(
         path=Path(path),
         topics=recorded,
@@ -338,19 +339,18 @@ def load_run(path: str | Path) -> RunData:
         run_info=run_info,
         status=status,
         controller_status=controller,
-        **_couples(by_topic[topics.COUPLE] if counts.get(name[topics.COUPLE]) else None),
+        couples=couples,
+        transitions=transitions,
         recorder=recorder,
         repeated_states=repeated,
         concurrent=concurrent_processes(spans),
     )
 
 
-def _couples(msgs: list[Any] | None) -> dict[str, Any]:
+def _couples(msgs: list[Any]) -> tuple[dict[int, Any], dict[int, bool]]:
     """``couples`` and ``transitions`` of :class:`RunData`: the first usable couple answering each
     step (a re-sent state is answered twice; a malformed message is left out, as the simulator
-    leaves it out) and its law's ``transition`` flag; both None without recorded couples."""
-    if msgs is None:
-        return {"couples": None, "transitions": None}
+    leaves it out) and its law's ``transition`` flag."""
     couples: dict[int, Any] = {}
     transitions: dict[int, bool] = {}
     for msg in msgs:
@@ -360,4 +360,4 @@ def _couples(msgs: list[Any] | None) -> dict[str, Any]:
             continue
         if step not in couples:
             couples[step], transitions[step] = couple, transition
-    return {"couples": couples, "transitions": transitions}
+    return couples, transitions
